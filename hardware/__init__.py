@@ -1,0 +1,1 @@
+"""hardware: the scanning rig (track, slider, rotation, power meter) through PyVISA."""

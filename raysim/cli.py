@@ -1,0 +1,95 @@
+"""The ``raysim`` command: a thin typer layer over the Python API.
+
+Units at this edge: lengths in metres, frequencies in Hz, angles in degrees where an option
+name ends in ``-deg``. Errors a user can cause end with one line on stderr and exit status 2.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import typer
+from rich.console import Console
+
+from raysim.errors import RaysimError
+
+app = typer.Typer(
+    name="raysim",
+    help=(
+        "Reflector surface deformation from one intensity scan on a hemisphere around the "
+        "focus. Lengths in metres, frequencies in Hz, angles in degrees (options ending in "
+        "-deg); scenes are TOML files (see scenes/)."
+    ),
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+console = Console(stderr=True)
+out = Console()
+
+
+def _version(value: bool) -> None:
+    if value:
+        from raysim import __version__
+
+        out.print(f"raysim {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                 help="Print the version and exit."),
+) -> None:
+    """Reflector surface deformation from one intensity scan on a hemisphere at the focus."""
+
+
+def fail(message: str) -> typer.Exit:
+    """Print one line for the user and return the exit to raise (status 2)."""
+    console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    return typer.Exit(code=2)
+
+
+def output_path(path: Path) -> Path:
+    """Check an output path's folder can be written before hours of work go into it."""
+    parent = path.expanduser().resolve().parent
+    parent.mkdir(parents=True, exist_ok=True)
+    if path.is_dir():
+        raise RaysimError(f"{path}: is a folder, give a file name")
+    return path
+
+
+# --- simulate (raysim.go, raysim.po, raysim.ptd) ------------------------------------------
+
+
+# --- invert, paper (solver) ------------------------------------------------------------
+
+
+# --- render, report (raysim.render) ----------------------------------------------------
+
+
+# --- scan, rig (hardware) --------------------------------------------------------------
+
+
+# --- dataset (raysim.dataset) ----------------------------------------------------------
+
+
+def main() -> None:
+    """Console-script entry point: user errors become one line and exit status 2."""
+    try:
+        app()
+    except RaysimError as exc:
+        console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+        sys.exit(2)
+    except OSError as exc:
+        name = f"{exc.filename}: " if exc.filename else ""
+        console.print(f"[bold red]error:[/] {name}{exc.strerror or exc}", highlight=False)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        console.print("[bold red]interrupted[/]")
+        sys.exit(130)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,21 @@
+"""Exceptions a user can cause. The CLI turns each into one line and exit status 2."""
+
+
+class RaysimError(Exception):
+    """Base class: bad input, not a bug. Its message is one line meant for the user."""
+
+
+class SceneError(RaysimError, ValueError):
+    """A scene file or scene value is invalid (unknown key, wrong unit, impossible geometry)."""
+
+
+class MeshError(RaysimError, ValueError):
+    """A reflector mesh cannot be read or is unusable (empty, not a dish, no ideal counterpart)."""
+
+
+class FieldMapError(RaysimError, ValueError):
+    """A FieldMap file breaks the data contract (missing variable, attribute or unit)."""
+
+
+class DeviceError(RaysimError, RuntimeError):
+    """The requested compute device (for example ``cuda``) is not available."""

@@ -1,0 +1,1 @@
+"""solver: intensity scan (FieldMap) -> surface map (SurfaceMap)."""
