@@ -70,6 +70,12 @@ def simulate(
     n_theta: int | None = typer.Option(None, "--n-theta", help="Cells in theta (polar angle from -z)."),
     n_phi: int | None = typer.Option(None, "--n-phi", help="Cells in phi (azimuth)."),
     device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
+    total: bool = typer.Option(False, "--total", help="PO: intensity of scattered plus incident field."),
+    save_field: bool = typer.Option(False, "--save-field",
+                                    help="PO: also store the complex field components E_re, E_im."),
+    samples_per_wavelength: float | None = typer.Option(
+        None, "--samples-per-wavelength",
+        help="PO: Gauss points per wavelength along mesh face edges (default 1.5)."),
 ) -> None:
     """Simulate a scene: intensity of the ideal and deformed reflector on the probe sphere.
 
@@ -92,7 +98,8 @@ def simulate(
         def report(stage: str, fraction: float) -> None:
             bar.update(task, completed=fraction, description=f"{method} {loaded.name}: {stage}")
 
-        ds = run(loaded, method=method, device=device, progress=report)
+        ds = run(loaded, method=method, device=device, progress=report, total=total,
+                 save_field=save_field, samples_per_wavelength=samples_per_wavelength)
     save(ds, output)
     out.print(f"{output}: {summary(ds)}", highlight=False)
 
