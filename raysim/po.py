@@ -100,7 +100,7 @@ class Radiator:
         self.block = int(block or (2048 if self.cpu else 16384))
         self.pairs = 0
         self.seconds = 0.0
-        self.reach = 0.0  # largest distance element -> field point seen (m), for the phase limit
+        self._bounds = (pts.min(axis=0), pts.max(axis=0))
 
     def add(self, elements: CurrentElements, progress: Progress | None = None) -> None:
         """Add the field of ``elements`` at every point."""
@@ -137,12 +137,11 @@ class Radiator:
     def _check_phase(self, src) -> None:
         """The kernels' phase reduction holds for kR < MAX_PHASE: refuse anything beyond."""
         pos = src.numpy()[:3]
-        fp = self.field_points.numpy()
-        lo = np.minimum(pos.min(axis=1), fp.min(axis=1))
-        hi = np.maximum(pos.max(axis=1), fp.max(axis=1))
-        self.reach = max(self.reach, float(np.linalg.norm(hi - lo)))
-        if self.k * self.reach >= self.K.MAX_PHASE:
-            raise RaysimError(f"k R up to {self.k * self.reach:.3g} rad exceeds the kernel's phase "
+        lo = np.minimum(pos.min(axis=1), self._bounds[0])
+        hi = np.maximum(pos.max(axis=1), self._bounds[1])
+        reach = float(np.linalg.norm(hi - lo))  # bounds any element-to-point distance (m)
+        if self.k * reach >= self.K.MAX_PHASE:
+            raise RaysimError(f"k R up to {self.k * reach:.3g} rad exceeds the kernel's phase "
                               f"range {self.K.MAX_PHASE:.3g} rad: lower the frequency")
 
     def rate(self) -> float:
