@@ -75,7 +75,8 @@ def simulate(
                                     help="PO: also store the complex field components E_re, E_im."),
     samples_per_wavelength: float | None = typer.Option(
         None, "--samples-per-wavelength",
-        help="PO: Gauss points per wavelength along mesh face edges (default 1.5)."),
+        help="PO: Gauss points per wavelength along mesh face edges (default 1.5; 3-4 for "
+             "field points near the surface, far from its focus)."),
 ) -> None:
     """Simulate a scene: intensity of the ideal and deformed reflector on the probe sphere.
 

@@ -127,16 +127,12 @@ class Arcs:
         return len(self.face)
 
 
-def boundary_arcs(reflector: Reflector, rtol: float = 1e-9) -> Arcs:
-    """The free edges of ``reflector`` whose two ends lie at one radius from the z axis.
+def free_edges(faces: NDArray[np.int64]) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """The mesh's free edges (used by one face only): the rim, hole and gap edges.
 
-    Only meaningful for a reflector with a smooth surface: generated meshes put their panel
-    rows on circles, so these are the rim and the ring edges. A straight radial gap edge has
-    ends at different radii and stays straight.
+    Returns (b, c, a, face): the edge runs from vertex b to vertex c in the winding of
+    ``face``, and a is that face's third vertex.
     """
-    faces = reflector.faces
-    xy = reflector.vertices[:, :2]
-    r = np.hypot(xy[:, 0], xy[:, 1])
     local = np.array([(0, 1, 2), (1, 2, 0), (2, 0, 1)])  # (b, c, opposite) per edge
     b = faces[:, local[:, 0]].ravel()
     c = faces[:, local[:, 1]].ravel()
@@ -145,9 +141,20 @@ def boundary_arcs(reflector: Reflector, rtol: float = 1e-9) -> Arcs:
     key = np.sort(np.column_stack([b, c]), axis=1)
     _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
     free = counts[inverse.ravel()] == 1
+    return b[free], c[free], a[free], face[free]
+
+
+def boundary_arcs(reflector: Reflector, rtol: float = 1e-9) -> Arcs:
+    """The free edges of ``reflector`` whose two ends lie at one radius from the z axis.
+
+    Only meaningful for a reflector with a smooth surface: generated meshes put their panel
+    rows on circles, so these are the rim and the ring edges. A straight radial gap edge has
+    ends at different radii and stays straight.
+    """
+    r = np.hypot(reflector.vertices[:, 0], reflector.vertices[:, 1])
+    b, c, a, face = free_edges(reflector.faces)
     rb, rc = r[b], r[c]
-    on_circle = free & (rb > 0) & (np.abs(rb - rc) <= rtol * np.maximum(rb, rc))
-    sel = np.flatnonzero(on_circle)
+    sel = np.flatnonzero((rb > 0) & (np.abs(rb - rc) <= rtol * np.maximum(rb, rc)))
     radius = 0.5 * (rb[sel] + rc[sel])
     # the opposite vertex tells the side: inside the circle -> add the segment
     sign = np.where(r[a[sel]] < radius, 1.0, -1.0)
@@ -167,7 +174,7 @@ class FaceQuadrature:
 
     reflector: Reflector
     spacing: float
-    n_min: int = 2
+    n_min: int = 3
     n_max: int = 10
     curve_rim: bool = True
 
