@@ -110,7 +110,7 @@ def go_check() -> None:
         t = np.clip((r1 - np.hypot(x, y)) / (r1 - r0), 0.0, 1.0)
         return f(t) / (f(t) + f(1.0 - t))
 
-    grid = SphereGrid(10.0, 40, 36, theta_max=np.radians(40.0))
+    grid = SphereGrid(10.0, 40, 12, theta_max=np.radians(40.0))
     wave = po.Illumination.plane_wave(3e9, (0, 0, -1), (1, 0, 0))
     with Clock() as c:
         result = po.sphere_field(paraboloid(110.0, 33.0, 5.0), grid, wave, taper=taper)

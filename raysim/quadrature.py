@@ -14,9 +14,9 @@ removed (inner boundaries) by a product Gauss rule in polar coordinates. Without
 surface (a mesh from a file) the samples lie on the flat facets, with the facet's area and the
 interpolated vertex normal.
 
-Each face carries Stroud's conical product rule of order n (n^2 points, exact to degree 2n - 1;
-Stroud, *Approximate Calculation of Multiple Integrals*, 1971, sec. 2.7): Gauss-Jacobi in the
-collapsed coordinate, Gauss-Legendre along the opposite edge. n is the face's longest edge
+Each face carries a conical product rule of order n (n^2 points, exact to degree 2n - 1; the
+conical product formulas of Stroud, *Approximate Calculation of Multiple Integrals*, 1971):
+Gauss-Jacobi in the collapsed coordinate, Gauss-Legendre along the opposite edge. n is the face's longest edge
 over ``spacing`` (so about n points span each edge); a face that would need more than
 ``n_max`` is split into m^2 congruent sub-triangles (its m-fold barycentric lattice) first.
 The integrand on a reflector is smooth within a face, so the error falls exponentially with n:
@@ -52,7 +52,7 @@ class TriangleRule:
 
 @lru_cache(maxsize=16)
 def conical_rule(n: int) -> TriangleRule:
-    """Stroud's conical product rule with n^2 points (degree 2n - 1): Gauss-Jacobi in the
+    """The conical product rule with n^2 points (degree 2n - 1): Gauss-Jacobi in the
     collapsed coordinate s (weight s), Gauss-Legendre along t; x = A + s (B - A) + s t (C - B)."""
     from scipy.special import roots_jacobi
 
