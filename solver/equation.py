@@ -22,7 +22,7 @@ GAIN_MODES = ("power", "none")
 
 
 def intensity_ratio_fa(intensity: ArrayLike, intensity_ideal: ArrayLike) -> NDArray[np.float64]:
-    """FA = I_ideal / I_def - 1 (dimensionless); NaN where either sample is missing or I_def <= 0."""
+    """FA = I_ideal / I_def - 1 (dimensionless); NaN where a sample is missing or I_def <= 0."""
     i_def = np.asarray(intensity, dtype=np.float64)
     i_ideal = np.asarray(intensity_ideal, dtype=np.float64)
     good = np.isfinite(i_def) & np.isfinite(i_ideal) & (i_def > 0)

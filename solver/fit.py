@@ -119,6 +119,7 @@ def write_panel_csv(rows: list[dict], path: str | os.PathLike[str]) -> Path:
         writer = csv.DictWriter(fh, fieldnames=PANEL_COLUMNS)
         writer.writeheader()
         for row in rows:
-            writer.writerow({k: (f"{v:.3f}" if isinstance(v, float) else v) for k, v in row.items()})
+            writer.writerow({k: f"{v:.3f}" if isinstance(v, float) else v
+                             for k, v in row.items()})
     os.replace(tmp, path)
     return path

@@ -135,7 +135,7 @@ def _truth_from_scene(attrs: dict) -> Callable | None:
         from raysim.scene import parse_scene
 
         return parse_scene(str(text), source="FieldMap scene").deformation
-    except Exception:  # noqa: BLE001 - a scene that no longer parses just means no truth
+    except Exception:  # a scene that no longer parses just means no truth
         return None
 
 

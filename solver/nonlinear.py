@@ -27,6 +27,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
+from itertools import pairwise
 
 import numpy as np
 import scipy.sparse as sp
@@ -163,7 +164,7 @@ def anderson_step(iterates: list[NDArray[np.float64]],
     x, f = iterates[-1], updates[-1]
     if len(iterates) == 1:
         return x + f
-    dF = np.stack([b - a for a, b in zip(updates[:-1], updates[1:], strict=True)], axis=1)
-    dX = np.stack([b - a for a, b in zip(iterates[:-1], iterates[1:], strict=True)], axis=1)
+    dF = np.stack([b - a for a, b in pairwise(updates)], axis=1)
+    dX = np.stack([b - a for a, b in pairwise(iterates)], axis=1)
     gamma, *_ = np.linalg.lstsq(dF, f, rcond=None)
     return x + f - (dX + dF) @ gamma

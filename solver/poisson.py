@@ -103,7 +103,7 @@ def _arm(x0, y0, a, axis: int, sign: int):
 
 @lru_cache(maxsize=8)
 def disk_laplacian(D: float, N: int) -> DiskLaplacian:
-    """Assemble (and cache) the Shortley-Weller Laplacian on the N x N grid of a dish of diameter D."""
+    """Assemble (and cache) the Shortley-Weller Laplacian on the N x N grid of a dish D (m)."""
     grid = ApertureGrid(float(D), int(N))
     h, a, mask = grid.h, grid.a, grid.mask
     index = np.full((N, N), -1, dtype=np.int64)

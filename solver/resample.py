@@ -64,7 +64,7 @@ def check_full_circle(sphere: SphereGrid) -> None:
 
 
 def fill_missing(values: NDArray[np.float64], n_rows: int) -> tuple[NDArray[np.float64], int]:
-    """Fill NaN samples in the first ``n_rows`` rows by a discrete Laplace equation (periodic in phi).
+    """Fill NaN samples of the first ``n_rows`` rows by a discrete Laplace equation (periodic).
 
     Each hole takes the mean of its four neighbours (two in theta, two in phi); rows 0 and
     ``n_rows - 1`` have one theta neighbour. Returns the filled copy and the number filled.
