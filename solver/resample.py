@@ -8,9 +8,10 @@ Steps, each stated in the result so a reader knows what was done to the data:
 
 1. usable rows: sphere cells whose theta range lies wholly inside the rim image
    theta_rim = 2 atan(D / 4F); the cell the rim cuts holds part-lit power and is not used;
-2. missing samples (NaN) inside the usable rows are filled by harmonic inpainting on the
-   (theta, phi) grid (a discrete Laplace equation over the holes, periodic in phi);
-3. rows between the last usable one and the rim are extrapolated linearly in theta;
+2. missing samples (NaN) inside the usable rows are filled by smooth inpainting on the
+   (theta, phi) grid (least-squares Laplacian over the holes, periodic in phi);
+3. rows between the last usable one and the rim are continued by the cubic in theta through
+   the last four usable rows;
 4. a cubic spline in (theta, phi), periodic in phi and continued across the pole (theta -> -theta
    is phi -> phi + pi), gives the values at the aperture points inside the disk.
 """
@@ -48,8 +49,8 @@ def usable_rows(sphere: SphereGrid, F: float, D: float) -> int:
     """Number of leading theta rows whose cells lie wholly inside the rim image."""
     edges_hi = sphere.theta_edges[1:]
     n = int(np.count_nonzero(edges_hi <= theta_rim(D, F) + 1e-12))
-    if n < 2:
-        raise FieldMapError("the scan has fewer than two theta rows inside the rim image")
+    if n < 4:
+        raise FieldMapError("the scan has fewer than four theta rows inside the rim image")
     if theta_rim(D, F) - sphere.theta[n - 1] > MAX_GAP_CELLS * sphere.dtheta:
         raise FieldMapError(
             f"the scan stops at theta = {np.degrees(sphere.theta_max):.2f} deg, short of the "
@@ -64,10 +65,12 @@ def check_full_circle(sphere: SphereGrid) -> None:
 
 
 def fill_missing(values: NDArray[np.float64], n_rows: int) -> tuple[NDArray[np.float64], int]:
-    """Fill NaN samples of the first ``n_rows`` rows by a discrete Laplace equation (periodic).
+    """Fill NaN samples of the first ``n_rows`` rows so the field's Laplacian is least there.
 
-    Each hole takes the mean of its four neighbours (two in theta, two in phi); rows 0 and
-    ``n_rows - 1`` have one theta neighbour. Returns the filled copy and the number filled.
+    The hole values minimise the sum of squares of the 5-point (theta, phi) Laplacian over
+    every stencil that touches a hole (a discrete biharmonic fill, exact for discrete-harmonic
+    fields; the last row uses a one-sided theta difference). Periodic in phi; across the pole the theta neighbour of row 0 at phi
+    is row 0 at phi + pi. Returns the filled copy and the number of samples filled.
     """
     out = np.array(values, dtype=np.float64, copy=True)
     block = out[:n_rows]
@@ -75,37 +78,43 @@ def fill_missing(values: NDArray[np.float64], n_rows: int) -> tuple[NDArray[np.f
     n_holes = int(np.count_nonzero(holes))
     if n_holes == 0:
         return out, 0
-    if n_holes == holes.size:
-        raise FieldMapError("no usable intensity samples inside the rim image")
+    if n_holes > 0.5 * holes.size:
+        raise FieldMapError("more than half of the samples inside the rim image are missing")
     n_t, n_p = block.shape
-    index = np.full(block.shape, -1, dtype=np.int64)
-    index[holes] = np.arange(n_holes)
-    ti, pj = np.nonzero(holes)
-    rows, cols, vals = [], [], []
-    rhs = np.zeros(n_holes)
-    count = np.zeros(n_holes)
-    for dt, dp in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-        nt, np_ = ti + dt, (pj + dp) % n_p
-        ok = (nt >= 0) & (nt < n_t)
-        count += ok
-        k = np.flatnonzero(ok)
-        nb = index[nt[k], np_[k]]
-        inner = nb >= 0
-        rows.append(k[inner])
-        cols.append(nb[inner])
-        vals.append(-np.ones(np.count_nonzero(inner)))
-        np.add.at(rhs, k[~inner], block[nt[k[~inner]], np_[k[~inner]]])
-    A = sp.csr_matrix((np.concatenate([count, *vals]),
-                       (np.concatenate([np.arange(n_holes), *rows]),
-                        np.concatenate([np.arange(n_holes), *cols]))), shape=(n_holes, n_holes))
-    block[holes] = spla.spsolve(A.tocsc(), rhs)
+    cell = np.arange(n_t * n_p).reshape(n_t, n_p)
+    up = np.roll(cell[:1], n_p // 2, axis=1) if n_p % 2 == 0 else None
+    centre = cell[: n_t - 1] if up is not None else cell[1: n_t - 1]
+    t0 = 0 if up is not None else 1
+    rows_t = np.arange(t0, n_t - 1)
+    north = np.concatenate([up, cell[: n_t - 2]]) if up is not None else cell[: n_t - 2]
+    stencil = [centre, north, cell[rows_t + 1], np.roll(centre, 1, axis=1),
+               np.roll(centre, -1, axis=1)]
+    last = cell[n_t - 1:]                      # the last row: one-sided theta difference
+    stencil = [np.concatenate([a, b]) for a, b in zip(
+        stencil, [last, cell[n_t - 3: n_t - 2], cell[n_t - 2: n_t - 1],
+                  np.roll(last, 1, axis=1), np.roll(last, -1, axis=1)], strict=True)]
+    weights = [np.concatenate([np.full(centre.size, w), np.full(last.size, v)])
+               for w, v in zip((-4.0, 1.0, 1.0, 1.0, 1.0), (-1.0, 1.0, -2.0, 1.0, 1.0),
+                               strict=True)]
+    eq = np.arange(stencil[0].size)
+    lap = sp.csr_matrix((np.concatenate(weights),
+                         (np.tile(eq, 5), np.concatenate([c.ravel() for c in stencil]))),
+                        shape=(eq.size, n_t * n_p))
+    flat_holes = holes.ravel()
+    touching = np.asarray(lap[:, flat_holes].getnnz(axis=1) > 0)
+    lap = lap[touching]
+    unknown = lap[:, flat_holes].tocsc()
+    known = lap[:, ~flat_holes] @ block.ravel()[~flat_holes]
+    normal = (unknown.T @ unknown).tocsc()
+    block[holes] = spla.spsolve(normal, -(unknown.T @ known))
     return out, n_holes
 
 
 def extend_rows(values: NDArray[np.float64], n_rows: int) -> NDArray[np.float64]:
-    """Rows 0..n_rows-1 kept; EXTRA_ROWS more extrapolated linearly in theta from the last two."""
-    last, prev = values[n_rows - 1], values[n_rows - 2]
-    extra = last[None, :] + np.arange(1, EXTRA_ROWS + 1)[:, None] * (last - prev)[None, :]
+    """Rows 0..n_rows-1 kept; EXTRA_ROWS more continued by the cubic through the last four."""
+    k = np.arange(-3.0, 1.0)                                  # the last four rows, at 0
+    coef = np.linalg.solve(np.vander(k, 4), values[n_rows - 4:n_rows])
+    extra = np.vander(np.arange(1.0, EXTRA_ROWS + 1), 4) @ coef
     return np.concatenate([values[:n_rows], extra], axis=0)
 
 
