@@ -37,7 +37,7 @@ from solver.errors import SolverError
 from solver.fit import parse_terms, remove_terms
 from solver.nonlinear import Forward, extend_outside, refine
 from solver.poisson import SOLVERS, SolveInfo, solve_poisson
-from solver.resample import Coverage, sphere_to_aperture, usable_rows
+from solver.resample import Coverage, fill_missing, sphere_to_aperture, usable_rows
 from solver.surface import surfacemap
 
 DEFAULT_SOLVER = "multigrid"
@@ -182,9 +182,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
             raise SolverError("the fft solver works on the enclosing square and cannot use rim "
                               "targets; choose direct, multigrid, sor or gauss-seidel")
         boundary.check_targets(rim, grid.a)
-    scale = power_gain(scan.intensity, scan.intensity_ideal, scan.sphere.cell_area()) \
-        if gain == "power" else 1.0
     n_rows = usable_rows(scan.sphere, scan.F, scan.D)
+    scale = _power_scale(scan.intensity, scan, n_rows) if gain == "power" else 1.0
     fa, noise_v, noise_source = _measured_fa(scan, scale, gain, n_rows)
     missing = int(np.count_nonzero(~np.isfinite(fa[:n_rows])))
     inverse = LinearInverse(scan, grid, solver, iterations=iterations, omega=omega, tol=tol,
@@ -235,6 +234,21 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     return surfacemap(grid, delta_out, attrs, truth=truth_map, deformation_std=std)
 
 
+def _power_scale(intensity, scan: Scan, n_rows: int) -> float:
+    """The scan's scale from GO power conservation, missing samples filled first.
+
+    A missing sample would drop its cell from both power sums and bias the ratio by its FA;
+    inside the usable rows it takes the inpainted ratio I / I_ideal, beyond them the ideal.
+    """
+    ideal = scan.intensity_ideal
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(ideal > 0, intensity / ideal, np.nan)
+    ratio[:n_rows], _ = fill_missing(ratio[:n_rows], n_rows)
+    filled = np.where(np.isfinite(intensity), intensity,
+                      np.where(np.isfinite(ratio), ratio, 1.0) * ideal)
+    return power_gain(filled, ideal, scan.sphere.cell_area())
+
+
 def _measured_fa(scan: Scan, scale: float, gain: str, n_rows: int):
     """FA of the scan after the gain, with the noise bias removed; and the noise variance used."""
     fa = intensity_ratio_fa(scan.intensity / scale, scan.intensity_ideal)
@@ -275,8 +289,7 @@ def _monte_carlo_std(scan: Scan, inverse: LinearInverse, gain: str, samples: int
     rim = inverse.rim
     for _ in range(samples):
         noisy = scan.intensity + sigma * rng.standard_normal(sigma.shape)
-        c = power_gain(noisy, scan.intensity_ideal, scan.sphere.cell_area()) \
-            if gain == "power" else 1.0
+        c = _power_scale(noisy, scan, inverse.coverage.n_rows) if gain == "power" else 1.0
         inverse.rim = boundary.zero_rim(inverse.grid.a)
         fa = intensity_ratio_fa(noisy / c, scan.intensity_ideal)
         draws.append(inverse.solve(fa))

@@ -69,8 +69,9 @@ def fill_missing(values: NDArray[np.float64], n_rows: int) -> tuple[NDArray[np.f
 
     The hole values minimise the sum of squares of the 5-point (theta, phi) Laplacian over
     every stencil that touches a hole (a discrete biharmonic fill, exact for discrete-harmonic
-    fields; the last row uses a one-sided theta difference). Periodic in phi; across the pole the theta neighbour of row 0 at phi
-    is row 0 at phi + pi. Returns the filled copy and the number of samples filled.
+    fields; the last row uses a one-sided theta difference). Periodic in phi; across the pole
+    the theta neighbour of row 0 at phi is row 0 at phi + pi. Returns the filled copy and the
+    number of samples filled.
     """
     out = np.array(values, dtype=np.float64, copy=True)
     block = out[:n_rows]
