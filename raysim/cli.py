@@ -139,12 +139,12 @@ def paper_command(
     rows = compare(scale=scale, N=grid, refine=refine, device=device)
     out.print(f"paper GO case, Eq. 8 x {scale:g}, N = {grid}, 90 x 360 cells", highlight=False)
     out.print(f"{'method':44s} {'paper RRMS':>10s} {'paper s':>9s} {'RRMS':>9s} {'RMS um':>8s} "
-              f"{'time s':>7s}", highlight=False)
+              f"{'time s':>7s}", highlight=False, soft_wrap=True)
     for row in rows:
         paper = f"{row.paper_rrms * 100:.2f} %" if row.paper_rrms is not None else "-"
         out.print(f"{row.method:44s} {paper:>10s} {row.paper_seconds:>9s} "
                   f"{row.rrms * 100:7.3f} % {row.rms_m * 1e6:8.2f} {row.seconds:7.2f}",
-                  highlight=False)
+                  highlight=False, soft_wrap=True)
 
 
 

@@ -77,3 +77,20 @@ def test_user_errors_end_with_one_line_and_status_2(monkeypatch, capsys, tmp_pat
     assert stderr.startswith("error:") and len(stderr.strip().splitlines()) == 1, stderr
     assert "Traceback" not in stderr + stdout
     assert not (tmp_path / "s.nc").exists()
+
+
+def test_panels_csv_from_a_fieldmap_whose_scene_has_panels(monkeypatch, capsys, tmp_path,
+                                                           paper_field):
+    """The layout comes from the scene the FieldMap records (here: scenes/panels_go.toml)."""
+    from pathlib import Path
+
+    scene = (Path(__file__).resolve().parents[2] / "scenes" / "panels_go.toml").read_text()
+    field = paper_field.copy(deep=True).assign_attrs(scene=scene)
+    path = save(field, tmp_path / "panels.nc")
+    table = tmp_path / "panels.csv"
+    code, _, _ = run(monkeypatch, capsys, "invert", str(path), "-o", str(tmp_path / "s.nc"),
+                     "--grid", "128", "--refine", "0", "--panels-csv", str(table))
+    assert code in (0, None)
+    lines = table.read_text().splitlines()
+    assert lines[0].startswith("panel_id,ring,centre_x_m,centre_y_m,piston_um")
+    assert len(lines) == 1 + 216
