@@ -10,7 +10,12 @@ squares over the grid points inside the aperture:
 
 Per panel (when the reflector has panels): piston at the panel's centroid and two tilts,
 fitted over the grid points on that panel, written as a table a surface crew can act on (the
-actuator correction is the negative of each value).
+actuator correction is the negative of each value). The map is the smooth surface whose
+Laplacian the intensity fixes, so the table tells each panel how to follow the measured
+large-scale shape (gravity, heat). Errors of single panels are another matter: a panel's own
+piston and tilt are harmonic inside the panel, so GO intensity sees them only through the
+images of its edges, which the gaps darken; independent panel pistons are unobservable and
+independent tilts only partly observable (about 0.7 correlation on scenes/panels_go.toml).
 """
 
 from __future__ import annotations

@@ -53,16 +53,28 @@ class RefineHistory:
 
 
 def go_forward(device: str | None = "cpu") -> Forward:
-    """The project's GO engine as the refinement's forward model (imported on first use)."""
+    """The project's GO engine as the refinement's forward model (imported on first use).
+
+    The ideal reflector's map depends only on (sphere grid, F, D, device) and is kept for the
+    session, so repeated inversions of one scan geometry trace it once.
+    """
 
     def forward(sphere, F, D, x, y, delta):
+        if delta is None:
+            return _ideal_go(sphere, float(F), float(D), device).copy()
         from raysim.deformation import GriddedMap
         from raysim.go import forward_intensity
 
-        deformation = None if delta is None else GriddedMap(x, y, delta)
-        return forward_intensity(sphere, F, D, deformation, device=device)
+        return forward_intensity(sphere, F, D, GriddedMap(x, y, delta), device=device)
 
     return forward
+
+
+@lru_cache(maxsize=4)
+def _ideal_go(sphere: SphereGrid, F: float, D: float, device: str | None) -> NDArray:
+    from raysim.go import forward_intensity
+
+    return forward_intensity(sphere, F, D, None, device=device)
 
 
 @lru_cache(maxsize=4)
