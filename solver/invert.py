@@ -204,6 +204,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         "harmonic_observable": rim is not None,
         "removed_terms": ",".join(terms) or "none",
         "refine_iterations": refine_iterations,
+        "refine_method": "defect correction with Anderson acceleration; forward model: "
+                         + ("raysim.go GO engine" if forward is None else "caller's"),
         "refine_update_rms_m": ",".join(f"{v:.3e}" for v in history.update_rms),
         "refine_misfit_rms": ",".join(f"{v:.3e}" for v in history.misfit_rms),
         "refine_seconds": history.seconds,
@@ -212,7 +214,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         "noise_bias": "removed: FA -> (1 + FA) / (1 + v) - 1" if gain == "power" else
                       "removed: FA -> (1 + FA) / (1 + v/2) - 1 (noise symmetric in dB)",
         "samples_missing": missing,
-        "missing_samples": "filled by harmonic inpainting on the (theta, phi) grid",
+        "missing_samples": "filled by least-squares Laplacian inpainting on the (theta, phi) "
+                           "grid",
         "theta_last_used_deg": float(np.degrees(inverse.coverage.theta_last)),
         "theta_rim_deg": float(np.degrees(inverse.coverage.theta_rim)),
         "rms_definition": f"over the {grid.n_inside} grid points inside r < D/2",
