@@ -43,6 +43,7 @@ from solver.surface import surfacemap
 DEFAULT_SOLVER = "multigrid"
 DEFAULT_N = 256
 DEFAULT_REFINE = 3
+MAX_INCIDENCE = 1e-3  # rad: the equation and the GO model assume an on-axis plane wave
 
 
 @dataclass
@@ -61,6 +62,10 @@ class Scan:
     @classmethod
     def from_fieldmap(cls, ds: xr.Dataset) -> Scan:
         ds = validate_fieldmap(ds)
+        tilt = float(ds.attrs.get("incidence_theta", 0.0))
+        if abs(tilt) > MAX_INCIDENCE:
+            raise SolverError(f"the inversion assumes an on-axis plane wave; this scan's source "
+                              f"is {np.degrees(tilt):.3f} deg off axis")
         std = ds["intensity_std"].values if "intensity_std" in ds.data_vars else None
         return cls(grid_of(ds), float(ds.attrs["focal_length"]), float(ds.attrs["diameter"]),
                    float(ds.attrs["sphere_radius"]), ds["intensity"].values.astype(np.float64),
@@ -76,7 +81,7 @@ class LinearInverse:
     """
 
     def __init__(self, scan: Scan, grid: ApertureGrid, solver: str, *, iterations=None,
-                 omega=None, tol=1e-12, targets: boundary.RimTargets | None = None,
+                 omega=None, tol=1e-10, targets: boundary.RimTargets | None = None,
                  max_harmonics: int = boundary.MAX_HARMONICS) -> None:
         self.scan, self.grid, self.solver = scan, grid, solver
         self.options = {"iterations": iterations, "omega": omega, "tol": tol}
@@ -142,7 +147,7 @@ def _truth_from_scene(attrs: dict) -> Callable | None:
 def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_N,
            rim: boundary.RimTargets | None = None, remove: str | Sequence[str] | None = None,
            refine_iterations: int = DEFAULT_REFINE, gain: str = "power",
-           iterations: int | None = None, omega: float | None = None, tol: float = 1e-12,
+           iterations: int | None = None, omega: float | None = None, tol: float = 1e-10,
            truth: Callable | NDArray | str | None = "scene", forward: Forward | None = None,
            device: str | None = "cpu", uncertainty_samples: int = 32, seed: int = 0,
            max_harmonics: int = boundary.MAX_HARMONICS) -> xr.Dataset:

@@ -126,3 +126,5 @@ def test_bad_requests_raise_specific_errors(paper_field):
         invert(paper_field, rim=RimTargets(A * np.cos(phi[:5]), A * np.sin(phi[:5]), phi[:5] * 0))
     with pytest.raises(FieldMapError, match="intensity_ideal"):
         invert(paper_field.drop_vars("intensity_ideal"))
+    with pytest.raises(SolverError, match="off axis"):
+        invert(paper_field.assign_attrs(incidence_theta=np.radians(2.0)))
