@@ -17,7 +17,6 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
-from scipy.interpolate import RegularGridInterpolator
 
 from raysim.field import grid_of
 from raysim.field import validate as validate_fieldmap
@@ -105,6 +104,8 @@ class LinearInverse:
         """Harmonic correction (m) that moves ``delta`` onto the rim targets (zero without)."""
         if self.targets is None:
             return np.zeros_like(delta)
+        from scipy.interpolate import RegularGridInterpolator  # slow to import; rims only
+
         filled = extend_outside(self.grid, delta)
         at = RegularGridInterpolator((self.grid.y, self.grid.x), filled, bounds_error=False,
                                      fill_value=None)
