@@ -24,6 +24,7 @@ current estimate as a gridded map; any callable with the same signature can stan
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -138,8 +139,6 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
     forward : the forward model; None uses the project's GO engine on ``device``.
     memory : depth of the Anderson acceleration (0: plain defect correction).
     """
-    import time
-
     start = time.perf_counter()
     forward = forward or go_forward(device)
     history = RefineHistory()
