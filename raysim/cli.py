@@ -102,6 +102,26 @@ def simulate(
 
 
 # --- render, report (raysim.render) ----------------------------------------------------
+@app.command()
+def render(
+    file: Path = typer.Argument(..., help="FieldMap or SurfaceMap NetCDF file."),
+    output: Path = typer.Option(..., "-o", "--output", help="PNG file to write."),
+    kind: str | None = typer.Option(
+        None, "--kind", help="3d, map or cut (default: 3d for a FieldMap, map for a SurfaceMap)."),
+    size: str | None = typer.Option(None, "--size", help="Width x height in pixels, e.g. 1600x1200."),
+    quantity: str = typer.Option("fa", "--quantity",
+                                 help="FieldMap colour: fa (I_ideal/I_def - 1), intensity, or normalized "
+                                      "(intensity over the ideal GO law)."),
+) -> None:
+    """Draw a FieldMap (hemisphere over the dish) or a SurfaceMap (deformation in um) as PNG.
+
+    Works with no display (EGL off-screen rendering).
+    """
+    from raysim.render import render as run
+
+    written = run(file, output_path(output), kind=kind, size=size, quantity=quantity)
+    out.print(f"{written}", highlight=False)
+
 
 
 # --- scan, rig (hardware) --------------------------------------------------------------

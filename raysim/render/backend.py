@@ -1,0 +1,119 @@
+"""Headless drawing back ends: pyvista/VTK off-screen through EGL, matplotlib through Agg.
+
+Nothing here needs a display. :func:`pyvista` points VTK at its EGL render window before the
+first window exists (the ``VTK_DEFAULT_OPENGL_WINDOW`` environment variable, read when VTK
+creates a window), so a user sets nothing; a user who set the variable keeps their choice.
+Sizes are (width, height) in pixels everywhere.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+from typing import Any
+
+from raysim.errors import RaysimError
+
+EGL_WINDOW = "vtkEGLRenderWindow"
+MIN_SIZE = (200, 150)
+MAX_SIZE = (8000, 8000)
+DPI = 100  # matplotlib dots per inch: a figure of W x H pixels is W/100 x H/100 inches
+
+
+class RenderError(RaysimError, ValueError):
+    """A picture cannot be made from what the user gave (file kind, size, option)."""
+
+
+def parse_size(size: str | tuple[int, int] | None, default: tuple[int, int]) -> tuple[int, int]:
+    """Picture size (width, height) in pixels from ``"WxH"``, a pair, or None (``default``)."""
+    if size is None:
+        return default
+    if isinstance(size, str):
+        match = re.fullmatch(r"\s*(\d+)\s*[xX×,]\s*(\d+)\s*", size)
+        if not match:
+            raise RenderError(f"--size must look like 1600x1200 (width x height in pixels), got {size!r}")
+        width, height = int(match.group(1)), int(match.group(2))
+    else:
+        try:
+            width, height = (int(v) for v in size)
+        except (TypeError, ValueError) as exc:
+            raise RenderError(f"size must be (width, height) in pixels, got {size!r}") from exc
+    if not (MIN_SIZE[0] <= width <= MAX_SIZE[0] and MIN_SIZE[1] <= height <= MAX_SIZE[1]):
+        raise RenderError(f"size {width}x{height} is outside {MIN_SIZE[0]}x{MIN_SIZE[1]} .. "
+                          f"{MAX_SIZE[0]}x{MAX_SIZE[1]} pixels")
+    return width, height
+
+
+def pyvista() -> Any:
+    """Import pyvista for off-screen rendering through EGL (no X server); return the module."""
+    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", EGL_WINDOW)
+    import pyvista as pv
+
+    pv.OFF_SCREEN = True
+    return pv
+
+
+def points(size: float) -> int:
+    """A VTK font size in points (integer, at least 7)."""
+    return max(7, round(size))
+
+
+def plotter(size: tuple[int, int], shape: tuple[int, int] = (1, 1), **layout: Any) -> Any:
+    """An off-screen pyvista Plotter of ``size`` pixels, white background, no window.
+
+    ``layout`` passes pyvista's subplot options (``groups``, ``row_weights``, ``col_weights``).
+    """
+    pv = pyvista()
+    try:
+        pl = pv.Plotter(off_screen=True, window_size=list(size), shape=shape, border=False,
+                        lighting="light_kit", **layout)
+    except RuntimeError as exc:  # pragma: no cover - depends on the machine's OpenGL stack
+        raise RenderError("VTK could not open an off-screen EGL window: install EGL with Mesa "
+                          f"(scripts/install-system-deps.sh) ({exc})") from exc
+    pl.set_background("white")
+    return pl
+
+
+def screenshot(pl: Any, output: str | os.PathLike[str] | None) -> Any:
+    """Render ``pl`` and return its RGB image (height, width, 3); write a PNG when ``output``."""
+    image = pl.screenshot(None, return_img=True)
+    if output is not None:
+        write_png(image, output)
+    return image
+
+
+def write_png(image: Any, output: str | os.PathLike[str]) -> Path:
+    """Write an RGB(A) uint8 image array as PNG, creating the folder."""
+    from matplotlib.image import imsave
+
+    path = Path(output)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    imsave(path, image, format="png")
+    return path
+
+
+def figure(size: tuple[int, int]) -> Any:
+    """A matplotlib Figure of exactly ``size`` pixels (Agg canvas, no pyplot, no display)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def figure_image(fig: Any) -> Any:
+    """Draw ``fig`` and return its RGB image (height, width, 3) as uint8."""
+    import numpy as np
+
+    fig.canvas.draw()
+    return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+
+
+def save_figure(fig: Any, output: str | os.PathLike[str] | None) -> Any:
+    """Draw ``fig``, write it as PNG when ``output`` is given, return its RGB image."""
+    image = figure_image(fig)
+    if output is not None:
+        write_png(image, output)
+    return image
