@@ -123,6 +123,27 @@ def render(
     out.print(f"{written}", highlight=False)
 
 
+@app.command()
+def report(
+    scene: Path = typer.Argument(..., help="Scene TOML file (see scenes/)."),
+    output: Path = typer.Option(..., "-o", "--output", help="Folder for report.html, its figures and data."),
+    method: str = typer.Option("go", "--method", help="Simulation method: go, po or po+ptd."),
+    device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
+    solver: str | None = typer.Option(None, "--solver", help="Poisson solver (default: the solver's)."),
+    grid: int | None = typer.Option(None, "--grid",
+                                    help="Aperture grid points across D (default: the solver's)."),
+) -> None:
+    """Simulate, invert and draw a scene: an HTML report mirroring the paper's Figs. 8-10.
+
+    The page embeds its figures; the PNGs, field.nc and surface.nc are written beside it.
+    """
+    from raysim.render.report import report as run
+
+    page = run(scene, output, method=method, device=device, solver=solver, grid=grid,
+               progress=lambda line: console.print(f"report: {line}", highlight=False))
+    out.print(f"{page}", highlight=False)
+
+
 
 # --- scan, rig (hardware) --------------------------------------------------------------
 

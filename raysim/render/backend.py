@@ -83,6 +83,36 @@ def screenshot(pl: Any, output: str | os.PathLike[str] | None) -> Any:
     return image
 
 
+def project(pl: Any, points: Any, subplot: tuple[int, int] | None = None) -> Any:
+    """Pixel positions (column, row from the top) of world points (n, 3) (m) in ``pl``'s picture,
+    through the camera of ``subplot`` (default: the active renderer). Render ``pl`` first."""
+    import numpy as np
+
+    if subplot is not None:
+        pl.subplot(*subplot)
+    renderer = pl.renderer
+    height = pl.window_size[1]
+    out = []
+    for p in np.atleast_2d(np.asarray(points, dtype=np.float64)):
+        renderer.SetWorldPoint(float(p[0]), float(p[1]), float(p[2]), 1.0)
+        renderer.WorldToDisplay()
+        x, y, _ = renderer.GetDisplayPoint()
+        out.append((x, height - 1 - y))
+    return np.array(out)
+
+
+def colour_count(image: Any) -> int:
+    """Number of distinct RGB colours in an image (uint8 0-255 or float 0-1 values): a blank or
+    one-colour picture has 1."""
+    import numpy as np
+
+    rgb = np.asarray(image)[..., :3]
+    if rgb.dtype.kind == "f":
+        rgb = np.round(rgb * 255.0)
+    rgb = rgb.astype(np.int64)
+    return int(np.unique((rgb[..., 0] << 16) | (rgb[..., 1] << 8) | rgb[..., 2]).size)
+
+
 def write_png(image: Any, output: str | os.PathLike[str]) -> Path:
     """Write an RGB(A) uint8 image array as PNG, creating the folder."""
     from matplotlib.image import imsave

@@ -38,24 +38,26 @@ RIM_STYLE = {"color": "black", "linestyle": "--", "linewidth": 0.9}
 
 
 # --- FieldMap --------------------------------------------------------------------------------
-def field_map(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = (1600, 1200)) -> Any:
-    """Figure: the quantity on the sphere as a plan view (radius = theta, deg) and as a
-    rectangular (phi, theta) map, with the rim image dashed."""
-    q = field_quantity(ds, quantity)
+def field_map(ds: xr.Dataset, quantity: str | Quantity = "fa", size: tuple[int, int] = (1600, 1200),
+              title: str | None = None) -> Any:
+    """Figure: a quantity on the sphere (a name of FIELD_QUANTITIES or a Quantity on the map's
+    cells) as a plan view (radius = theta, deg) and as a rectangular (phi, theta) map, with the
+    rim image dashed."""
+    q = quantity if isinstance(quantity, Quantity) else field_quantity(ds, quantity)
     fig = backend.figure(size)
-    fig.suptitle(field_title(ds, q.label) + "\n" + field_subtitle(ds), fontsize=12)
+    fig.suptitle(field_title(ds, title or q.label) + "\n" + field_subtitle(ds), fontsize=12)
     left, right = fig.subplots(1, 2, width_ratios=[1.0, 1.35])
     image = plan_view(left, ds, q)
     left.set_title("plan view from above (radius = theta)")
     phi = np.degrees(ds["phi"].values)
     theta = np.degrees(ds["theta"].values)
-    right.pcolormesh(_edges(phi), _edges(theta), np.ma.masked_invalid(q.values), cmap=_cmap(q.cmap),
-                     norm=_norm(q), shading="flat", rasterized=True)
+    right.pcolormesh(cell_edges(phi), cell_edges(theta), np.ma.masked_invalid(q.values),
+                     cmap=colour_map(q.cmap), norm=_norm(q), shading="flat", rasterized=True)
     right.axhline(np.degrees(rim_theta(ds)), **RIM_STYLE, label="rim image")
     right.set_xlabel("phi (deg), atan2(y, x) at the focus")
     right.set_ylabel("theta (deg) from -z at the focus")
-    right.set_xlim(_edges(phi)[0], _edges(phi)[-1])
-    right.set_ylim(_edges(theta)[0], _edges(theta)[-1])
+    right.set_xlim(cell_edges(phi)[0], cell_edges(phi)[-1])
+    right.set_ylim(cell_edges(theta)[0], cell_edges(theta)[-1])
     right.set_xticks(np.arange(0, 361, 45))
     right.legend(loc="upper right", fontsize=9)
     right.set_title("(phi, theta) map; grey: no value")
@@ -66,11 +68,11 @@ def field_map(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = (160
 def plan_view(ax: Any, ds: xr.Dataset, q: Quantity) -> Any:
     """Draw ``q`` on ``ax`` as seen from above: the cell (theta, phi) at radius theta (deg) in
     direction phi; returns the mappable."""
-    t = _edges(np.degrees(ds["theta"].values))
-    p = _edges(ds["phi"].values)
+    t = cell_edges(np.degrees(ds["theta"].values))
+    p = cell_edges(ds["phi"].values)
     T, P = np.meshgrid(t, p, indexing="ij")
-    image = ax.pcolormesh(T * np.cos(P), T * np.sin(P), np.ma.masked_invalid(q.values), cmap=_cmap(q.cmap),
-                          norm=_norm(q), shading="flat", rasterized=True)
+    image = ax.pcolormesh(T * np.cos(P), T * np.sin(P), np.ma.masked_invalid(q.values),
+                          cmap=colour_map(q.cmap), norm=_norm(q), shading="flat", rasterized=True)
     rim = np.degrees(rim_theta(ds))
     circle = np.linspace(0, 2 * np.pi, 361)
     ax.plot(rim * np.cos(circle), rim * np.sin(circle), **RIM_STYLE)
@@ -130,9 +132,9 @@ def surface_map(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200)) -> Any:
     x, y = ds["x"].values, ds["y"].values
     for ax, (name, values) in zip(axes, panels, strict=True):
         limit = nice_ceiling(symmetric_limit(values, 100.0) * UM) if name == "error" else shared
-        image = ax.pcolormesh(_edges(x), _edges(y), np.ma.masked_invalid(values * UM), cmap="RdBu_r",
+        image = ax.pcolormesh(cell_edges(x), cell_edges(y), np.ma.masked_invalid(values * UM), cmap="RdBu_r",
                               vmin=-limit, vmax=limit, shading="flat", rasterized=True)
-        _rim(ax, ds)
+        rim_circle(ax, aperture_radius(ds))
         ax.set_aspect("equal")
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
@@ -153,8 +155,8 @@ def surface_cut(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200)) -> Any:
                  + (f"\n{summary}" if summary else ""), fontsize=12)
     axes = fig.subplots(2, 1, sharex=True)
     x, y = ds["x"].values, ds["y"].values
-    cuts = (("along the x axis (y = 0)", x, lambda v: _at_zero(v, y, axis=0), "x (m)"),
-            ("along the y axis (x = 0)", y, lambda v: _at_zero(v, x, axis=1), "y (m)"))
+    cuts = (("along the x axis (y = 0)", x, lambda v: profile_at_zero(v, y, axis=0), "x (m)"),
+            ("along the y axis (x = 0)", y, lambda v: profile_at_zero(v, x, axis=1), "y (m)"))
     for ax, (label, coord, take, axis) in zip(axes, cuts, strict=True):
         recovered = panels.get("recovered", panels.get("deformation"))
         label = "recovered" if "truth" in panels else "deformation"
@@ -172,7 +174,7 @@ def surface_cut(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200)) -> Any:
 
 
 # --- helpers ---------------------------------------------------------------------------------
-def _at_zero(values: np.ndarray, coord: np.ndarray, axis: int) -> np.ndarray:
+def profile_at_zero(values: np.ndarray, coord: np.ndarray, axis: int) -> np.ndarray:
     """The profile of ``values`` (y, x) at ``coord`` = 0 along ``axis``, linear between the
     two grid lines either side (NaN where either is NaN)."""
     k = int(np.clip(np.searchsorted(coord, 0.0) - 1, 0, len(coord) - 2))
@@ -181,7 +183,7 @@ def _at_zero(values: np.ndarray, coord: np.ndarray, axis: int) -> np.ndarray:
     return (1.0 - w) * a + w * b
 
 
-def _edges(centres: np.ndarray) -> np.ndarray:
+def cell_edges(centres: np.ndarray) -> np.ndarray:
     """Cell edges of regularly spaced cell centres."""
     centres = np.asarray(centres, dtype=np.float64)
     if centres.size == 1:
@@ -190,12 +192,10 @@ def _edges(centres: np.ndarray) -> np.ndarray:
     return np.concatenate([[centres[0] - 0.5 * step], centres + 0.5 * step])
 
 
-def _cmap(name: str) -> Any:
+def colour_map(name: str) -> Any:
     import matplotlib
 
-    cmap = matplotlib.colormaps[name].copy()
-    cmap.set_bad("#b0b0b0")
-    return cmap
+    return matplotlib.colormaps[name].with_extremes(bad="#b0b0b0")
 
 
 def _norm(q: Quantity) -> Any:
@@ -214,7 +214,14 @@ def _extend(q: Quantity) -> str:
     return {(True, True): "both", (True, False): "min", (False, True): "max"}.get((low, high), "neither")
 
 
-def _rim(ax: Any, ds: xr.Dataset) -> None:
-    a = float(ds.attrs.get("diameter", 2 * max(abs(ds["x"].values).max(), 0.0))) / 2
+def rim_circle(ax: Any, radius: float) -> None:
+    """Draw the aperture's rim, a circle of ``radius`` (m) about the axis."""
     circle = np.linspace(0, 2 * np.pi, 361)
-    ax.plot(a * np.cos(circle), a * np.sin(circle), color="black", linewidth=0.8)
+    ax.plot(radius * np.cos(circle), radius * np.sin(circle), color="black", linewidth=0.8)
+
+
+def aperture_radius(ds: xr.Dataset) -> float:
+    """D/2 (m) of a SurfaceMap: its ``diameter`` attribute, else its largest |x|."""
+    if "diameter" in ds.attrs:
+        return 0.5 * float(ds.attrs["diameter"])
+    return float(np.abs(ds["x"].values).max())

@@ -34,10 +34,12 @@ def G(r: np.ndarray, F: float, R: float) -> np.ndarray:
 
 def equation_fieldmap(delta: Delta, D: float = 110.0, F: float = 33.0, R: float = 10.0,
                       n_theta: int = 90, n_phi: int = 360, frequency_hz: float = 0.3e9,
-                      scene_name: str = "equation example") -> xr.Dataset:
+                      scene_name: str = "equation example", scene: str | None = None,
+                      attrs: dict | None = None) -> xr.Dataset:
     """A GO-like FieldMap for the deformation ``delta`` (m) from the linear equation (see above).
 
-    Cells beyond the rim image get intensity 0 in both maps, like a GO trace.
+    Cells beyond the rim image get intensity 0 in both maps, like a GO trace. ``scene`` (TOML
+    text) and ``attrs`` are recorded as a simulated FieldMap records them.
     """
     grid = SphereGrid(R, n_theta, n_phi)
     e = grid.theta_edges
@@ -50,8 +52,9 @@ def equation_fieldmap(delta: Delta, D: float = 110.0, F: float = 33.0, R: float 
     lit = t < theta_rim(D, F)
     deformed = np.where(lit, ideal / (1.0 + np.where(lit, fa, 0.0)), 0.0)
     return fieldmap(grid, deformed, ideal, focal_length=F, diameter=D, frequency_hz=frequency_hz,
-                    method="go", sampling="cell_mean",
-                    attrs={"scene_name": scene_name, "incidence_theta": 0.0, "incidence_phi": 0.0})
+                    method="go", sampling="cell_mean", scene=scene,
+                    attrs={"scene_name": scene_name, "incidence_theta": 0.0, "incidence_phi": 0.0,
+                           **(attrs or {})})
 
 
 def surfacemap(delta: np.ndarray | Delta, D: float = 110.0, N: int = 128,

@@ -81,7 +81,8 @@ def warped_dish(ds: xr.Dataset, values: np.ndarray, k: float, n_r: int = 160, n_
     return mesh
 
 
-def surface_plotter(ds: xr.Dataset, size: tuple[int, int] = (2400, 1000), k: float | None = None) -> Any:
+def surface_plotter(ds: xr.Dataset, size: tuple[int, int] = (2400, 1000), k: float | None = None,
+                    title: str | None = None) -> Any:
     """Build (not render) the 3D picture of a SurfaceMap; returns the pyvista Plotter.
 
     A title strip on top; below it one view of the deformation, or truth / recovered / error
@@ -122,7 +123,7 @@ def surface_plotter(ds: xr.Dataset, size: tuple[int, int] = (2400, 1000), k: flo
                     name=f"label_{name}")
         _camera(pl, a, F, 1.35 if n == 1 else 1.15)
     pl.subplot(0, 0)
-    lines = [surface_title(ds), surface_subtitle(ds)]
+    lines = [title or surface_title(ds), surface_subtitle(ds)]
     summary = error_summary(ds)
     lines.append(f"height exaggerated {k:g} x (delta along z); rings every {_ring_step(a):g} m"
                  + (f"; {summary}" if summary else ""))

@@ -1,0 +1,174 @@
+"""The paper's figure set (Figs. 8a-d, 9, 10) for one run: a FieldMap and its SurfaceMap.
+
+Frames and units (DESIGN.md): sphere angles in rad (shown in deg), aperture x, y in m, delta in
+m (shown in µm). The aperture sees the sphere through the ideal GO mapping theta = 2 atan(r/2F),
+phi = atan2(y, x) (paper Eq. 34); FA = I_ideal / I_def - 1 and G = -2 F d / R, d = F + z - R
+(paper Eqs. 28-29). For Figs. 8d and 9 the sphere's FA is resampled onto the aperture here, for
+display, by bilinear interpolation in (theta, phi) between cell centres (periodic in phi);
+the solver's own resampling may differ in detail (hole filling, the rim cell).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import xarray as xr
+from scipy.interpolate import RegularGridInterpolator
+
+from raysim.errors import RaysimError
+from raysim.render import backend, charts
+from raysim.render.data import Quantity, fa, field_title, rim_theta, symmetric_limit
+from raysim.render.samples import G, laplacian
+from raysim.sphere import theta_of_radius
+
+Delta = Callable[[np.ndarray, np.ndarray], np.ndarray]
+SIZE = (1400, 1050)
+
+
+def scene_deformation(field: xr.Dataset) -> Delta | None:
+    """delta(x, y) (m) of the scene the FieldMap carries, or None (measured scan, or a scene
+    that refers to files not present here)."""
+    text = field.attrs.get("scene")
+    if not text:
+        return None
+    try:
+        from raysim.scene import parse_scene
+
+        deformation = parse_scene(str(text), source="FieldMap scene").deformation
+    except RaysimError:
+        return None
+    return lambda x, y: deformation(x, y)
+
+
+def fa_on_aperture(field: xr.Dataset, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """FA of the FieldMap at aperture points (x, y) (m, any equal shapes), bilinear in
+    (theta, phi) between cell centres; NaN beyond the last theta row inside the rim image
+    and where a neighbouring cell has no value."""
+    values = fa(field)
+    theta = field["theta"].values
+    phi = field["phi"].values
+    step = (phi[-1] - phi[0]) / max(len(phi) - 1, 1)
+    inside = theta + 0.5 * (theta[1] - theta[0]) <= rim_theta(field) + 1e-12
+    theta, values = theta[inside], values[inside]
+    if len(phi) % 2 == 0 and np.isclose(len(phi) * step, 2 * np.pi):
+        # across the pole: the row at -theta_0 is the first row turned by 180 deg in phi
+        theta = np.concatenate([[-theta[0]], theta])
+        values = np.concatenate([np.roll(values[:1], len(phi) // 2, axis=1), values])
+    # periodic in phi: one column copied beyond each end
+    phi_ext = np.concatenate([[phi[-1] - 2 * np.pi], phi, [phi[0] + 2 * np.pi]])
+    values_ext = np.concatenate([values[:, -1:], values, values[:, :1]], axis=1)
+    interp = RegularGridInterpolator((theta, phi_ext), values_ext, bounds_error=False, fill_value=np.nan)
+    F = float(field.attrs["focal_length"])
+    t = theta_of_radius(np.hypot(x, y), F)
+    p = np.mod(np.arctan2(y, x) - phi[0] + 0.5 * step, 2 * np.pi) + phi[0] - 0.5 * step
+    return interp(np.stack([np.ravel(t), np.ravel(p)], axis=-1)).reshape(np.shape(x))
+
+
+def truth_laplacian(truth: Delta | None, surface: xr.Dataset | None) -> Callable[[np.ndarray, np.ndarray],
+                                                                                   np.ndarray] | None:
+    """Laplacian of the true delta (1/m) at any points: from the scene's delta (central
+    differences), else from the SurfaceMap's ``truth`` grid (5-point, bilinear between points)."""
+    if truth is not None:
+        return lambda x, y: laplacian(truth, x, y)
+    if surface is None or "truth" not in surface.data_vars:
+        return None
+    values = surface["truth"].values
+    h = float(surface["x"].values[1] - surface["x"].values[0])
+    lap = np.full(values.shape, np.nan)
+    lap[1:-1, 1:-1] = (values[2:, 1:-1] + values[:-2, 1:-1] + values[1:-1, 2:] + values[1:-1, :-2]
+                       - 4 * values[1:-1, 1:-1]) / (h * h)
+    interp = RegularGridInterpolator((surface["y"].values, surface["x"].values), lap, bounds_error=False,
+                                     fill_value=np.nan)
+    return lambda x, y: interp(np.stack([np.ravel(y), np.ravel(x)], axis=-1)).reshape(np.shape(x))
+
+
+# --- the figures -----------------------------------------------------------------------------
+def fig8a_deformation(truth: xr.Dataset, size: tuple[int, int] = SIZE) -> np.ndarray:
+    """Fig. 8a: the assumed deformation as a warped dish (a SurfaceMap-like dataset whose
+    ``deformation`` is the truth), RGB image."""
+    from raysim.render.surface3d import surface_plotter
+
+    pl = surface_plotter(truth, size, title="Assumed deformation delta (scene)")
+    image = np.array(backend.screenshot(pl, None))
+    pl.close()
+    return image
+
+
+def fig8b_ideal_amplitude(field: xr.Dataset, size: tuple[int, int] = SIZE):
+    """Fig. 8b: amplitude |E| / |E_inc| of the ideal reflector on the sphere."""
+    amplitude = np.sqrt(np.clip(field["intensity_ideal"].values.astype(np.float64), 0.0, None))
+    finite = amplitude[np.isfinite(amplitude)]
+    q = Quantity("amplitude", amplitude, "|E| / |E_inc| of the ideal reflector", "viridis",
+                 (0.0, float(finite.max()) if finite.size else 1.0), False, "|E|/|E_inc|")
+    return charts.field_map(field, q, size, title="Ideal amplitude on the sphere (Fig. 8b)")
+
+
+def fig8c_fa_sphere(field: xr.Dataset, size: tuple[int, int] = SIZE):
+    """Fig. 8c: FA = I_ideal / I_def - 1 on the sphere, before resampling."""
+    return charts.field_map(field, "fa", size, title="FA on the sphere, before resampling (Fig. 8c)")
+
+
+def fig8d_fa_aperture(field: xr.Dataset, x: np.ndarray, size: tuple[int, int] = SIZE):
+    """Fig. 8d: FA resampled onto the aperture grid x = y (m) through the ideal GO mapping."""
+    X, Y = np.meshgrid(x, x, indexing="xy")
+    values = fa_on_aperture(field, X, Y)
+    values[np.hypot(X, Y) >= 0.5 * float(field.attrs["diameter"])] = np.nan
+    fig = backend.figure(size)
+    fig.suptitle(field_title(field, "FA after resampling onto the aperture (Fig. 8d)")
+                 + "\nbilinear in (theta, phi), ideal GO mapping r = 2F tan(theta/2); grey: no value",
+                 fontsize=12)
+    ax = fig.subplots()
+    limit = symmetric_limit(values)
+    image = ax.pcolormesh(charts.cell_edges(x), charts.cell_edges(x), np.ma.masked_invalid(values),
+                          cmap=charts.colour_map("RdBu_r"), vmin=-limit, vmax=limit, shading="flat",
+                          rasterized=True)
+    charts.rim_circle(ax, 0.5 * float(field.attrs["diameter"]))
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    fig.colorbar(image, ax=ax, label="FA = I_ideal / I_def - 1", extend="both")
+    return fig
+
+
+def fig9_equation(field: xr.Dataset, lap: Callable | None, size: tuple[int, int] = SIZE, n: int = 801):
+    """Fig. 9: FA against G Laplacian(delta) along the x axis (y = 0) and the y axis (x = 0)."""
+    a = 0.5 * float(field.attrs["diameter"])
+    F, R = float(field.attrs["focal_length"]), float(field.attrs["sphere_radius"])
+    s = np.linspace(-a, a, n)[1:-1]
+    fig = backend.figure(size)
+    fig.suptitle(field_title(field, "FA against G Laplacian(delta) along cuts (Fig. 9)")
+                 + "\nG = -2 F d / R, d = F + z - R; FA resampled from the sphere", fontsize=12)
+    axes = fig.subplots(2, 1, sharex=True)
+    for ax, (name, x, y) in zip(axes, (("x axis (y = 0)", s, 0 * s), ("y axis (x = 0)", 0 * s, s)),
+                                strict=True):
+        ax.plot(s, fa_on_aperture(field, x, y), color="C0", label="FA from the intensities")
+        if lap is not None:
+            ax.plot(s, G(np.hypot(x, y), F, R) * lap(x, y), color="C3", linestyle="--",
+                    label="G Laplacian(delta), true delta")
+        ax.set_title(f"along the {name}", fontsize=11)
+        ax.set_ylabel("FA (dimensionless)")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=9)
+    axes[-1].set_xlabel("position along the cut (m)")
+    return fig
+
+
+def fig10_recovered(surface: xr.Dataset, size: tuple[int, int] = SIZE):
+    """Fig. 10: recovered against true deformation along cuts (µm)."""
+    return charts.surface_cut(surface, size)
+
+
+def truth_dataset(surface: xr.Dataset, truth: Delta | None) -> xr.Dataset | None:
+    """A SurfaceMap-like dataset holding the true delta as ``deformation`` (for Fig. 8a): the
+    SurfaceMap's ``truth`` when present, else the scene's delta on the SurfaceMap's grid."""
+    if "truth" in surface.data_vars:
+        values = surface["truth"].values
+    elif truth is not None:
+        X, Y = np.meshgrid(surface["x"].values, surface["y"].values, indexing="xy")
+        values = np.where(np.isfinite(surface["deformation"].values), truth(X, Y), np.nan)
+    else:
+        return None
+    attrs = {k: v for k, v in surface.attrs.items() if k in ("focal_length", "diameter", "sphere_radius")}
+    return xr.Dataset({"deformation": (("y", "x"), values, {"units": "m"})},
+                      coords={"x": surface["x"], "y": surface["y"]}, attrs=attrs)
