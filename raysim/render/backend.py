@@ -49,6 +49,7 @@ def pyvista() -> Any:
     """Import pyvista for off-screen rendering through EGL (no X server); return the module."""
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", EGL_WINDOW)
     import pyvista as pv
+    import pyvista.plotting  # pyvista loads it lazily otherwise, at the first Plotter
 
     pv.OFF_SCREEN = True
     return pv
@@ -65,6 +66,11 @@ def plotter(size: tuple[int, int], shape: tuple[int, int] = (1, 1), **layout: An
     ``layout`` passes pyvista's subplot options (``groups``, ``row_weights``, ``col_weights``).
     """
     pv = pyvista()
+    from pyvista.plotting.tools import supports_open_gl
+
+    if not supports_open_gl():
+        raise RenderError("VTK found no OpenGL for off-screen rendering: install EGL with Mesa "
+                          "(scripts/install-system-deps.sh: libegl1 libegl-mesa0 libgl1-mesa-dri)")
     try:
         pl = pv.Plotter(off_screen=True, window_size=list(size), shape=shape, border=False,
                         lighting="light_kit", **layout)
@@ -76,7 +82,12 @@ def plotter(size: tuple[int, int], shape: tuple[int, int] = (1, 1), **layout: An
 
 
 def screenshot(pl: Any, output: str | os.PathLike[str] | None) -> Any:
-    """Render ``pl`` and return its RGB image (height, width, 3); write a PNG when ``output``."""
+    """Render ``pl`` and return its RGB image (height, width, 3); write a PNG when ``output``.
+
+    Renders again on every call (pyvista renders by itself only the first time), so camera,
+    actor and size changes since the last picture show.
+    """
+    pl.render()  # a no-op before the first picture, which screenshot renders itself
     image = pl.screenshot(None, return_img=True)
     if output is not None:
         write_png(image, output)

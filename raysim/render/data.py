@@ -202,7 +202,8 @@ def field_subtitle(ds: xr.Dataset) -> str:
     """Geometry line: D, F, R and the grid of a FieldMap."""
     D, F, R = (float(ds.attrs[k]) for k in ("diameter", "focal_length", "sphere_radius"))
     n_t, n_p = ds.sizes["theta"], ds.sizes["phi"]
-    dt = np.degrees(float(ds["theta"][1] - ds["theta"][0])) if n_t > 1 else np.nan
+    theta = ds["theta"].values
+    dt = np.degrees(float(theta[1] - theta[0])) if n_t > 1 else np.nan
     return (f"D = {D:g} m, F = {F:g} m, sphere R = {R:g} m about the focus, {n_t} x {n_p} cells "
             f"({dt:.2g}°), rim image at theta = {np.degrees(rim_theta(ds)):.2f}°")
 
@@ -232,7 +233,8 @@ def surface_subtitle(ds: xr.Dataset) -> str:
     removed = str(ds.attrs.get("removed_terms", "") or "none")
     bits.append(f"removed: {removed}")
     n = ds.sizes["x"]
-    step = float(ds["x"][1] - ds["x"][0]) if n > 1 else np.nan
+    x = ds["x"].values
+    step = float(x[1] - x[0]) if n > 1 else np.nan
     bits.append(f"grid {ds.sizes['y']} x {n}, step {step:.3g} m")
     return "; ".join(bits)
 

@@ -10,6 +10,7 @@ wave's direction of travel.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -21,7 +22,7 @@ from raysim.field import grid_of
 from raysim.render import backend
 from raysim.render.data import Quantity, field_quantity, field_subtitle, field_title, frequency_text
 
-DISH_CELLS = 110  # triangle edge of the drawn dish: D / DISH_CELLS (coarse; gaps drawn as lines)
+DISH_CELLS = 70  # triangle edge of the drawn dish: D / DISH_CELLS (coarse; gaps drawn as lines)
 NAN_COLOR = "#b0b0b0"
 
 
@@ -46,22 +47,29 @@ def hemisphere(ds: xr.Dataset, values: np.ndarray) -> Any:
     return mesh
 
 
-def reflector(ds: xr.Dataset) -> tuple[Any, str]:
-    """The reflector to draw under the hemisphere, as pyvista PolyData (m), and a description.
+def reflector(ds: xr.Dataset) -> tuple[Any, Any, str]:
+    """The reflector to draw under the hemisphere: pyvista PolyData of its triangles and of its
+    panel outlines (m), and a description.
 
     From the FieldMap's scene (panels and gaps as laid out there) when it has one and it can be
     rebuilt here; otherwise the ideal paraboloid z = r^2/(4F) of diameter D from the attributes.
+    Drawn coarsely (triangle edge D / DISH_CELLS); the same map draws from a cache.
     """
+    text = ds.attrs.get("scene")
+    return _reflector(float(ds.attrs["diameter"]), float(ds.attrs["focal_length"]),
+                      str(text) if text else None)
+
+
+@functools.lru_cache(maxsize=4)
+def _reflector(D: float, F: float, text: str | None) -> tuple[Any, Any, str]:
     from raysim.geometry import paraboloid
 
-    D, F = float(ds.attrs["diameter"]), float(ds.attrs["focal_length"])
     layout, what = None, "ideal paraboloid (from the map's attributes)"
-    text = ds.attrs.get("scene")
     if text:
         try:
             from raysim.scene import parse_scene
 
-            scene = parse_scene(str(text), source="FieldMap scene")
+            scene = parse_scene(text, source="FieldMap scene")
             if scene.dish.mesh is None and scene.dish.diameter and scene.dish.focal_length:
                 D, F = scene.D, scene.F
                 layout = scene.panels
@@ -70,7 +78,10 @@ def reflector(ds: xr.Dataset) -> tuple[Any, str]:
         except RaysimError:
             pass  # a scene that refers to files not present here: draw the ideal dish
     dish = paraboloid(D, F, resolution=D / DISH_CELLS, layout=layout)
-    return polydata(dish.vertices, dish.faces), what
+    mesh = polydata(dish.vertices, dish.faces)
+    edges = mesh.extract_feature_edges(boundary_edges=True, feature_edges=False, manifold_edges=False,
+                                       non_manifold_edges=False)
+    return mesh, edges, what
 
 
 def polydata(vertices: np.ndarray, faces: np.ndarray) -> Any:
@@ -102,16 +113,14 @@ def field_plotter(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = 
     _add_hemisphere(pl, ds, q, scale, bar=not overview)
     what = "no reflector drawn"
     if show_reflector:
-        dish, what = reflector(ds)
+        dish, edges, what = reflector(ds)
         pl.add_mesh(dish, color="#cfcfcf", ambient=0.35, diffuse=0.7, specular=0.05,
                     smooth_shading=True, name="reflector")
-        edges = dish.extract_feature_edges(boundary_edges=True, feature_edges=False,
-                                           manifold_edges=False, non_manifold_edges=False)
         if edges.n_cells:
             pl.add_mesh(edges, color="#6e6e6e", line_width=1.0, name="panel_edges")
     _add_focus_and_source(pl, ds, F, R, D, scale, labels=not overview)
     if overview:
-        _camera(pl, np.array([0.0, 0.0, 0.45 * F]), 1.55 * D, 24.0, -70.0)
+        _camera(pl, np.array([0.0, 0.0, 0.45 * F]), 1.55 * D, 24.0, -70.0)  # as field_image's inset
         return pl
     title = field_title(ds, f"{what_of(q)} on the probe hemisphere").replace(" — ", "\n", 1)
     pl.add_text(title, position="upper_edge", font_size=backend.points(13 * scale), color="black",
@@ -127,18 +136,23 @@ def field_image(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = (1
                 inset: bool = True) -> np.ndarray:
     """The 3D FieldMap picture as an RGB array (height, width, 3): the close-up of
     :func:`field_plotter` with, when ``inset``, an overview of the whole antenna pasted in the
-    lower-left corner (30 % of each side)."""
-    main = field_plotter(ds, quantity, size)
-    image = np.array(backend.screenshot(main, None))
-    main.close()
+    lower-left corner (30 % of each side), rendered by the same window without its text."""
+    pl = field_plotter(ds, quantity, size)
+    image = np.array(backend.screenshot(pl, None))
     if inset:
+        D, F = float(ds.attrs["diameter"]), float(ds.attrs["focal_length"])
+        for name in ("title", "notes", "labels"):
+            pl.remove_actor(name, render=False)
+        pl.remove_scalar_bar(render=False)
         w, h = int(0.3 * size[0]), int(0.3 * size[1])
-        small = field_plotter(ds, quantity, (w, h), overview=True)
-        picture = np.array(backend.screenshot(small, None))
-        small.close()
+        pl.window_size = [w, h]
+        _camera(pl, np.array([0.0, 0.0, 0.45 * F]), 1.55 * D, 24.0, -70.0)
+        picture = np.array(backend.screenshot(pl, None))[:h, :w]
         picture[[0, -1], :] = 60
         picture[:, [0, -1]] = 60
-        image[size[1] - h - int(0.02 * size[1]):size[1] - int(0.02 * size[1]), :w] = picture
+        bottom = size[1] - int(0.02 * size[1])
+        image[bottom - h:bottom, :w] = picture
+    pl.close()
     return image
 
 
