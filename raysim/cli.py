@@ -135,21 +135,24 @@ def render(
 
 @app.command()
 def report(
-    scene: Path = typer.Argument(..., help="Scene TOML file (see scenes/)."),
+    source: Path = typer.Argument(..., help="Scene TOML file, or a FieldMap (.nc) simulated or measured."),
     output: Path = typer.Option(..., "-o", "--output", help="Folder for report.html, its figures and data."),
     method: str = typer.Option("go", "--method", help="Simulation method: go, po or po+ptd."),
     device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
     solver: str | None = typer.Option(None, "--solver", help="Poisson solver (default: the solver's)."),
     grid: int | None = typer.Option(None, "--grid",
                                     help="Aperture grid points across D (default: the solver's)."),
+    invert: bool = typer.Option(True, "--invert/--no-invert",
+                                help="--no-invert leaves the inversion out: the field's figures only."),
 ) -> None:
     """Simulate, invert and draw a scene: an HTML report mirroring the paper's Figs. 8-10.
 
     The page embeds its figures; the PNGs, field.nc and surface.nc are written beside it.
+    Given a FieldMap instead of a scene, the simulation is skipped.
     """
     from raysim.render.report import report as run
 
-    page = run(scene, output, method=method, device=device, solver=solver, grid=grid,
+    page = run(source, output, method=method, device=device, solver=solver, grid=grid, invert=invert,
                progress=lambda line: console.print(f"report: {line}", highlight=False))
     out.print(f"{page}", highlight=False)
 

@@ -38,42 +38,51 @@ PAPER_GO = ("paper, GO data: FDM (Gauss-Seidel, N = 256, 1000 iterations) RRMS 4
             "FFT RRMS 7.47 %")
 
 
-def report(scene: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, method: str = "go",
-           device: str = "cpu", solver: str | None = None, grid: int | None = None,
+def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, method: str = "go",
+           device: str = "cpu", solver: str | None = None, grid: int | None = None, invert: bool = True,
            progress: Callable[[str], None] | None = None) -> Path:
-    """Simulate the scene, invert its FieldMap and write the report into ``out_dir``.
+    """Simulate a scene (or take a FieldMap), invert it and write the report into ``out_dir``.
 
     Parameters
     ----------
-    scene : scene TOML file.
+    source : scene TOML file, or a FieldMap NetCDF (``.nc``) already simulated or measured.
     out_dir : folder for ``report.html``, ``field.nc``, ``surface.nc`` and ``figures/``.
     method : simulation method (``go``; ``po``, ``po+ptd`` where available).
     device : Warp device, ``cpu`` or ``cuda``.
     solver, grid : the inversion's Poisson solver and aperture grid points N (None: the
         solver's defaults).
+    invert : False leaves the inversion out: the field's figures only (8a-d, 9).
     progress : optional callback with a line per stage.
     Returns the path of ``report.html``.
     """
-    from raysim.field import save
-    from raysim.scene import load_scene
-    from raysim.simulate import simulate
+    from raysim.field import load, save
 
     say = progress or (lambda line: None)
-    run_inversion = inversion()  # before hours of simulation, not after
-    loaded = load_scene(scene)
-    out = _folder(out_dir)
-    say(f"simulating {loaded.name} ({method})")
-    start = time.perf_counter()
-    field = simulate(loaded, method=method, device=device)
-    seconds_simulate = time.perf_counter() - start
-    save(field, out / "field.nc")
-    say("inverting")
-    start = time.perf_counter()
-    surface = run_inversion(field, solver=solver, grid=grid, device=device)
-    seconds_invert = time.perf_counter() - start
-    _save_surface(surface, out / "surface.nc")
+    run_inversion = inversion() if invert else None  # fail before hours of simulation, not after
+    timings: dict[str, float] = {}
+    if Path(source).suffix.lower() in (".nc", ".nc4", ".netcdf"):
+        field = load(source)
+        out = _folder(out_dir)
+    else:
+        from raysim.scene import load_scene
+        from raysim.simulate import simulate
+
+        loaded = load_scene(source)
+        out = _folder(out_dir)
+        say(f"simulating {loaded.name} ({method})")
+        start = time.perf_counter()
+        field = simulate(loaded, method=method, device=device)
+        timings["simulate"] = time.perf_counter() - start
+        save(field, out / "field.nc")
+    surface = None
+    if run_inversion is not None:
+        say("inverting")
+        start = time.perf_counter()
+        surface = run_inversion(field, solver=solver, grid=grid, device=device)
+        timings["invert"] = time.perf_counter() - start
+        _save_surface(surface, out / "surface.nc")
     say("drawing")
-    return write_report(field, surface, out, timings={"simulate": seconds_simulate, "invert": seconds_invert})
+    return write_report(field, surface, out, timings=timings)
 
 
 def inversion() -> Callable[..., xr.Dataset]:
@@ -97,10 +106,11 @@ def inversion() -> Callable[..., xr.Dataset]:
     return invert
 
 
-def write_report(field: xr.Dataset, surface: xr.Dataset, out_dir: str | os.PathLike[str], *,
+def write_report(field: xr.Dataset, surface: xr.Dataset | None, out_dir: str | os.PathLike[str], *,
                  timings: dict[str, float] | None = None) -> Path:
-    """Draw the figure set for a FieldMap and its SurfaceMap and write ``report.html`` with the
-    PNGs beside it in ``figures/``; returns the HTML path. ``timings`` (s) are quoted."""
+    """Draw the figure set for a FieldMap and its SurfaceMap (None: no inversion, the field's
+    figures only) and write ``report.html`` with the PNGs beside it in ``figures/``; returns the
+    HTML path. ``timings`` (s) are quoted."""
     out = _folder(out_dir)
     (out / "figures").mkdir(exist_ok=True)
     start = time.perf_counter()
@@ -121,15 +131,15 @@ def write_report(field: xr.Dataset, surface: xr.Dataset, out_dir: str | os.PathL
 
 
 # --- the figures -----------------------------------------------------------------------------
-def _figures(field: xr.Dataset, surface: xr.Dataset) -> list[tuple[str, str, np.ndarray]]:
+def _figures(field: xr.Dataset, surface: xr.Dataset | None) -> list[tuple[str, str, np.ndarray]]:
     """(file name, caption, RGB image) of every figure, in the paper's order."""
     from raysim.render import charts
     from raysim.render.field3d import field_image
     from raysim.render.surface3d import surface_plotter
 
     truth = figures.scene_deformation(field)
-    truth_map = figures.truth_dataset(surface, truth)
-    x = surface["x"].values
+    truth_map = figures.truth_dataset(field, surface, truth)
+    x = figures.aperture_x(field, surface)
     items: list[tuple[str, str, np.ndarray]] = []
     if truth_map is not None:
         items.append(("fig8a_deformation", "Fig. 8a: the assumed deformation delta, height exaggerated as "
@@ -144,18 +154,22 @@ def _figures(field: xr.Dataset, surface: xr.Dataset) -> list[tuple[str, str, np.
         ("fig9_equation", "Fig. 9: FA from the intensities against G times the Laplacian of the true "
          "deformation, along the x and y axes (the deformation-intensity equation).",
          backend.figure_image(figures.fig9_equation(field, figures.truth_laplacian(truth, surface)))),
-        ("fig10_recovered", "Fig. 10: recovered against true deformation along the x and y axes, with "
-         "the error.", backend.figure_image(figures.fig10_recovered(surface))),
-        ("surface_maps", "Recovered surface: truth, recovered and error over the aperture (µm).",
-         backend.figure_image(charts.surface_map(surface, (2400, 1000) if "truth" in surface else
-                                                 (1600, 1200)))),
-        ("field_3d", "The probe hemisphere coloured by FA over the reflector, focus and plane wave "
-         "marked; inset: the whole antenna.", field_image(field, "fa", figures.SIZE)),
     ]
-    pl = surface_plotter(surface, (2400, 1000) if "truth" in surface else figures.SIZE)
-    items.append(("surface_3d", "Recovered surface as warped dishes (truth, recovered, error), one "
-                  "exaggeration.", np.array(backend.screenshot(pl, None))))
-    pl.close()
+    if surface is not None:
+        wide = (2400, 1000) if "truth" in surface.data_vars else figures.SIZE
+        items += [
+            ("fig10_recovered", "Fig. 10: recovered against true deformation along the x and y axes, "
+             "with the error.", backend.figure_image(figures.fig10_recovered(surface))),
+            ("surface_maps", "Recovered surface: truth, recovered and error over the aperture (µm).",
+             backend.figure_image(charts.surface_map(surface, wide))),
+        ]
+    items.append(("field_3d", "The probe hemisphere coloured by FA over the reflector, focus and plane "
+                  "wave marked; inset: the whole antenna.", field_image(field, "fa", figures.SIZE)))
+    if surface is not None:
+        pl = surface_plotter(surface, wide)
+        items.append(("surface_3d", "Recovered surface as warped dishes (truth, recovered, error), one "
+                      "exaggeration.", np.array(backend.screenshot(pl, None))))
+        pl.close()
     return items
 
 
@@ -175,10 +189,10 @@ def _figure_html(name: str, caption: str, png: bytes) -> str:
 
 
 # --- the page --------------------------------------------------------------------------------
-def numbers(field: xr.Dataset, surface: xr.Dataset, times: dict[str, float]) -> list[tuple[str, str]]:
+def numbers(field: xr.Dataset, surface: xr.Dataset | None, times: dict[str, float]) -> list[tuple[str, str]]:
     """The run's figures as (label, value) rows: geometry, data, solver, RMS, RRMS, times."""
     a = field.attrs
-    s = surface.attrs
+    s = surface.attrs if surface is not None else {}
     data = f"{method_text(str(a.get('method', '?')))} at {frequency_text(float(a.get('frequency_hz', 0)))}"
     refine = f", {s['refine_iterations']} refinement iterations" if "refine_iterations" in s else ""
     rows = [
@@ -186,24 +200,34 @@ def numbers(field: xr.Dataset, surface: xr.Dataset, times: dict[str, float]) -> 
         ("dish", f"D = {float(a['diameter']):g} m, F = {float(a['focal_length']):g} m; probe sphere "
                  f"R = {float(a['sphere_radius']):g} m, {field.sizes['theta']} x {field.sizes['phi']} cells"),
         ("data", data + (f", {int(a['rays']):,} rays" if "rays" in a else "")),
-        ("solver", f"{s.get('solver', '?')}, grid {surface.sizes['x']} x {surface.sizes['y']}{refine}"),
-        ("boundary", str(s.get("boundary", "?")) + (f"; harmonic part {s['harmonic_part']}"
-                                                    if s.get("harmonic_part") else "")),
-        ("removed terms", str(s.get("removed_terms", "none") or "none")),
     ]
-    panels = dict(surface_panels(surface))
-    if "error" in panels:
-        M = peak_to_peak(panels["truth"])
-        err = rms(panels["error"])
-        rows += [("truth", f"RMS {rms(panels['truth']) * UM:.2f} µm, peak-to-peak M = {M * UM:.1f} µm"),
-                 ("recovered - truth", f"RMS {err * UM:.2f} µm, RRMS = RMS / M = {100 * err / M:.2f} %")]
-        if _is_paper_case(field):
-            rows.append(("paper", PAPER_GO))
+    if surface is None:
+        rows.append(("inversion", "not run: the field's figures only"))
     else:
-        rows.append(("recovered", f"RMS {rms(panels['deformation']) * UM:.2f} µm (no truth to compare with)"))
+        rows += [
+            ("solver", f"{s.get('solver', '?')}, grid {surface.sizes['x']} x {surface.sizes['y']}{refine}"),
+            ("boundary", str(s.get("boundary", "?")) + (f"; harmonic part {s['harmonic_part']}"
+                                                        if s.get("harmonic_part") else "")),
+            ("removed terms", str(s.get("removed_terms", "none") or "none")),
+        ]
+        rows += _accuracy(field, surface)
     time_rows = [("simulate", times.get("simulate", a.get("seconds_total"))),
                  ("invert", times.get("invert", s.get("time_s"))), ("draw the figures", times.get("draw"))]
     rows += [(f"time: {label}", f"{float(t):.1f} s") for label, t in time_rows if t is not None]
+    return rows
+
+
+def _accuracy(field: xr.Dataset, surface: xr.Dataset) -> list[tuple[str, str]]:
+    """RMS and RRMS rows, recomputed from the maps (RMS over the aperture, RRMS = RMS / M)."""
+    panels = dict(surface_panels(surface))
+    if "error" not in panels:
+        return [("recovered", f"RMS {rms(panels['deformation']) * UM:.2f} µm (no truth to compare with)")]
+    M = peak_to_peak(panels["truth"])
+    err = rms(panels["error"])
+    rows = [("truth", f"RMS {rms(panels['truth']) * UM:.2f} µm, peak-to-peak M = {M * UM:.1f} µm"),
+            ("recovered - truth", f"RMS {err * UM:.2f} µm, RRMS = RMS / M = {100 * err / M:.2f} %")]
+    if _is_paper_case(field):
+        rows.append(("paper", PAPER_GO))
     return rows
 
 
@@ -213,14 +237,14 @@ def _is_paper_case(field: xr.Dataset) -> bool:
     return same and str(a.get("deformation", "")) == "paper Eq. 8 x 1"
 
 
-def _page(field: xr.Dataset, surface: xr.Dataset, blocks: list[str], times: dict[str, float]) -> str:
+def _page(field: xr.Dataset, surface: xr.Dataset | None, blocks: list[str], times: dict[str, float]) -> str:
     rows = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>"
                    for k, v in numbers(field, surface, times))
     scene = field.attrs.get("scene")
     scene_html = (f"<h2>Scene</h2><pre>{html.escape(str(scene))}</pre>" if scene else
                   "<h2>Scene</h2><p>None: a measured scan, drawn from the FieldMap's attributes.</p>")
     name = html.escape(str(field.attrs.get("scene_name", "scan")))
-    summary = html.escape(error_summary(surface) or "")
+    summary = html.escape(error_summary(surface) if surface is not None else "")
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">
 <title>raysim report: {name}</title>

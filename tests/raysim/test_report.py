@@ -125,3 +125,35 @@ def test_report_without_the_solver_fails_before_simulating(tmp_path, monkeypatch
     with pytest.raises(RenderError, match="needs the solver"):
         report_module.report(ROOT / "scenes" / "paper_go.toml", tmp_path / "run")
     assert not (tmp_path / "run").exists()
+
+
+def test_report_from_a_fieldmap_without_inversion_draws_the_field_figures(tmp_path, monkeypatch):
+    import raysim.simulate
+    from raysim.field import save
+
+    monkeypatch.setattr(raysim.simulate, "simulate", lambda *a, **k: pytest.fail("simulated a FieldMap"))
+    monkeypatch.setattr(report_module, "inversion", lambda: pytest.fail("inverted with --no-invert"))
+    drawn = []
+    monkeypatch.setattr(report_module, "_figures", lambda field, surface: drawn.append(surface) or [
+        ("fig9_equation", "Fig. 9", np.full((900, 1200, 3), 200, dtype=np.uint8))])
+    source = save(paper_field(), tmp_path / "scan.nc")
+    page = report_module.report(source, tmp_path / "run", invert=False)
+    assert drawn == [None]
+    text = page.read_text(encoding="utf-8")
+    assert "inversion</th><td>not run" in text
+    assert not (tmp_path / "run" / "surface.nc").exists()
+
+
+def test_fig9_compares_the_equation_within_panels_not_across_their_edges():
+    from raysim.render import figures
+
+    text = (ROOT / "scenes" / "panels_go.toml").read_text()
+    field = equation_fieldmap(PaperDeformation(D, F), D, F, scene=text)
+    truth = figures.scene_deformation(field)
+    assert truth is not None and truth.layout is not None
+    # along y = 0, a radial gap of every ring: a stencil straddling it would see two panels'
+    # pistons (a Laplacian of order piston / h^2); within one panel, rigid errors have none
+    x = np.linspace(-50.0, 50.0, 201)
+    np.testing.assert_allclose(truth.laplacian(x, np.zeros_like(x)), 0.0, atol=1e-9)
+    straddling = (truth(x, 0.01 + 0 * x) + truth(x, -0.01 + 0 * x) - 2 * truth(x, 0 * x)) / 1e-4
+    assert np.nanmax(np.abs(straddling)) > 1e-2
