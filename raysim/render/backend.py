@@ -8,6 +8,8 @@ Sizes are (width, height) in pixels everywhere.
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import os
 import re
 from pathlib import Path
@@ -16,6 +18,7 @@ from typing import Any
 from raysim.errors import RaysimError
 
 EGL_WINDOW = "vtkEGLRenderWindow"
+EGL_PLATFORM_DEVICE_EXT = 0x313F
 MIN_SIZE = (200, 150)
 MAX_SIZE = (8000, 8000)
 DPI = 100  # matplotlib dots per inch: a figure of W x H pixels is W/100 x H/100 inches
@@ -45,9 +48,53 @@ def parse_size(size: str | tuple[int, int] | None, default: tuple[int, int]) -> 
     return width, height
 
 
+EGL_HINT = ("install EGL with Mesa: scripts/install-system-deps.sh, or apt-get install libegl1 "
+            "libegl-mesa0 libgl1-mesa-dri")
+
+
+@functools.cache
+def egl_available() -> bool:
+    """Whether EGL can open an off-screen display here, probed the way VTK's EGL window opens
+    one (an EGL device, then eglInitialize), without VTK: VTK crashes where this fails."""
+    try:
+        egl = ctypes.CDLL("libEGL.so.1")
+    except OSError:
+        return False
+    egl.eglGetProcAddress.restype = ctypes.c_void_p
+    egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
+    query = egl.eglGetProcAddress(b"eglQueryDevicesEXT")
+    platform = egl.eglGetProcAddress(b"eglGetPlatformDisplayEXT")
+    if not query or not platform:
+        return False
+    query_devices = ctypes.CFUNCTYPE(ctypes.c_uint, ctypes.c_int, ctypes.POINTER(ctypes.c_void_p),
+                                     ctypes.POINTER(ctypes.c_int))(query)
+    platform_display = ctypes.CFUNCTYPE(ctypes.c_void_p, ctypes.c_uint, ctypes.c_void_p,
+                                        ctypes.c_void_p)(platform)
+    egl.eglInitialize.restype = ctypes.c_uint
+    egl.eglInitialize.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_int)]
+    egl.eglTerminate.argtypes = [ctypes.c_void_p]
+    devices = (ctypes.c_void_p * 32)()
+    count = ctypes.c_int(0)
+    if not query_devices(32, devices, ctypes.byref(count)):
+        return False
+    major, minor = ctypes.c_int(0), ctypes.c_int(0)
+    for k in range(count.value):
+        display = platform_display(EGL_PLATFORM_DEVICE_EXT, devices[k], None)
+        if display and egl.eglInitialize(display, ctypes.byref(major), ctypes.byref(minor)):
+            egl.eglTerminate(display)
+            return True
+    return False
+
+
 def pyvista() -> Any:
-    """Import pyvista for off-screen rendering through EGL (no X server); return the module."""
+    """Import pyvista for off-screen rendering through EGL (no X server); return the module.
+
+    Raises RenderError with what to install when the EGL window is chosen but EGL cannot open
+    a display (VTK itself would crash there).
+    """
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", EGL_WINDOW)
+    if os.environ["VTK_DEFAULT_OPENGL_WINDOW"] == EGL_WINDOW and not egl_available():
+        raise RenderError(f"no usable EGL for off-screen 3D rendering: {EGL_HINT}")
     import pyvista as pv
     import pyvista.plotting  # pyvista loads it lazily otherwise, at the first Plotter
 
@@ -69,14 +116,12 @@ def plotter(size: tuple[int, int], shape: tuple[int, int] = (1, 1), **layout: An
     from pyvista.plotting.tools import supports_open_gl
 
     if not supports_open_gl():
-        raise RenderError("VTK found no OpenGL for off-screen rendering: install EGL with Mesa "
-                          "(scripts/install-system-deps.sh: libegl1 libegl-mesa0 libgl1-mesa-dri)")
+        raise RenderError(f"VTK found no OpenGL for off-screen rendering: {EGL_HINT}")
     try:
         pl = pv.Plotter(off_screen=True, window_size=list(size), shape=shape, border=False,
                         lighting="light_kit", **layout)
     except RuntimeError as exc:  # pragma: no cover - depends on the machine's OpenGL stack
-        raise RenderError("VTK could not open an off-screen EGL window: install EGL with Mesa "
-                          f"(scripts/install-system-deps.sh) ({exc})") from exc
+        raise RenderError(f"VTK could not open an off-screen window ({exc}): {EGL_HINT}") from exc
     pl.set_background("white")
     return pl
 

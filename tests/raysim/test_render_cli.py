@@ -108,3 +108,27 @@ def test_3d_renders_in_a_process_with_no_display_and_no_vtk_setting(files, tmp_p
     image = imread(out)
     assert image.shape[:2] == (900, 1200)
     assert colour_count(image) > 1000
+
+
+def test_missing_egl_is_one_clear_error_not_a_crash(monkeypatch):
+    """Without libEGL (or without a driver behind it) VTK's EGL window crashes the process;
+    the probe turns that into a RenderError naming what to install."""
+    import ctypes
+
+    from raysim.render import backend
+
+    assert backend.egl_available()  # this machine renders: the tests above need it
+
+    def no_library(name, *args, **kwargs):
+        raise OSError(f"{name}: cannot open shared object file")
+
+    monkeypatch.setattr(ctypes, "CDLL", no_library)
+    backend.egl_available.cache_clear()
+    try:
+        assert not backend.egl_available()
+        with pytest.raises(RenderError, match="libegl1 libegl-mesa0 libgl1-mesa-dri"):
+            backend.pyvista()
+    finally:
+        monkeypatch.undo()
+        backend.egl_available.cache_clear()
+    assert backend.egl_available()
