@@ -140,8 +140,11 @@ def surface_map(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200)) -> Any:
         ax.set_ylabel("y (m)")
         ax.set_title(f"{name}: RMS {rms(values) * UM:.4g} µm, p-v {peak_to_peak(values) * UM:.4g} µm",
                      fontsize=11)
-        fig.colorbar(image, ax=ax, orientation="horizontal", label=f"{name} delta along z (µm)",
-                     shrink=0.9, pad=0.08)
+        if len(panels) == 1:
+            fig.colorbar(image, ax=ax, label=f"{name} delta along z (µm)", shrink=0.8)
+        else:
+            fig.colorbar(image, ax=ax, orientation="horizontal", label=f"{name} delta along z (µm)",
+                         shrink=0.9, pad=0.08)
     return fig
 
 
