@@ -189,6 +189,8 @@ def report(
     solver: str | None = typer.Option(None, "--solver", help="Poisson solver (default: the solver's)."),
     grid: int | None = typer.Option(None, "--grid",
                                     help="Aperture grid points across D (default: the solver's)."),
+    refine: int | None = typer.Option(None, "--refine",
+                                      help="GO refinement iterations (0: the paper's linear answer)."),
     invert: bool = typer.Option(True, "--invert/--no-invert",
                                 help="--no-invert leaves the inversion out: the field's figures only."),
 ) -> None:
@@ -199,7 +201,8 @@ def report(
     """
     from raysim.render.report import report as run
 
-    page = run(source, output, method=method, device=device, solver=solver, grid=grid, invert=invert,
+    page = run(source, output, method=method, device=device, solver=solver, grid=grid, refine=refine,
+               invert=invert,
                progress=lambda line: console.print(f"report: {line}", highlight=False))
     out.print(f"{page}", highlight=False)
 

@@ -160,18 +160,25 @@ def surface_cut(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200)) -> Any:
     x, y = ds["x"].values, ds["y"].values
     cuts = (("along the x axis (y = 0)", x, lambda v: profile_at_zero(v, y, axis=0), "x (m)"),
             ("along the y axis (x = 0)", y, lambda v: profile_at_zero(v, x, axis=1), "y (m)"))
-    for ax, (label, coord, take, axis) in zip(axes, cuts, strict=True):
+    for ax, (title, coord, take, axis) in zip(axes, cuts, strict=True):
         recovered = panels.get("recovered", panels.get("deformation"))
-        label = "recovered" if "truth" in panels else "deformation"
-        ax.plot(coord, take(recovered) * UM, color="C0", label=label)
+        name = "recovered" if "truth" in panels else "deformation"
+        handles = ax.plot(coord, take(recovered) * UM, color="C0", label=name)
         if "truth" in panels:
-            ax.plot(coord, take(panels["truth"]) * UM, color="C3", linestyle="--", label="truth")
-            ax.plot(coord, take(panels["error"]) * UM, color="0.4", linewidth=1.0, label="error")
+            handles += ax.plot(coord, take(panels["truth"]) * UM, color="C3", linestyle="--", label="truth")
+            # the error on its own scale (right), so a small error stays readable
+            right = ax.twinx()
+            error = take(panels["error"]) * UM
+            handles += right.plot(coord, error, color="0.35", linewidth=1.0, label="error (right scale)")
+            limit = 1.2 * nice_ceiling(symmetric_limit(error, 100.0))
+            right.set_ylim(-limit, limit)
+            right.set_ylabel("error (µm)", color="0.35")
+            right.tick_params(axis="y", colors="0.35")
         ax.axhline(0.0, color="0.6", linewidth=0.6)
-        ax.set_title(label, fontsize=11)
+        ax.set_title(title, fontsize=11)
         ax.set_ylabel("delta along z (µm)")
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=9)
+        ax.legend(handles=handles, fontsize=9, loc="upper right")
         ax.set_xlabel(axis)
     return fig
 

@@ -3,9 +3,9 @@
 Frames and units (DESIGN.md): sphere angles in rad (shown in deg), aperture x, y in m, delta in
 m (shown in µm). The aperture sees the sphere through the ideal GO mapping theta = 2 atan(r/2F),
 phi = atan2(y, x) (paper Eq. 34); FA = I_ideal / I_def - 1 and G = -2 F d / R, d = F + z - R
-(paper Eqs. 28-29). For Figs. 8d and 9 the sphere's FA is resampled onto the aperture here, for
-display, by bilinear interpolation in (theta, phi) between cell centres (periodic in phi);
-the solver's own resampling may differ in detail (hole filling, the rim cell).
+(paper Eqs. 28-29). Figs. 8d and 9 show FA resampled onto the aperture grid by the solver's own
+resampling (``solver.resample``: holes filled, rows up to the rim extrapolated, cubic spline),
+so they show the data the inversion used (before its power-gain correction).
 """
 
 from __future__ import annotations
@@ -20,9 +20,10 @@ from scipy.interpolate import RegularGridInterpolator
 
 from raysim.errors import RaysimError
 from raysim.render import backend, charts
-from raysim.render.data import Quantity, fa, field_title, rim_theta, symmetric_limit
-from raysim.render.samples import G, laplacian
-from raysim.sphere import theta_of_radius
+from raysim.render.backend import RenderError
+from raysim.render.data import Quantity, fa, field_title, symmetric_limit
+from raysim.render.samples import laplacian
+from solver.equation import G
 
 Delta = Callable[[np.ndarray, np.ndarray], np.ndarray]
 SIZE = (1400, 1050)
@@ -62,28 +63,19 @@ def scene_deformation(field: xr.Dataset) -> SceneTruth | None:
     return SceneTruth(scene.deformation, scene.panels)
 
 
-def fa_on_aperture(field: xr.Dataset, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """FA of the FieldMap at aperture points (x, y) (m, any equal shapes), bilinear in
-    (theta, phi) between cell centres; NaN beyond the last theta row inside the rim image
-    and where a neighbouring cell has no value."""
-    values = fa(field)
-    theta = field["theta"].values
-    phi = field["phi"].values
-    step = (phi[-1] - phi[0]) / max(len(phi) - 1, 1)
-    inside = theta + 0.5 * (theta[1] - theta[0]) <= rim_theta(field) + 1e-12
-    theta, values = theta[inside], values[inside]
-    if len(phi) % 2 == 0 and np.isclose(len(phi) * step, 2 * np.pi):
-        # across the pole: the row at -theta_0 is the first row turned by 180 deg in phi
-        theta = np.concatenate([[-theta[0]], theta])
-        values = np.concatenate([np.roll(values[:1], len(phi) // 2, axis=1), values])
-    # periodic in phi: one column copied beyond each end
-    phi_ext = np.concatenate([[phi[-1] - 2 * np.pi], phi, [phi[0] + 2 * np.pi]])
-    values_ext = np.concatenate([values[:, -1:], values, values[:, :1]], axis=1)
-    interp = RegularGridInterpolator((theta, phi_ext), values_ext, bounds_error=False, fill_value=np.nan)
-    F = float(field.attrs["focal_length"])
-    t = theta_of_radius(np.hypot(x, y), F)
-    p = np.mod(np.arctan2(y, x) - phi[0] + 0.5 * step, 2 * np.pi) + phi[0] - 0.5 * step
-    return interp(np.stack([np.ravel(t), np.ravel(p)], axis=-1)).reshape(np.shape(x))
+def fa_on_aperture(field: xr.Dataset, x: np.ndarray) -> np.ndarray:
+    """FA of the FieldMap resampled by the solver onto the aperture grid with cell centres ``x``
+    (= y, m, N of them spanning D), indexed [y, x]; NaN outside the aperture."""
+    from raysim.field import grid_of
+    from solver.aperture import ApertureGrid
+    from solver.resample import sphere_to_aperture
+
+    D, F = float(field.attrs["diameter"]), float(field.attrs["focal_length"])
+    grid = ApertureGrid(D, len(x))
+    if not np.allclose(grid.x, x, atol=1e-9 * D):
+        raise RenderError("the aperture grid must be N cell centres spanning D")
+    values, _ = sphere_to_aperture(fa(field), grid_of(field), grid, F, D)
+    return values
 
 
 def truth_laplacian(truth: SceneTruth | None, surface: xr.Dataset | None) -> Delta | None:
@@ -132,13 +124,10 @@ def fig8c_fa_sphere(field: xr.Dataset, size: tuple[int, int] = SIZE):
 
 def fig8d_fa_aperture(field: xr.Dataset, x: np.ndarray, size: tuple[int, int] = SIZE):
     """Fig. 8d: FA resampled onto the aperture grid x = y (m) through the ideal GO mapping."""
-    X, Y = np.meshgrid(x, x, indexing="xy")
-    values = fa_on_aperture(field, X, Y)
-    values[np.hypot(X, Y) >= 0.5 * float(field.attrs["diameter"])] = np.nan
+    values = fa_on_aperture(field, x)
     fig = backend.figure(size)
     fig.suptitle(field_title(field, "FA after resampling onto the aperture (Fig. 8d)")
-                 + "\nbilinear in (theta, phi), ideal GO mapping r = 2F tan(theta/2); grey: no value",
-                 fontsize=12)
+                 + "\nideal GO mapping r = 2F tan(theta/2), the solver's resampling", fontsize=12)
     ax = fig.subplots()
     limit = symmetric_limit(values)
     image = ax.pcolormesh(charts.cell_edges(x), charts.cell_edges(x), np.ma.masked_invalid(values),
@@ -152,23 +141,24 @@ def fig8d_fa_aperture(field: xr.Dataset, x: np.ndarray, size: tuple[int, int] = 
     return fig
 
 
-def fig9_equation(field: xr.Dataset, lap: Callable | None, size: tuple[int, int] = SIZE, n: int = 801):
-    """Fig. 9: FA against G Laplacian(delta) along the x axis (y = 0) and the y axis (x = 0)."""
-    a = 0.5 * float(field.attrs["diameter"])
+def fig9_equation(field: xr.Dataset, x: np.ndarray, lap: Delta | None, size: tuple[int, int] = SIZE):
+    """Fig. 9: FA (resampled onto the aperture grid x = y, m) against G Laplacian(delta) along
+    the x axis (y = 0) and the y axis (x = 0)."""
     F, R = float(field.attrs["focal_length"]), float(field.attrs["sphere_radius"])
-    s = np.linspace(-a, a, n)[1:-1]
+    values = fa_on_aperture(field, x)
     fig = backend.figure(size)
     fig.suptitle(field_title(field, "FA against G Laplacian(delta) along cuts (Fig. 9)")
                  + "\nG = -2 F d / R, d = F + z - R; FA resampled from the sphere", fontsize=12)
     axes = fig.subplots(2, 1, sharex=True)
-    for ax, (name, x, y) in zip(axes, (("x axis (y = 0)", s, 0 * s), ("y axis (x = 0)", 0 * s, s)),
-                                strict=True):
-        measured = fa_on_aperture(field, x, y)
-        ax.plot(s, measured, color="C0", label="FA from the intensities")
+    zero = np.zeros_like(x)
+    cuts = (("x axis (y = 0)", x, zero, charts.profile_at_zero(values, x, axis=0)),
+            ("y axis (x = 0)", zero, x, charts.profile_at_zero(values, x, axis=1)))
+    for ax, (name, px, py, measured) in zip(axes, cuts, strict=True):
+        ax.plot(x, measured, color="C0", label="FA from the intensities")
         curves = [measured]
         if lap is not None:
-            curves.append(G(np.hypot(x, y), F, R) * lap(x, y))
-            ax.plot(s, curves[-1], color="C3", linestyle="--", label="G Laplacian(delta), true delta")
+            curves.append(G(np.hypot(px, py), F, R) * lap(px, py))
+            ax.plot(x, curves[-1], color="C3", linestyle="--", label="G Laplacian(delta), true delta")
         # a few spikes (gap images, the pole) must not flatten the rest: clip at 1.3 x the 99th
         # percentile and say so
         limit = 1.3 * symmetric_limit(np.concatenate(curves), 99.0)

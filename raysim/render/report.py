@@ -16,7 +16,6 @@ import os
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -39,7 +38,8 @@ PAPER_GO = ("paper, GO data: FDM (Gauss-Seidel, N = 256, 1000 iterations) RRMS 4
 
 
 def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, method: str = "go",
-           device: str = "cpu", solver: str | None = None, grid: int | None = None, invert: bool = True,
+           device: str = "cpu", solver: str | None = None, grid: int | None = None,
+           refine: int | None = None, invert: bool = True,
            progress: Callable[[str], None] | None = None) -> Path:
     """Simulate a scene (or take a FieldMap), invert it and write the report into ``out_dir``.
 
@@ -49,8 +49,8 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
     out_dir : folder for ``report.html``, ``field.nc``, ``surface.nc`` and ``figures/``.
     method : simulation method (``go``; ``po``, ``po+ptd`` where available).
     device : Warp device, ``cpu`` or ``cuda``.
-    solver, grid : the inversion's Poisson solver and aperture grid points N (None: the
-        solver's defaults).
+    solver, grid, refine : the inversion's Poisson solver, aperture grid points N and GO
+        refinement iterations (0: the paper's linear answer); None: the solver's defaults.
     invert : False leaves the inversion out: the field's figures only (8a-d, 9).
     progress : optional callback with a line per stage.
     Returns the path of ``report.html``.
@@ -78,7 +78,7 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
     if run_inversion is not None:
         say("inverting")
         start = time.perf_counter()
-        surface = run_inversion(field, solver=solver, grid=grid, device=device)
+        surface = run_inversion(field, solver=solver, grid=grid, refine=refine, device=device)
         timings["invert"] = time.perf_counter() - start
         _save_surface(surface, out / "surface.nc")
     say("drawing")
@@ -87,7 +87,8 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
 
 def inversion() -> Callable[..., xr.Dataset]:
     """The inversion FieldMap -> SurfaceMap of the solver package, as
-    ``f(field, solver=None, grid=None, device="cpu")``; RenderError when it is not installed."""
+    ``f(field, solver=None, grid=None, refine=None, device="cpu")``; RenderError when it is not
+    installed."""
     try:
         from solver.invert import invert as run
     except ImportError as exc:
@@ -95,13 +96,9 @@ def inversion() -> Callable[..., xr.Dataset]:
                           "installation does not have yet") from exc
 
     def invert(field: xr.Dataset, solver: str | None = None, grid: int | None = None,
-               device: str = "cpu") -> xr.Dataset:
-        options: dict[str, Any] = {"device": device}
-        if solver is not None:
-            options["solver"] = solver
-        if grid is not None:
-            options["N"] = grid
-        return run(field, **options)
+               refine: int | None = None, device: str = "cpu") -> xr.Dataset:
+        given = {"solver": solver, "N": grid, "refine_iterations": refine}
+        return run(field, device=device, **{k: v for k, v in given.items() if v is not None})
 
     return invert
 
@@ -153,7 +150,7 @@ def _figures(field: xr.Dataset, surface: xr.Dataset | None) -> list[tuple[str, s
          "mapping.", backend.figure_image(figures.fig8d_fa_aperture(field, x))),
         ("fig9_equation", "Fig. 9: FA from the intensities against G times the Laplacian of the true "
          "deformation, along the x and y axes (the deformation-intensity equation).",
-         backend.figure_image(figures.fig9_equation(field, figures.truth_laplacian(truth, surface)))),
+         backend.figure_image(figures.fig9_equation(field, x, figures.truth_laplacian(truth, surface)))),
     ]
     if surface is not None:
         wide = (2400, 1000) if "truth" in surface.data_vars else figures.SIZE

@@ -17,6 +17,7 @@ import xarray as xr
 
 from raysim.field import fieldmap
 from raysim.sphere import SphereGrid, aperture_radius, ideal_go_cell_mean, theta_rim
+from solver.equation import G
 
 Delta = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -25,11 +26,6 @@ def laplacian(delta: Delta, x: np.ndarray, y: np.ndarray, h: float = 1e-2) -> np
     """Laplacian of delta(x, y) (1/m) by central differences of step ``h`` (m)."""
     return (delta(x + h, y) + delta(x - h, y) + delta(x, y + h) + delta(x, y - h)
             - 4.0 * delta(x, y)) / (h * h)
-
-
-def G(r: np.ndarray, F: float, R: float) -> np.ndarray:
-    """G = -2 F d / R (m) at aperture radius r (m), d = F + r^2/(4F) - R."""
-    return -2.0 * F * (F + r * r / (4.0 * F) - R) / R
 
 
 def equation_fieldmap(delta: Delta, D: float = 110.0, F: float = 33.0, R: float = 10.0,

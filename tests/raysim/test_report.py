@@ -89,8 +89,8 @@ def test_report_runs_simulate_invert_draw_and_writes_the_data(tmp_path, monkeypa
         return field
 
     def fake_inversion():
-        def invert(field, solver=None, grid=None, device="cpu"):
-            calls.append(("invert", solver, grid))
+        def invert(field, solver=None, grid=None, refine=None, device="cpu"):
+            calls.append(("invert", solver, grid, refine))
             return recovered_surface(N=grid or 64)
         return invert
 
@@ -99,8 +99,9 @@ def test_report_runs_simulate_invert_draw_and_writes_the_data(tmp_path, monkeypa
     # draw only two figures: the wiring is under test here, the figures above
     monkeypatch.setattr(report_module, "_figures", lambda field, surface: [
         ("fig10_recovered", "Fig. 10", np.full((900, 1200, 3), 200, dtype=np.uint8))])
-    page = report_module.report(ROOT / "scenes" / "paper_go.toml", tmp_path / "run", solver="fft", grid=48)
-    assert calls == [("simulate", "paper_go", "go"), ("invert", "fft", 48)]
+    page = report_module.report(ROOT / "scenes" / "paper_go.toml", tmp_path / "run", solver="fft", grid=48,
+                                refine=0)
+    assert calls == [("simulate", "paper_go", "go"), ("invert", "fft", 48, 0)]
     assert page == tmp_path / "run" / "report.html" and page.is_file()
     assert (tmp_path / "run" / "field.nc").is_file() and (tmp_path / "run" / "surface.nc").is_file()
     from raysim.field import load
