@@ -120,7 +120,7 @@ def field_plotter(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = 
             pl.add_mesh(edges, color="#6e6e6e", line_width=1.0, name="panel_edges")
     _add_focus_and_source(pl, ds, F, R, D, scale, labels=not overview)
     if overview:
-        _camera(pl, np.array([0.0, 0.0, 0.45 * F]), 1.55 * D, 24.0, -70.0)  # as field_image's inset
+        _overview_camera(pl, D, F)
         return pl
     title = field_title(ds, f"{what_of(q)} on the probe hemisphere").replace(" — ", "\n", 1)
     pl.add_text(title, position="upper_edge", font_size=backend.points(13 * scale), color="black",
@@ -140,13 +140,12 @@ def field_image(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = (1
     pl = field_plotter(ds, quantity, size)
     image = np.array(backend.screenshot(pl, None))
     if inset:
-        D, F = float(ds.attrs["diameter"]), float(ds.attrs["focal_length"])
         for name in ("title", "notes", "labels"):
             pl.remove_actor(name, render=False)
         pl.remove_scalar_bar(render=False)
         w, h = int(0.3 * size[0]), int(0.3 * size[1])
         pl.window_size = [w, h]
-        _camera(pl, np.array([0.0, 0.0, 0.45 * F]), 1.55 * D, 24.0, -70.0)
+        _overview_camera(pl, float(ds.attrs["diameter"]), float(ds.attrs["focal_length"]))
         picture = np.array(backend.screenshot(pl, None))[:h, :w]
         picture[[0, -1], :] = 60
         picture[:, [0, -1]] = 60
@@ -157,6 +156,7 @@ def field_image(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = (1
 
 
 def what_of(q: Quantity) -> str:
+    """The quantity's name for a title."""
     return {"fa": "Intensity ratio FA", "intensity": "Intensity",
             "normalized": "Intensity over the ideal GO law"}[q.name]
 
@@ -218,6 +218,11 @@ def _camera(pl: Any, centre: np.ndarray, distance: float, elevation_deg: float, 
     pl.camera.up = (0.0, 0.0, 1.0)
     pl.camera.view_angle = 30.0
     pl.camera.clipping_range = (0.02 * distance, 4.0 * distance)
+
+
+def _overview_camera(pl: Any, D: float, F: float) -> None:
+    """The whole antenna from the -y side, 24 deg above the aperture plane."""
+    _camera(pl, np.array([0.0, 0.0, 0.45 * F]), 1.55 * D, 24.0, -70.0)
 
 
 def _fmt(clim: tuple[float, float]) -> str:

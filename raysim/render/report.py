@@ -274,8 +274,7 @@ def _folder(out_dir: str | os.PathLike[str]) -> Path:
 
 
 def _save_surface(surface: xr.Dataset, path: Path) -> None:
-    try:
-        from solver.surface import save
-    except ImportError:
-        from raysim.netcdf import write_atomic as save
+    """Write the SurfaceMap through its contract's writer (checked, atomic)."""
+    from solver.surface import save
+
     save(surface, path)
