@@ -178,3 +178,24 @@ def test_cut_draws_the_fa_of_each_cut_where_the_data_are(paper_field):
     # the intensity panel holds the deformed and the ideal curve of each cut
     assert len(top.lines) >= 8
     assert max(np.nanmax(line.get_ydata()) for line in top.lines if len(line.get_ydata())) > 25
+
+
+def test_measured_scan_without_scene_draws_the_ideal_dish_and_grey_holes(paper_field):
+    """A measured scan has no scene and may miss samples: the dish comes from the attributes,
+    missing cells show in the no-value grey, every kind renders."""
+    from raysim.render.field3d import NAN_COLOR, reflector
+
+    complete = paper_field.copy(deep=True)
+    complete.attrs["method"] = "measured"
+    complete.attrs.pop("scene", None)
+    ds = complete.copy(deep=True)
+    ds["intensity"].values[20:30, 40:80] = np.nan  # a block of failed readings, facing the camera
+    _, _, what = reflector(ds)
+    assert what.startswith("ideal paraboloid")
+    grey = tuple(int(NAN_COLOR[k:k + 2], 16) / 255 for k in (1, 3, 5))
+    # the band beyond the rim image is grey in both; the holes add their own grey pixels
+    before = near_colour(render_image(complete, "3d", SIZE, "fa"), grey, tol=6)
+    image = render_image(ds, "3d", SIZE, "fa")
+    assert near_colour(image, grey, tol=6) > before + 300
+    for kind in ("map", "cut"):
+        assert render_image(ds, kind, SIZE).shape == (SIZE[1], SIZE[0], 3)
