@@ -4,8 +4,10 @@ Frame and units (DESIGN.md): sphere angles in rad, aperture x, y and delta in m.
 
 Steps: gain (power ratio or none) -> FA on the sphere -> resample to the aperture grid ->
 Laplacian(delta) = FA / G on the disk with rim values (zero, or fitted to rim targets) ->
-model-based refinement (``refine`` GO iterations) -> optional removal of piston, tilt and focus
--> RMS / RRMS against the truth when it is known -> SurfaceMap with every choice recorded.
+model-based refinement (``refine`` iterations of a forward model: GO, or PO / PO+PTD for wave
+data, chosen from the FieldMap's ``method`` unless the caller names one) -> optional removal of
+piston, tilt and focus -> RMS / RRMS against the truth when it is known -> SurfaceMap with
+every choice recorded.
 """
 
 from __future__ import annotations
@@ -34,14 +36,18 @@ from solver.equation import (
 )
 from solver.errors import SolverError
 from solver.fit import parse_terms, remove_terms
+from solver.forward import MODELS, Progress
 from solver.nonlinear import Forward, extend_outside, refine
 from solver.poisson import SOLVERS, SolveInfo, solve_poisson
+from solver.refinement import choose_model, refinement_setup
 from solver.resample import Coverage, fill_missing, sphere_to_aperture, usable_rows
 from solver.surface import surfacemap
+from solver.wave import amplitude_weight
 
 DEFAULT_SOLVER = "multigrid"
 DEFAULT_N = 256
 DEFAULT_REFINE = 3
+WEIGHTS = ("auto", "amplitude", "none")
 MAX_INCIDENCE = 1e-3  # rad: the equation and the GO model assume an on-axis plane wave
 
 
@@ -89,6 +95,7 @@ class LinearInverse:
         self.rim = boundary.zero_rim(grid.a)
         self.info = SolveInfo(solver)
         self.coverage: Coverage | None = None
+        self.weight: NDArray[np.float64] | None = None  # on the sphere, applied by solve()
 
     def poisson(self, fa_aperture, g=None) -> NDArray[np.float64]:
         rhs = np.where(self.grid.mask, fa_aperture / self.G, 0.0)
@@ -115,7 +122,9 @@ class LinearInverse:
         return self.poisson(np.zeros_like(delta), series)
 
     def solve(self, fa_sphere) -> NDArray[np.float64]:
-        """delta (m) for FA on the sphere, rim values zero or fitted to the targets."""
+        """delta (m) for FA on the sphere (times ``weight``), rim values zero or fitted."""
+        if self.weight is not None:
+            fa_sphere = fa_sphere * self.weight
         delta = self.poisson(self.to_aperture(fa_sphere))
         return delta + self.rim_update(delta)
 
@@ -151,7 +160,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
            iterations: int | None = None, omega: float | None = None, tol: float = 1e-10,
            truth: Callable | NDArray | str | None = "scene", forward: Forward | None = None,
            device: str | None = "cpu", uncertainty_samples: int = 32, seed: int = 0,
-           max_harmonics: int = boundary.MAX_HARMONICS) -> xr.Dataset:
+           max_harmonics: int = boundary.MAX_HARMONICS, model: str | None = None,
+           weights: str = "auto", progress: Progress | None = None) -> xr.Dataset:
     """Recover the surface deformation from a FieldMap; return a SurfaceMap.
 
     Parameters
@@ -162,16 +172,28 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     N : aperture grid points across the diameter (>= 16).
     rim : rim targets (x, y, dz in m) fixing the harmonic part; None assumes zero on the rim.
     remove : terms to remove after the solve: any of piston, tilt, focus.
-    refine_iterations : GO refinement iterations; 0 gives the paper's linear answer.
+    refine_iterations : model refinement iterations; 0 gives the linear answer.
     gain : ``power`` estimates the scan's scale from its total power; ``none`` trusts it.
     iterations, omega, tol : settings of the iterative solvers (see :func:`solve_poisson`).
     truth : None, a callable delta(x, y) (m), an (N, N) array (m), or ``"scene"`` (the
         FieldMap's scene deformation when it carries a scene).
-    forward : the refinement's forward model; None uses the project's GO engine.
-    device : Warp device of the GO engine (``cpu`` or ``cuda``).
+    forward : the refinement's forward model (a callable, see :mod:`solver.forward`); None
+        builds the one ``model`` names.
+    device : Warp device of the forward model (``cpu`` or ``cuda``).
     uncertainty_samples : Monte Carlo draws for ``deformation_std`` (when intensity_std exists).
     seed : random seed of the Monte Carlo draws.
     max_harmonics : highest Fourier order of the rim fit.
+    model : the refinement's forward model, one of :data:`solver.forward.MODELS` (``go``,
+        ``po``, ``po+ptd``); None picks the one that made the data (FieldMap ``method``: GO for
+        GO data, PO for PO data, GO for a measured scan). A wave model brings its own
+        preconditioner (:class:`solver.wave.WaveCorrection`) and, unless ``gain="none"``,
+        fits the scan's scale with the surface.
+    weights : ``amplitude`` multiplies FA (and every refinement misfit) by sqrt(I_ideal /
+        I_GO) per sphere cell, which keeps wave data's response near GO's in the dark rings
+        of the diffraction pattern (:func:`solver.wave.amplitude_weight`; 1 for GO data);
+        ``none`` uses FA as the paper does; ``auto`` (default) weights when the refinement
+        runs a wave model, so the linear answer (refine 0) stays the paper's equation.
+    progress : optional ``progress(stage, fraction)`` of the refinement (0..1).
     """
     start = time.perf_counter()
     if solver not in SOLVERS:
@@ -180,6 +202,10 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         raise SolverError(f"unknown gain mode {gain!r}: choose one of {', '.join(GAIN_MODES)}")
     if refine_iterations < 0:
         raise SolverError(f"refine must be >= 0, got {refine_iterations}")
+    if model is not None and model not in MODELS:
+        raise SolverError(f"unknown model {model!r}: choose one of {', '.join(MODELS)}")
+    if weights not in WEIGHTS:
+        raise SolverError(f"unknown weights {weights!r}: choose one of {', '.join(WEIGHTS)}")
     terms = parse_terms(remove)
     scan = Scan.from_fieldmap(field)
     grid = ApertureGrid(scan.D, N)
@@ -194,10 +220,20 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     missing = int(np.count_nonzero(~np.isfinite(fa[:n_rows])))
     inverse = LinearInverse(scan, grid, solver, iterations=iterations, omega=omega, tol=tol,
                             targets=rim, max_harmonics=max_harmonics)
+    chosen = choose_model(scan.attrs, refine_iterations, model, forward, device)
+    weights = ("amplitude" if chosen.wave else "none") if weights == "auto" else weights
+    if weights == "amplitude":
+        inverse.weight = amplitude_weight(scan.intensity_ideal, scan.sphere, scan.F,
+                                          str(scan.attrs.get("sampling", "centre")))
     delta = inverse.solve(fa)
     linear_info = inverse.info
+    setup = refinement_setup(inverse, chosen, refine_iterations, fit_gain=gain == "power",
+                             progress=progress)
     delta, history = refine(delta, fa, scan.sphere, scan.F, scan.D, grid, n_rows,
-                            inverse.correct, refine_iterations, forward, device)
+                            setup.correct, refine_iterations, setup.forward, device,
+                            weight=inverse.weight, fit_gain=setup.fit_gain,
+                            progress=setup.progress)
+    gain_factor = history.gain_factor[-1] if history.gain_factor else 1.0
     std = None
     if scan.intensity_std is not None and uncertainty_samples > 0:
         std = _monte_carlo_std(scan, inverse, gain, uncertainty_samples, seed)
@@ -210,12 +246,22 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         "harmonic_observable": rim is not None,
         "removed_terms": ",".join(terms) or "none",
         "refine_iterations": refine_iterations,
+        "refine_model": setup.model,
+        "refine_model_choice": setup.choice,
         "refine_method": "defect correction with Anderson acceleration; forward model: "
-                         + ("raysim.go GO engine" if forward is None else "caller's"),
+                         + setup.description,
+        "refine_preconditioner": setup.preconditioner,
+        "refine_gain_factor": ",".join(f"{v:.9f}" for v in history.gain_factor) or "none",
+        "weights": "amplitude: FA times sqrt(I_ideal / I_GO) per sphere cell (1 for GO data)"
+                   if weights == "amplitude" else "none",
         "refine_update_rms_m": ",".join(f"{v:.3e}" for v in history.update_rms),
         "refine_misfit_rms": ",".join(f"{v:.3e}" for v in history.misfit_rms),
         "refine_seconds": history.seconds,
-        "gain_mode": gain, "gain": scale,
+        "gain_mode": gain, "gain": scale * gain_factor,
+        "gain_source": "GO power balance, then fitted with the surface by the wave refinement"
+                       if setup.fit_gain and history.gain_factor else
+                       "GO power balance (deformed and ideal send equal power)" if gain == "power"
+                       else "none (trusted)",
         "noise_relative_std": float(np.sqrt(noise_v)), "noise_source": noise_source,
         "noise_bias": "removed: FA -> (1 + FA) / (1 + v) - 1" if gain == "power" else
                       "removed: FA -> (1 + FA) / (1 + v/2) - 1 (noise symmetric in dB)",

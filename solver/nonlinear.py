@@ -17,9 +17,19 @@ Jacobian (plain defect correction gains only a factor of about 0.6 per step on t
 case), so the iterates are combined by Anderson acceleration (Walker & Ni, SIAM J. Numer.
 Anal. 49, 1715, 2011; depth ``memory``): the next iterate is the combination of the last few
 that minimises the linearised update, which removes those directions in one or two steps.
-The model needs only what every FieldMap carries: F, D, R and the grid.
-The default model is the project's own GO engine (:func:`raysim.go.forward_intensity`) on the
-current estimate as a gridded map; any callable with the same signature can stand in.
+The model needs only what every FieldMap carries: F, D, R and the grid (and, for the wave
+models, the frequency and polarisation): see :mod:`solver.forward`. The default model is the
+project's own GO engine (:func:`raysim.go.forward_intensity`) on the current estimate as a
+gridded map; the PO engine (``po``, ``po+ptd``) or any callable with the same signature can
+stand in, with the preconditioner of :mod:`solver.wave` in place of the GO inversion (the
+GO inversion alone lets the PO iteration diverge after two steps: PO responds to the smooth
+shapes through the edge wave, and to the fine ones with a Fresnel attenuation GO lacks). The
+preconditioner sets how fast the iteration converges; the fixed point is the model's.
+
+Misfits may be weighted per sphere cell (``weight``: the amplitude weight of
+:func:`solver.wave.amplitude_weight`, 1 for GO data) and, with ``fit_gain``, the scan's scale
+is an unknown beside the surface: ``correct`` then returns a gain step too, and the measured
+1 + FA is multiplied by the running factor gamma (GO keeps its exact power-balance scale).
 """
 
 from __future__ import annotations
@@ -38,44 +48,22 @@ from numpy.typing import NDArray
 from raysim.sphere import SphereGrid
 from solver.aperture import ApertureGrid
 from solver.equation import intensity_ratio_fa
+from solver.forward import Forward, Progress, go_forward
 
-# forward(sphere, F, D, x, y, delta) -> GO cell-mean intensity (n_theta, n_phi); delta None
-# for the ideal reflector, else (N, N) in m on the aperture grid x, y (finite everywhere).
-Forward = Callable[[SphereGrid, float, float, NDArray, NDArray, NDArray | None], NDArray]
+__all__ = ["Correct", "Forward", "RefineHistory", "anderson_step", "extend_outside", "go_forward",
+           "refine"]
 
 
 @dataclass
 class RefineHistory:
-    """Per iteration: RMS of the update (m) and of the FA misfit on the usable cells."""
+    """Per iteration: RMS of the update (m), of the weighted FA misfit on the usable cells, and
+    the scale factor gamma on the measured 1 + FA (1 unless the gain is fitted; one more entry
+    than iterations: the last is the final value)."""
 
     update_rms: list[float] = field(default_factory=list)
     misfit_rms: list[float] = field(default_factory=list)
+    gain_factor: list[float] = field(default_factory=list)
     seconds: float = 0.0
-
-
-def go_forward(device: str | None = "cpu") -> Forward:
-    """The project's GO engine as the refinement's forward model (imported on first use).
-
-    The ideal reflector's map depends only on (sphere grid, F, D, device) and is kept for the
-    session, so repeated inversions of one scan geometry trace it once.
-    """
-
-    def forward(sphere, F, D, x, y, delta):
-        if delta is None:
-            return _ideal_go(sphere, float(F), float(D), device).copy()
-        from raysim.deformation import GriddedMap
-        from raysim.go import forward_intensity
-
-        return forward_intensity(sphere, F, D, GriddedMap(x, y, delta), device=device)
-
-    return forward
-
-
-@lru_cache(maxsize=4)
-def _ideal_go(sphere: SphereGrid, F: float, D: float, device: str | None) -> NDArray:
-    from raysim.go import forward_intensity
-
-    return forward_intensity(sphere, F, D, None, device=device)
 
 
 @lru_cache(maxsize=4)
@@ -119,11 +107,15 @@ def extend_outside(grid: ApertureGrid, delta: NDArray[np.float64]) -> NDArray[np
     return filled
 
 
+Correct = Callable[[NDArray[np.float64], NDArray[np.float64]],
+                   NDArray[np.float64] | tuple[NDArray[np.float64], float]]
+
+
 def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere: SphereGrid,
-           F: float, D: float, grid: ApertureGrid, n_rows: int,
-           correct: Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]],
+           F: float, D: float, grid: ApertureGrid, n_rows: int, correct: Correct,
            iterations: int, forward: Forward | None = None, device: str | None = "cpu",
-           memory: int = 3) -> tuple[NDArray[np.float64], RefineHistory]:
+           memory: int = 3, weight: NDArray[np.float64] | None = None, fit_gain: bool = False,
+           progress: Progress | None = None) -> tuple[NDArray[np.float64], RefineHistory]:
     """Refine ``delta`` (m, (N, N)) by defect correction against the measured FA on the sphere.
 
     Parameters
@@ -134,35 +126,67 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
     grid : the aperture grid of ``delta``.
     n_rows : usable theta rows (cells wholly inside the rim image); the rest are not compared.
     correct : ``correct(misfit_on_sphere, delta) -> update`` (m): the linear inversion of an FA
-        misfit, with the rim handling of the caller (zero rim change, or a rim-target refit).
+        misfit, with the rim handling of the caller (zero rim change, or a rim-target refit);
+        with ``fit_gain`` it returns ``(update, gain_step)``, the relative change of the scale.
     iterations : number of forward evaluations and updates.
     forward : the forward model; None uses the project's GO engine on ``device``.
     memory : depth of the Anderson acceleration (0: plain defect correction).
+    weight : per-cell factor on the misfit (n_theta, n_phi), dimensionless; None for 1.
+    fit_gain : estimate the scan's scale with the surface (see the module docstring).
+    progress : ``progress(stage, fraction)`` over the whole refinement (fraction 0..1); a
+        forward with ``reports_progress`` also reports within each call.
     """
     start = time.perf_counter()
     forward = forward or go_forward(device)
     history = RefineHistory()
     if iterations <= 0:
         return delta, history
-    ideal = forward(sphere, F, D, grid.x, grid.y, None)
+    report = progress or (lambda stage, fraction: None)
+    n_calls = iterations + 1
+
+    def model_of(index: int, label: str, surface: NDArray | None) -> NDArray[np.float64]:
+        report(label, index / n_calls)
+        if not getattr(forward, "reports_progress", False):
+            return forward(sphere, F, D, grid.x, grid.y, surface)
+
+        def within(stage: str, fraction: float) -> None:
+            report(f"{label}: {stage}", (index + min(max(fraction, 0.0), 1.0)) / n_calls)
+
+        return forward(sphere, F, D, grid.x, grid.y, surface, progress=within)
+
+    ideal = model_of(0, "ideal reflector", None)
+    w = 1.0 if weight is None else weight
     delta = np.array(delta, dtype=np.float64, copy=True)
     mask = grid.mask
+    gamma = 1.0
     iterates: list[NDArray[np.float64]] = []
     updates: list[NDArray[np.float64]] = []
-    for _ in range(iterations):
-        model = forward(sphere, F, D, grid.x, grid.y, extend_outside(grid, delta))
-        misfit = fa_measured - intensity_ratio_fa(model, ideal)
+    for k in range(iterations):
+        model = model_of(k + 1, f"iteration {k + 1}/{iterations}",
+                         extend_outside(grid, delta))
+        history.gain_factor.append(gamma)
+        misfit = ((1.0 + fa_measured) * gamma - 1.0 - intensity_ratio_fa(model, ideal)) * w
         misfit[n_rows:] = np.nan
         history.misfit_rms.append(float(np.sqrt(np.nanmean(misfit[:n_rows] ** 2))))
-        update = correct(misfit, delta)[mask]
+        step = correct(misfit, delta)
+        update, gain_step = step if fit_gain else (step, 0.0)
+        update = update[mask]
         history.update_rms.append(float(np.sqrt(np.mean(update**2))))
-        iterates.append(delta[mask])
-        updates.append(update)
+        # the scale rides along as one more unknown, scaled to weigh little in Anderson's fit
+        iterates.append(np.append(delta[mask], GAIN_SCALE * gamma))
+        updates.append(np.append(update, GAIN_SCALE * gamma * gain_step))
         iterates, updates = iterates[-(memory + 1):], updates[-(memory + 1):]
+        following = anderson_step(iterates, updates)
         delta = delta.copy()
-        delta[mask] = anderson_step(iterates, updates)
+        delta[mask] = following[:-1]
+        gamma = following[-1] / GAIN_SCALE if fit_gain else 1.0
+    history.gain_factor.append(gamma)
+    report("done", 1.0)
     history.seconds = time.perf_counter() - start
     return delta, history
+
+
+GAIN_SCALE = 1e-6  # m per unit of the scale factor in the Anderson state
 
 
 def anderson_step(iterates: list[NDArray[np.float64]],

@@ -16,6 +16,7 @@ from raysim.errors import RaysimError
 from raysim.field import load as load_fieldmap
 from solver import boundary, surface
 from solver.fit import panel_adjustments, write_panel_csv
+from solver.forward import Progress
 from solver.invert import DEFAULT_N, DEFAULT_REFINE, DEFAULT_SOLVER, invert
 
 
@@ -37,12 +38,15 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
                rim_csv: str | os.PathLike[str] | None = None, remove: str | None = None,
                refine: int = DEFAULT_REFINE, gain: str = "power", iterations: int | None = None,
                device: str | None = "cpu",
-               panels_csv: str | os.PathLike[str] | None = None) -> xr.Dataset:
+               panels_csv: str | os.PathLike[str] | None = None, model: str | None = None,
+               progress: Progress | None = None) -> xr.Dataset:
     """Invert the FieldMap at ``field_path`` and write the SurfaceMap to ``output``.
 
     Options as :func:`solver.invert.invert`; ``rim_csv`` is a CSV ``x,y,dz`` (m) of rim
     targets; ``panels_csv`` receives the per-panel adjustment table (needs a FieldMap whose
-    scene has panels). Nothing is written when an input is bad.
+    scene has panels); ``model`` names the refinement's forward model (None: from the data's
+    method); ``progress(stage, fraction)`` follows the refinement. Nothing is written when an
+    input is bad.
     """
     field = load_fieldmap(field_path)
     rim = boundary.read_rim_csv(rim_csv) if rim_csv is not None else None
@@ -53,7 +57,8 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
             raise RaysimError(f"{field_path}: records no panel layout (no scene with [panels]); "
                               "--panels-csv needs one")
     result = invert(field, solver=solver, N=N, rim=rim, remove=remove,
-                    refine_iterations=refine, gain=gain, iterations=iterations, device=device)
+                    refine_iterations=refine, gain=gain, iterations=iterations, device=device,
+                    model=model, progress=progress)
     result.attrs["source_fieldmap"] = str(field_path)
     surface.save(result, output)
     if layout is not None:
@@ -75,7 +80,9 @@ def summary(result: xr.Dataset) -> list[str]:
     state = "converged" if a.get("solver_converged") else "NOT converged"
     lines.append(f"solver {a['solver']} ({a.get('solver_iterations', 0)} iterations, "
                  f"residual {a.get('solver_residual', 0.0):.1e}, {state}); "
-                 f"GO refinement {a.get('refine_iterations', 0)} iterations")
+                 f"refinement {a.get('refine_iterations', 0)} iterations, model "
+                 f"{a.get('refine_model', 'go')} ({a.get('refine_model_choice', '')}), "
+                 f"{a.get('refine_seconds', 0.0):.1f} s")
     lines.append(f"boundary: {a['boundary']}")
     if a["harmonic_part"] == "unobservable":
         lines.append("harmonic part (tilt, astigmatism, any r^n cos n phi) is UNOBSERVABLE "

@@ -1,0 +1,110 @@
+"""The refinement's set-up: which forward model, which preconditioner, what to record.
+
+Frame and units as :mod:`solver.nonlinear`. The model is the caller's (``forward``), the one
+named (``model``: go, po, po+ptd), or by default the one that made the data (the FieldMap's
+``method``; GO for a measured scan). GO data and the GO model keep the GO inversion as the
+preconditioner and the power-balance scale; a wave model (PO, PO+PTD) gets
+:class:`solver.wave.WaveCorrection`, built from the model's ideal complex field (computed
+here, once per scan geometry, then cached by the model), and fits the scan's scale with the
+surface when the gain is not trusted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from solver.forward import WAVE_MODELS, Forward, Progress, forward_for, model_for_method
+from solver.nonlinear import Correct
+
+
+@dataclass
+class RefinementSetup:
+    """What :func:`solver.nonlinear.refine` needs, and the words for the SurfaceMap."""
+
+    forward: Forward | None
+    correct: Correct
+    fit_gain: bool
+    progress: Progress | None
+    model: str            # go, po, po+ptd, the caller's name for its model, or none
+    choice: str           # how the model was chosen
+    description: str      # the model in words
+    preconditioner: str   # the preconditioner in words
+
+    @property
+    def wave(self) -> bool:
+        return self.model in WAVE_MODELS
+
+
+@dataclass(frozen=True)
+class ModelChoice:
+    """The refinement's forward model before anything is computed with it."""
+
+    forward: Forward | None
+    name: str           # go, po, po+ptd, the caller's name for its model, or none
+    choice: str         # how it was chosen
+    description: str    # the model in words
+
+    @property
+    def wave(self) -> bool:
+        return self.name in WAVE_MODELS
+
+
+def choose_model(attrs: dict, iterations: int, model: str | None, forward: Forward | None,
+                 device: str | None) -> ModelChoice:
+    """The caller's ``forward``, else the ``model`` named, else the data's (FieldMap attrs)."""
+    data_method = str(attrs.get("method", ""))
+    if forward is not None:
+        # a caller's model may say what physics it is (``name``: go, po, po+ptd)
+        name = str(getattr(forward, "name", "caller"))
+        return ModelChoice(forward, name, "given by the caller", f"caller's ({name})")
+    if iterations == 0:
+        return ModelChoice(None, "none", "refine 0", "none (no refinement)")
+    name = model or model_for_method(data_method)
+    forward, description = forward_for(name, attrs, device)
+    return ModelChoice(forward, name, "requested" if model else
+                       f"from the data's method {data_method!r}", description)
+
+
+def refinement_setup(inverse, chosen: ModelChoice, iterations: int, fit_gain: bool,
+                     progress: Progress | None = None) -> RefinementSetup:
+    """The preconditioner for ``chosen`` on a scan; ``inverse`` is its LinearInverse.
+
+    ``fit_gain``: the scan's scale is not trusted (gain mode ``power``); a wave model then
+    fits it with the surface. A wave model's ideal field is computed here (``progress``).
+    """
+    scan = inverse.scan
+    progress = _monotone(progress) if progress is not None else None
+    forward, name = chosen.forward, chosen.name
+    if iterations == 0 or not chosen.wave or not hasattr(forward, "ideal_field"):
+        text = "GO inversion (resample, divide by G, Poisson solve)" if iterations else "none"
+        return RefinementSetup(forward, inverse.correct, False, progress, name, chosen.choice,
+                               chosen.description, text)
+    from solver.wave import WaveCorrection
+
+    report = progress or (lambda stage, fraction: None)
+    E0 = forward.ideal_field(scan.sphere, scan.F, scan.D,
+                             lambda stage, f: report(f"ideal reflector: {stage}",
+                                                     f / (iterations + 1)))
+    weight = inverse.weight if inverse.weight is not None else np.ones_like(scan.intensity_ideal)
+    correct = WaveCorrection(inverse, E0, float(scan.attrs["frequency_hz"]),
+                             float(scan.attrs.get("polarization", 0.0)), weight, fit_gain)
+    axis, rim = correct.filter.shortest_period()
+    text = (f"two-level wave preconditioner: the focus-like shape B"
+            f"{' and the scan scale' if fit_gain else ''} by least squares with PO's "
+            f"edge-wave response, the rest by the GO inversion after a Fresnel filter (periods "
+            f"down to {axis:.1f} m on the axis, {rim:.1f} m at the rim)")
+    return RefinementSetup(forward, correct, fit_gain, progress, name, chosen.choice,
+                           chosen.description, text)
+
+
+def _monotone(progress: Progress) -> Progress:
+    """``progress`` with fractions that never go back (stages report from several places)."""
+    done = [0.0]
+
+    def report(stage: str, fraction: float) -> None:
+        done[0] = max(done[0], float(fraction))
+        progress(stage, done[0])
+
+    return report
