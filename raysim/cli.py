@@ -61,6 +61,41 @@ def output_path(path: Path) -> Path:
 
 
 # --- simulate (raysim.go, raysim.po, raysim.ptd) ------------------------------------------
+@app.command()
+def simulate(
+    scene: Path = typer.Argument(..., help="Scene TOML file (see scenes/)."),
+    output: Path = typer.Option(..., "-o", "--output", help="FieldMap NetCDF file to write."),
+    method: str = typer.Option("go", "--method", help="go (geometric optics), po, or po+ptd."),
+    frequency: float | None = typer.Option(None, "--frequency", help="Override the scene's frequency (Hz)."),
+    n_theta: int | None = typer.Option(None, "--n-theta", help="Cells in theta (polar angle from -z)."),
+    n_phi: int | None = typer.Option(None, "--n-phi", help="Cells in phi (azimuth)."),
+    device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
+) -> None:
+    """Simulate a scene: intensity of the ideal and deformed reflector on the probe sphere.
+
+    Writes a FieldMap (NetCDF): intensity relative to the incident plane wave on (theta, phi)
+    cells, theta from -z at the focus and phi = atan2(y, x), both in radians in the file.
+    """
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from raysim.field import save
+    from raysim.scene import load_scene
+    from raysim.simulate import simulate as run
+    from raysim.simulate import summary
+
+    loaded = load_scene(scene).with_overrides(frequency, n_theta, n_phi)
+    output_path(output)
+    with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
+                  console=console, transient=True) as bar:
+        task = bar.add_task(f"{method} {loaded.name}", total=1.0)
+
+        def report(stage: str, fraction: float) -> None:
+            bar.update(task, completed=fraction, description=f"{method} {loaded.name}: {stage}")
+
+        ds = run(loaded, method=method, device=device, progress=report)
+    save(ds, output)
+    out.print(f"{output}: {summary(ds)}", highlight=False)
+
 
 
 # --- invert, paper (solver) ------------------------------------------------------------

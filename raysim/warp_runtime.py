@@ -7,7 +7,9 @@ launched this way takes ``offset: int`` as its last input and indexes ``wp.tid()
 
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
 import threading
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -35,13 +37,35 @@ def init() -> Any:
 
     with _lock:
         if not _ready:
-            wp.config.quiet = True
+            wp.config.log_level = 30  # warnings and errors only: no banner, no load timings
             cache = os.environ.get("WARP_CACHE_PATH") or _repo_cache()
             if cache is not None:
                 wp.config.kernel_cache_dir = str(cache)
-            wp.init()
+            with _quiet_stderr():
+                # Warp's native layer prints a warning when no CUDA driver exists; a
+                # CPU-only user needs no such line, and a CUDA request fails clearly anyway
+                wp.init()
             _ready = True
     return wp
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    """Silence file descriptor 2 (native prints included) for the duration."""
+    try:
+        saved = os.dup(2)
+    except OSError:  # pragma: no cover - no stderr to silence
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        sys.stderr.flush()
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
 
 
 def resolve_device(device: str | None) -> str:
@@ -68,10 +92,14 @@ def cpu_threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def launch(kernel: Any, dim: int, inputs: Sequence[Any], device: str, min_chunk: int = 4096) -> None:
+def launch(kernel: Any, dim: int, inputs: Sequence[Any], device: str, min_chunk: int = 4096,
+           private: Sequence[int] = ()) -> None:
     """Launch a 1-D ``kernel`` over ``dim`` items; on the CPU, in slices across threads.
 
     ``inputs`` excludes the trailing ``offset`` argument, which this function appends.
+    ``private`` lists the positions in ``inputs`` of arrays the kernel accumulates into with
+    ``wp.atomic_add``: Warp's CPU atomics are plain adds, so each thread gets its own zeroed
+    copy and the copies are summed into the original afterwards.
     """
     wp = init()
     if dim <= 0:
@@ -85,11 +113,19 @@ def launch(kernel: Any, dim: int, inputs: Sequence[Any], device: str, min_chunk:
     # the first launch compiles or loads the module; do it once before the threads race
     wp.load_module(kernel.module, device=device)
     bounds = [dim * k // n for k in range(n + 1)]
+    copies = [
+        {i: wp.zeros_like(inputs[i]) for i in private} if k > 0 else {} for k in range(n)
+    ]
 
     def run(k: int) -> None:
         lo, hi = bounds[k], bounds[k + 1]
+        args = [copies[k].get(i, a) for i, a in enumerate(inputs)]
         if hi > lo:
-            wp.launch(kernel, dim=hi - lo, inputs=[*inputs, lo], device=device)
+            wp.launch(kernel, dim=hi - lo, inputs=[*args, lo], device=device)
 
     with ThreadPoolExecutor(max_workers=n) as pool:
         list(pool.map(run, range(n)))
+    for i in private:
+        total = inputs[i].numpy()  # a view of the CPU array's memory
+        for k in range(1, n):
+            total += copies[k][i].numpy()
