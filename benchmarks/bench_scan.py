@@ -33,8 +33,8 @@ F, D, R = 33.0, 110.0, 10.0
 
 def plan_table(n_theta: int, n_phi: int, samples: int) -> dict:
     return {
-        "rig": {"track": {"radius": R}, "motion": {"speed_deg_s": 10.0}},
-        "reflector": {"focal_length": F, "diameter": D, "frequency_hz": 3e8},
+        "rig": {"track": {"radius_m": R}, "motion": {"speed_deg_s": 10.0}},
+        "reflector": {"focal_length_m": F, "diameter_m": D, "frequency_hz": 3e8},
         "grid": {"theta_max_deg": 80.0, "theta_step_deg": 80.0 / n_theta,
                  "phi_step_deg": 360.0 / n_phi},
         "acquisition": {"samples_per_point": samples, "reference_every_lines": 4},

@@ -127,8 +127,8 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
         raise PlanError(f"{top.where}: 'rig' must name a rig file or be a [rig] table")
 
     refl = top.sub("reflector")
-    F = refl.number("focal_length", low=0.0, strict_low=True)
-    D = refl.number("diameter", low=0.0, strict_low=True)
+    F = refl.number("focal_length_m", low=0.0, strict_low=True)
+    D = refl.number("diameter_m", low=0.0, strict_low=True)
     frequency_hz = refl.number("frequency_hz", low=0.0, strict_low=True)
     refl.done()
     if rig.radius >= F:

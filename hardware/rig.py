@@ -149,15 +149,15 @@ def load_rig(path: str | Path) -> tuple[Rig, str]:
 def rig_from_table(top: Table) -> Rig:
     """Build a :class:`Rig` from a parsed rig table (see ``scenes/rig.toml`` for the keys)."""
     track = top.sub("track")
-    radius = track.number("radius", low=0.0, strict_low=True)
+    radius = track.number("radius_m", low=0.0, strict_low=True)
     calibration = Calibration(
-        centre_offset=track.vector3("centre_offset", (0.0, 0.0, 0.0)),
+        centre_offset=track.vector3("centre_offset_m", (0.0, 0.0, 0.0)),
         slider_zero=track.angle("slider_zero_deg", 0.0, low=-180.0, high=180.0),
         rotation_zero=track.angle("rotation_zero_deg", 0.0, low=-360.0, high=360.0),
     )
     track.done()
     if math.dist(calibration.centre_offset, (0, 0, 0)) >= 0.5 * radius:
-        raise PlanError(f"{track.where}: 'centre_offset' must be well inside the track radius")
+        raise PlanError(f"{track.where}: 'centre_offset_m' must be well inside the track radius")
     lim_t = top.sub("limits", required=False)
     limits = Limits(
         slider_min=lim_t.angle("slider_min_deg", -95.0, low=-180.0, high=180.0),

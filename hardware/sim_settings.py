@@ -61,7 +61,7 @@ class SimSettings:
 
 def sim_settings_from_table(t: Table) -> SimSettings:
     """Parse a ``[simulator]`` table (degrees in ``*_deg`` keys, see ``scenes/scan_demo.toml``)."""
-    offset = t.vector3("centre_offset", (0.0, 0.0, 0.0)) if t.has("centre_offset") else None
+    offset = t.vector3("centre_offset_m", (0.0, 0.0, 0.0)) if t.has("centre_offset_m") else None
     settings = SimSettings(
         seed=t.integer("seed", 0, low=0),
         noise_db=t.number("noise_db", 0.0, low=0.0, high=10.0),

@@ -18,8 +18,8 @@ F, D, R = 33.0, 110.0, 10.0
 
 RIG_TOML = """
 [track]
-radius = {radius}
-centre_offset = [0.0, 0.0, 0.0]
+radius_m = {radius}
+centre_offset_m = [0.0, 0.0, 0.0]
 
 [limits]
 slider_min_deg = -95.0
@@ -44,8 +44,8 @@ PLAN_TOML = """
 rig = "rig.toml"
 
 [reflector]
-focal_length = {F}
-diameter = {D}
+focal_length_m = {F}
+diameter_m = {D}
 frequency_hz = 3.0e8
 
 [grid]

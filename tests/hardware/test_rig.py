@@ -93,11 +93,11 @@ def test_sample_rig_file_loads() -> None:
 
 
 @pytest.mark.parametrize(("snippet", "message"), [
-    ("[track]\nradius = 10.0\nradius_m = 3.0\n", "unknown key 'radius_m'"),
-    ("[track]\nradius = -1.0\n", "'radius' must be > 0"),
-    ("[track]\nradius = 10.0\ncentre_offset = [0.0, 1.0]\n", "three numbers"),
-    ("[track]\nradius = 10.0\n[park]\nslider_deg = 120.0\n", "park position lies outside"),
-    ("[track]\nradius = 10.0\n[motion]\nslider_axis = 2\n", "distinct ESP301 axes"),
+    ("[track]\nradius_m = 10.0\nradius = 3.0\n", "unknown key 'radius'"),
+    ("[track]\nradius_m = -1.0\n", "'radius_m' must be > 0"),
+    ("[track]\nradius_m = 10.0\ncentre_offset_m = [0.0, 1.0]\n", "three numbers"),
+    ("[track]\nradius_m = 10.0\n[park]\nslider_deg = 120.0\n", "park position lies outside"),
+    ("[track]\nradius_m = 10.0\n[motion]\nslider_axis = 2\n", "distinct ESP301 axes"),
     ("[limits]\nslider_min_deg = 0\n", "missing table [track]"),
 ])
 def test_bad_rig_files(tmp_path: Path, snippet: str, message: str) -> None:
