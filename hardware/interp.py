@@ -17,7 +17,7 @@ import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
 from raysim.field import grid_of
-from raysim.sphere import SphereGrid
+from raysim.sphere import SphereGrid, ideal_go_intensity
 
 
 class FieldSampler:
@@ -87,6 +87,56 @@ class FieldSampler:
         b = self.values[i, j1]
         # an exact weight of 0 or 1 returns the stored value even beside a NaN neighbour
         return np.where(w == 0.0, a, np.where(w == 1.0, b, (1.0 - w) * a + w * b))
+
+
+class SphereField:
+    """Intensity anywhere near the probe sphere, from a FieldMap (what the simulated probe sees).
+
+    The map's ratio intensity / intensity_ideal is interpolated (it is smooth where the
+    intensity itself varies by a factor of three over the hemisphere, and it makes GO cell
+    means and PO centre values alike) and multiplied by the ideal paraboloid's exact point
+    value (rho / R)^2 at the probe's direction; beyond the rim image the ideal is 0. Off the
+    sphere, at distance r from the focus, the intensity scales as (R / r)^2: the reflected
+    rays converge on the focus. Cells beyond the rim image (ideal 0) take the ratio of the
+    last lit cell below them, so that directions between the last lit centre and the rim
+    image interpolate between finite values.
+
+    Parameters
+    ----------
+    ratio : sampler of intensity / intensity_ideal (NaN where the ideal is 0).
+    F, D : focal length and diameter of the reflector (m).
+    """
+
+    def __init__(self, ratio: FieldSampler, F: float, D: float) -> None:
+        self.ratio = ratio
+        self.F = F
+        self.D = D
+
+    @classmethod
+    def from_fieldmap(cls, ds: xr.Dataset) -> SphereField:
+        """From a FieldMap's intensities and attributes (F, D, R in m)."""
+        ideal = ds["intensity_ideal"].values
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(ideal > 0, ds["intensity"].values / ideal, np.nan)
+        for i in range(1, ratio.shape[0]):
+            dark = ideal[i] <= 0
+            ratio[i, dark] = ratio[i - 1, dark]
+        return cls(FieldSampler(ratio, grid_of(ds)), float(ds.attrs["focal_length"]),
+                   float(ds.attrs["diameter"]))
+
+    @property
+    def radius(self) -> float:
+        """Radius R of the map's sphere (m)."""
+        return self.ratio.radius
+
+    def __call__(self, theta: float, phi: float, r: float) -> float:
+        """Intensity relative to the incident wave at (theta, phi) in rad, r in m from the
+        focus (0 where there is none: beyond the rim image, or no data)."""
+        ideal = float(ideal_go_intensity(theta, self.F, self.radius, self.D))
+        if ideal <= 0.0:
+            return 0.0
+        value = float(self.ratio(theta, phi)) * ideal * (self.radius / r) ** 2
+        return value if np.isfinite(value) else 0.0
 
 
 def _snap(index: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -25,7 +25,7 @@ from hardware.assemble import build_fieldmap
 from hardware.errors import JournalError, PlanError
 from hardware.instruments.motion import MotionController
 from hardware.instruments.power_meter import PowerMeter
-from hardware.interp import FieldSampler
+from hardware.interp import SphereField
 from hardware.journal import Journal, read_journal
 from hardware.plan import ScanPlan, w_to_dbm
 from hardware.rig import Rig
@@ -182,11 +182,11 @@ def _instrument_addresses(plan: ScanPlan, resources: Mapping[str, str] | None,
         if not math.isclose(float(ds.attrs[name]), ours, rel_tol=1e-9):
             raise PlanError(f"{simulate}: {name} {float(ds.attrs[name]):g} m differs from the "
                             f"plan's {ours:g} m")
-    sampler = FieldSampler.from_fieldmap(ds)
-    digest = hashlib.sha256(np.ascontiguousarray(sampler.values).tobytes()).hexdigest()[:16]
+    field = SphereField.from_fieldmap(ds)
+    digest = hashlib.sha256(np.ascontiguousarray(field.ratio.values).tobytes()).hexdigest()[:16]
     extra = {"simulated": 1, "sim_field": str(simulate), "sim_field_sha256": digest,
              **settings.record()}
-    sim_rig = SimulatedRig(plan.rig, settings, sampler,
+    sim_rig = SimulatedRig(plan.rig, settings, field,
                            power_unit_dbm=w_to_dbm(plan.power_unit), faults=faults)
     with sim_rig:
         yield sim_rig.resources, sim_rig, extra

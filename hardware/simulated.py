@@ -3,15 +3,14 @@
 The rig reads a FieldMap as the field around the focus. When the power meter is triggered, the
 probe's true position follows from the motion controller's axes *now* through the simulator's
 true calibration (which may differ from the rig file's: a centre offset, zero offsets); the
-intensity is the FieldMap interpolated at the probe's direction (periodic in phi, see
-:mod:`hardware.interp`) times (R_map / r)^2, r the probe's true distance from the focus (the
-reflected rays converge on the focus, so the intensity of a focusing reflector falls as 1/r^2
-along them). The reading in dBm adds the receiver's gain (``power_unit_dbm`` for intensity 1),
-a slow drift and Gaussian noise, both in dB and both deterministic functions of the seed and
-the sample index (the acquisition announces the index through :meth:`SimulatedRig.set_sample`;
-the k-th reading of a sample draws noise number k), so a resumed scan repeats an
-uninterrupted one exactly. Axes move at the velocity the driver sets, scaled by the
-simulator's time scale.
+intensity there comes from the FieldMap (:class:`hardware.interp.SphereField`: its ratio to
+the ideal interpolated at the probe's direction, periodic in phi, times the ideal's exact
+value there, times (R_map / r)^2 for a probe at distance r from the focus). The reading in
+dBm adds the receiver's gain (``power_unit_dbm`` for intensity 1), a slow drift and Gaussian
+noise, both in dB and both deterministic functions of the seed and the sample index (the
+acquisition announces the index through :meth:`SimulatedRig.set_sample`; the k-th reading of
+a sample draws noise number k), so a resumed scan repeats an uninterrupted one exactly. Axes
+move at the velocity the driver sets, scaled by the simulator's time scale.
 
 The instruments are real TCP servers on 127.0.0.1 (``TCPIP::127.0.0.1::PORT::SOCKET``), so
 the drivers under test go through pyvisa and pyvisa-py exactly as with the real rig.
@@ -24,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hardware.interp import FieldSampler
+from hardware.interp import SphereField
 from hardware.loopback import LineServer
 from hardware.rig import Rig
 from hardware.sim_instruments import ESP_VERSION, METER_IDN, Axis, ESP301Model, PowerMeterModel
@@ -56,13 +55,13 @@ class SimulatedRig:
     ----------
     rig : the rig as its file describes it (axes, limits, park position).
     settings : noise, drift, seed, time scale and the true calibration.
-    field : sampler of the intensity on the sphere; None reads the floor everywhere.
+    field : the intensity around the focus; None reads the floor everywhere.
     power_unit_dbm : what the meter reads for intensity 1 (dBm).
     faults : faults to inject.
     """
 
     def __init__(self, rig: Rig, settings: SimSettings = SimSettings(),
-                 field: FieldSampler | None = None, *, power_unit_dbm: float = -20.0,
+                 field: SphereField | None = None, *, power_unit_dbm: float = -20.0,
                  faults: Faults = Faults()) -> None:
         self.rig = rig
         self.truth = settings.true_rig(rig)
@@ -128,8 +127,7 @@ class SimulatedRig:
         """Intensity relative to the incident wave at the point (theta, phi, r) (rad, m)."""
         if self.field is None:
             return FLOOR
-        value = float(self.field(theta, phi)) * (self.field.radius / r) ** 2
-        return value if math.isfinite(value) and value > FLOOR else FLOOR
+        return max(self.field(theta, phi, r), FLOOR)
 
     def power_dbm(self) -> float:
         """What the meter reads now (dBm): field, gain, drift and noise of this reading."""

@@ -74,7 +74,7 @@ def test_references_remove_the_drift(tmp_path: Path) -> None:
 
 
 def bilinear(theta, phi):
-    """A field that bilinear interpolation reproduces exactly (rad in)."""
+    """A ratio to the ideal that bilinear interpolation reproduces exactly (rad in)."""
     return 1.0 + 0.3 * theta + 0.02 * phi + 0.01 * theta * phi
 
 
@@ -86,7 +86,8 @@ def test_unknown_centre_offset_biases_a_known_one_does_not(tmp_path: Path) -> No
     # 4 x 12 deg cells: the plan's centres are among theirs, bilinear values everywhere
     grid = SphereGrid(R, 22, 30, 0.0, math.radians(88.0), 0.0, 2 * math.pi)
     t, p = np.meshgrid(grid.theta, grid.phi, indexing="ij")
-    field = write_field(tmp_path / "bilinear.nc", grid, bilinear(t, p))
+    ideal = ideal_go_intensity(t, F, R, D)
+    field = write_field(tmp_path / "bilinear.nc", grid, bilinear(t, p) * ideal)
     unknown = scan(plan, tmp_path / "a.nc", simulate=field, sim=sim).fieldmap
     # the probe at axes (s, a) really sits at c + R u: the field there times (R / r)^2
     expected = np.empty((3, 6))
@@ -99,10 +100,12 @@ def test_unknown_centre_offset_biases_a_known_one_does_not(tmp_path: Path) -> No
             r = np.linalg.norm(q)
             t_true = math.atan2(math.hypot(q[0], q[1]), -q[2])
             p_true = math.atan2(q[1], q[0]) % (2 * math.pi)
-            expected[i, j] = bilinear(t_true, p_true) * (R / r) ** 2
+            ideal = (2 * F / (1 + math.cos(t_true)) / R) ** 2
+            expected[i, j] = bilinear(t_true, p_true) * ideal * (R / r) ** 2
     # the meter answers with 10 digits (1e-8 dB): 2.3e-9 relative
     assert np.allclose(unknown["intensity"].values, expected, rtol=5e-9, atol=0)
-    commanded = bilinear(*np.meshgrid(PLAN_GRID.theta, PLAN_GRID.phi, indexing="ij"))
+    t, p = np.meshgrid(PLAN_GRID.theta, PLAN_GRID.phi, indexing="ij")
+    commanded = bilinear(t, p) * ideal_go_intensity(t, F, R, D)
     assert np.abs(unknown["intensity"].values / commanded - 1).max() > 2e-4
 
     known_rig = plan.rig.with_calibration(Calibration(centre_offset=truth))

@@ -7,8 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from hardware.interp import FieldSampler
-from raysim.sphere import SphereGrid
+from hardware.interp import FieldSampler, SphereField
+from raysim.field import fieldmap
+from raysim.sphere import SphereGrid, ideal_go_intensity, theta_rim
 
 GRID = SphereGrid(10.0, 18, 36)          # 5 deg x 10 deg cells over the hemisphere
 
@@ -88,3 +89,25 @@ def test_missing_sample_spreads_only_to_neighbours() -> None:
     assert math.isnan(float(sampler(GRID.theta[9] + 0.01, GRID.phi[9] + 0.01)))
     assert float(sampler(GRID.theta[9], GRID.phi[10])) == 1.0
     assert float(sampler(GRID.theta[11], GRID.phi[9] + 0.05)) == 1.0
+
+
+def test_sphere_field_is_ratio_times_exact_ideal() -> None:
+    """A map 2 % above the ideal reads 1.02 (rho/R)^2 anywhere inside the rim image, 0
+    beyond it, and (R / r)^2 times that off the sphere; GO cell means (whose ideal is the
+    cell mean too) give the same point values."""
+    F, D = 33.0, 110.0
+    grid = SphereGrid(10.0, 90, 360)
+    lo, hi = grid.theta_edges[:-1], grid.theta_edges[1:]
+    from raysim.sphere import ideal_go_cell_mean
+    ideal = np.repeat(ideal_go_cell_mean(lo, hi, F, 10.0, D)[:, None], 360, axis=1)
+    ds = fieldmap(grid, 1.02 * ideal, ideal, focal_length=F, diameter=D, frequency_hz=3e8,
+                  method="go", sampling="cell_mean")
+    field = SphereField.from_fieldmap(ds)
+    rim = theta_rim(D, F)
+    for theta in (0.0, 0.3, 1.0, rim - 1e-3):
+        point = 1.02 * (2 * F / (1 + math.cos(theta)) / 10.0) ** 2
+        assert field(theta, 0.7, 10.0) == pytest.approx(point, rel=1e-12)
+        assert field(theta, 0.7, 10.004) == pytest.approx(point * (10.0 / 10.004) ** 2,
+                                                          rel=1e-12)
+    assert field(rim + 1e-3, 0.7, 10.0) == 0.0
+    assert float(ideal_go_intensity(rim + 1e-3, F, 10.0, D)) == 0.0

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hardware.acquire import move_to
-from hardware.interp import FieldSampler
+from hardware.interp import FieldSampler, SphereField
 from hardware.rig import Rig
 from hardware.session import open_instruments
 from hardware.sim_settings import SimSettings, drift_db
@@ -22,14 +22,22 @@ GRID = SphereGrid(10.0, 18, 36)
 RIG = Rig(radius=10.0, visa_timeout_s=0.3, move_timeout_s=2.0)
 
 
+F, D = 33.0, 110.0
+
+
 def bilinear(theta, phi):
-    """A field that bilinear interpolation reproduces exactly (rad in)."""
-    return 1.5 + 0.4 * theta + 0.01 * phi + 0.05 * theta * phi
+    """A ratio to the ideal that bilinear interpolation reproduces exactly (rad in)."""
+    return 1.02 + 0.04 * theta + 0.001 * phi + 0.005 * theta * phi
 
 
-def sampler(fn=bilinear) -> FieldSampler:
+def ideal(theta: float) -> float:
+    """(rho / R)^2 of the ideal paraboloid, written out: rho = 2F / (1 + cos theta)."""
+    return (2 * F / (1 + math.cos(theta)) / 10.0) ** 2
+
+
+def sampler(fn=bilinear) -> SphereField:
     t, p = np.meshgrid(GRID.theta, GRID.phi, indexing="ij")
-    return FieldSampler(fn(t, p), GRID)
+    return SphereField(FieldSampler(fn(t, p), GRID), F, D)
 
 
 def test_reading_is_the_field_at_the_commanded_cell() -> None:
@@ -38,10 +46,10 @@ def test_reading_is_the_field_at_the_commanded_cell() -> None:
         inst = open_instruments(sim.resources, RIG)
         inst.meter.setup(3e8)
         inst.motion.setup((1, 2), RIG.speed)
-        for i, j in ((2, 3), (10, 20), (17, 35)):
+        for i, j in ((2, 3), (10, 20), (15, 35)):
             theta, phi = GRID.theta[i], GRID.phi[j]
             move_to(inst.motion, RIG, *RIG.axes(theta, phi))
-            expected = -20.0 + 10 * math.log10(bilinear(theta, phi))
+            expected = -20.0 + 10 * math.log10(bilinear(theta, phi) * ideal(theta))
             assert inst.meter.read_dbm() == pytest.approx(expected, abs=1e-8)
         inst.close()
 
@@ -64,11 +72,12 @@ def test_reading_follows_the_true_track_centre() -> None:
             r = float(np.linalg.norm(p))
             t_true = math.atan2(math.hypot(p[0], p[1]), -p[2])
             p_true = math.atan2(p[1], p[0]) % (2 * math.pi)
-            expected = 10 * math.log10(bilinear(t_true, p_true) * (10.0 / r) ** 2)
+            expected = 10 * math.log10(bilinear(t_true, p_true) * ideal(t_true)
+                                       * (10.0 / r) ** 2)
             got = inst.meter.read_dbm()
             assert got == pytest.approx(expected, abs=1e-8)
             # and the offset matters at the level the method needs (> 1e-4 in the ratio)
-            assert abs(got - 10 * math.log10(bilinear(theta, phi))) > 4e-4
+            assert abs(got - 10 * math.log10(bilinear(theta, phi) * ideal(theta))) > 4e-4
         inst.close()
 
 
@@ -85,11 +94,13 @@ def test_noise_is_a_function_of_seed_and_index() -> None:
     assert readings(7, 3) == first
     assert readings(8, 3) != first
     assert len(set(first)) == 3
+    with SimulatedRig(RIG, SimSettings(time_scale=0.0), field) as sim:
+        base = sim.power_dbm()
     with SimulatedRig(RIG, settings, field) as sim:
         draws = []
         for index in range(1500):
             sim.set_sample(index)
-            draws.append(sim.power_dbm() + 20.0)
+            draws.append(sim.power_dbm() - base)
     assert np.mean(draws) == pytest.approx(0.0, abs=4 * 0.05 / math.sqrt(1500))
     assert np.std(draws) == pytest.approx(0.05, rel=0.08)
 
