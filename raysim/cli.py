@@ -7,6 +7,7 @@ name ends in ``-deg``. Errors a user can cause end with one line on stderr and e
 from __future__ import annotations
 
 import sys
+import tempfile
 from pathlib import Path
 
 import typer
@@ -52,11 +53,20 @@ def fail(message: str) -> typer.Exit:
 
 
 def output_path(path: Path) -> Path:
-    """Check an output path's folder can be written before hours of work go into it."""
-    parent = path.expanduser().resolve().parent
-    parent.mkdir(parents=True, exist_ok=True)
+    """Check an output file can be written before any work goes into it; return it."""
+    path = path.expanduser()
     if path.is_dir():
         raise RaysimError(f"{path}: is a folder, give a file name")
+    parent = path.resolve().parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RaysimError(f"{path}: cannot create its folder ({exc.strerror})") from exc
+    try:  # a real probe: permissions alone do not tell (root, read-only mounts, /proc)
+        with tempfile.NamedTemporaryFile(dir=parent, prefix=".raysim-probe-"):
+            pass
+    except OSError as exc:
+        raise RaysimError(f"{path}: cannot write in {parent} ({exc.strerror})") from exc
     return path
 
 
@@ -94,7 +104,7 @@ def simulate(
 
         ds = run(loaded, method=method, device=device, progress=report)
     save(ds, output)
-    out.print(f"{output}: {summary(ds)}", highlight=False)
+    out.print(f"{output}: {summary(ds)}", highlight=False, soft_wrap=True)
 
 
 

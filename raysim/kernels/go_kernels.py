@@ -256,6 +256,15 @@ def deposit_tubes(
         p_hi = wp.max(pa, wp.max(pb, pc))
         j_lo = int(wp.floor((p_lo - phi_min) / dphi))
         j_hi = int(wp.floor((p_hi - phi_min) / dphi))
+        # the radial and angular ranges are exact bounds: inside one cell, no clipping needed
+        th_in = th_lo >= theta_min and th_hi <= theta_min + wp.float64(n_theta) * dtheta
+        if i_lo == i_hi and j_lo == j_hi and th_in:
+            jj = j_lo
+            if full_circle == 1:
+                jj = ((j_lo % n_phi) + n_phi) % n_phi
+            if jj >= 0 and jj < n_phi:
+                wp.atomic_add(power, i_lo, jj, P)
+            return
 
     for j in range(j_lo, j_hi + 1):
         jj = j
