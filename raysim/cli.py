@@ -111,6 +111,53 @@ def simulate(
 # --- invert, paper (solver) ------------------------------------------------------------
 
 
+@app.command("invert")
+def invert_command(
+    field: Path = typer.Argument(..., help="FieldMap NetCDF (simulated or measured scan)."),
+    output: Path = typer.Option(..., "-o", "--output", help="SurfaceMap NetCDF to write."),
+    solver: str = typer.Option("multigrid", help="direct, multigrid, gauss-seidel, sor or fft."),
+    grid: int = typer.Option(256, help="Aperture grid points across the diameter (>= 16)."),
+    rim: Path | None = typer.Option(None, help="Rim targets, CSV with header x,y,dz (m)."),
+    remove: str = typer.Option("", help="Terms to remove, e.g. piston,tilt,focus."),
+    refine: int = typer.Option(3, help="GO refinement iterations (0: the paper's linear answer)."),
+    panels_csv: Path | None = typer.Option(None, help="Write the per-panel adjustment table."),
+    gain: str = typer.Option("power", help="power (estimate the scan's scale) or none."),
+    iterations: int | None = typer.Option(None, help="Fixed sweeps for gauss-seidel / sor."),
+    device: str = typer.Option("cpu", help="Warp device of the GO refinement: cpu or cuda."),
+) -> None:
+    """Recover the surface deformation from an intensity scan (FieldMap -> SurfaceMap)."""
+    from solver.run import run_invert, summary
+
+    result = run_invert(field, output_path(output), solver=solver, N=grid, rim_csv=rim,
+                        remove=remove, refine=refine, gain=gain, iterations=iterations,
+                        device=device, panels_csv=panels_csv)
+    for line in summary(result):
+        out.print(line, highlight=False, soft_wrap=True)
+    out.print(f"wrote {output}", highlight=False, soft_wrap=True)
+
+
+@app.command("paper")
+def paper_command(
+    scale: float = typer.Option(1.0, help="Scale of the paper's Eq. 8 deformation (1: 1.2 mm)."),
+    grid: int = typer.Option(256, help="Aperture grid points across the diameter."),
+    refine: int = typer.Option(3, help="GO refinement iterations of raysim's default row."),
+    device: str = typer.Option("cpu", help="Warp device: cpu or cuda."),
+) -> None:
+    """The paper's GO case: its Table 2 figures beside raysim's on the project's own GO data."""
+    from solver.paper import compare
+
+    rows = compare(scale=scale, N=grid, refine=refine, device=device)
+    out.print(f"paper GO case, Eq. 8 x {scale:g}, N = {grid}, 90 x 360 cells", highlight=False)
+    out.print(f"{'method':44s} {'paper RRMS':>10s} {'paper s':>9s} {'RRMS':>9s} {'RMS um':>8s} "
+              f"{'time s':>7s}", highlight=False, soft_wrap=True)
+    for row in rows:
+        paper = f"{row.paper_rrms * 100:.2f} %" if row.paper_rrms is not None else "-"
+        out.print(f"{row.method:44s} {paper:>10s} {row.paper_seconds:>9s} "
+                  f"{row.rrms * 100:7.3f} % {row.rms_m * 1e6:8.2f} {row.seconds:7.2f}",
+                  highlight=False, soft_wrap=True)
+
+
+
 # --- render, report (raysim.render) ----------------------------------------------------
 
 

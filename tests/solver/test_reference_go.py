@@ -24,6 +24,9 @@ def test_ideal_cell_means_match_the_closed_form_inside_the_rim():
     np.testing.assert_allclose(value[inside], np.broadcast_to(exact[inside, None],
                                                                 value[inside].shape), rtol=2e-9)
     assert np.all(value[grid.theta > np.radians(80.0)] == 0.0)
+    # the cell the rim image cuts holds exactly the power of its lit part
+    cut = np.flatnonzero(~inside)[0]
+    np.testing.assert_allclose(value[cut], exact[cut], rtol=2e-9)
 
 
 def test_preimage_round_trip_lands_on_the_target_sphere_point():
