@@ -2,8 +2,9 @@
 
 For each step not yet in the journal: announce its index (to a simulator), move both axes to
 the step's target and check they got there, wait the settling time, take the plan's number of
-readings, and append the step to the journal (synced to disk) before the next move. A failure
-stops the axes and leaves the journal holding every step completed so far.
+readings (more at a reference position), and append the step to the journal (synced to disk)
+before the next move. A failure stops the axes and leaves the journal holding every step
+completed so far.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from dataclasses import dataclass
 from hardware.instruments.motion import MotionController
 from hardware.instruments.power_meter import PowerMeter
 from hardware.journal import Journal, Record
-from hardware.plan import ScanPlan
+from hardware.plan import REFERENCE, ScanPlan
 from hardware.rig import Rig
 
 Progress = Callable[[int, int], None]
@@ -75,7 +76,8 @@ def acquire(plan: ScanPlan, instruments: Instruments, journal: Journal, *,
             if plan.settle_s > 0:
                 time.sleep(plan.settle_s)
             stamp = time.time()
-            power = tuple(meter.read_power() for _ in range(plan.samples_per_point))
+            count = plan.reference_samples if step.kind == REFERENCE else plan.samples_per_point
+            power = tuple(meter.read_power() for _ in range(count))
             journal.append(Record(step.index, step.kind, step.i, step.j, command, readback,
                                   power, stamp))
             if progress is not None:

@@ -1,13 +1,14 @@
 """From journal records to a measured FieldMap (DESIGN.md data contract, method ``measured``).
 
-Per cell: intensity = mean power / ``power_unit`` / g(n) * (r / R)^2 (the last factor only with
-``refer_to_sphere``), where g(n) is the receiver gain at step n relative to the first reference
-reading, interpolated linearly in the step index between the reference readings (held beyond
-the first and last), and r the probe's distance from the focus from the read-back axes and the
-rig file's calibration. ``intensity_std`` is the standard error of that mean (sample standard
-deviation of the readings over sqrt(count), NaN with a single reading). ``intensity_ideal`` is
-the ideal paraboloid's GO value (rho / R)^2 at the commanded cell centres (0 beyond the rim
-image). Cells without a record stay NaN, so a FieldMap can be written from a partial journal.
+Per cell: intensity = mean power / ``power_unit`` / g(n) * (r / R)^2 (the last factor only
+with ``refer_to_sphere``). g(n) is the receiver gain at step n relative to the first
+reference reading (see :func:`reference_gains`: as read, smoothed, or 1), interpolated
+linearly in the step index between the references (held beyond the first and last); r is the
+probe's distance from the focus from the read-back axes and the rig file's calibration.
+``intensity_std`` is the standard error of the mean (sample standard deviation of the
+readings over sqrt(count), NaN with a single reading). ``intensity_ideal`` is the ideal
+paraboloid's GO value (rho / R)^2 at the commanded cell centres (0 beyond the rim image).
+Cells without a record stay NaN, so a FieldMap can be written from a partial journal.
 """
 
 from __future__ import annotations
@@ -39,14 +40,29 @@ CELL_VARS = {
 }
 
 
-def gain(plan_records: Sequence[Record]) -> tuple[np.ndarray, np.ndarray]:
-    """(step indices, gains relative to the first) of the reference records, in order."""
-    refs = [r for r in plan_records if r.kind == REFERENCE]
-    if not refs:
-        return np.zeros(0), np.zeros(0)
-    index = np.array([r.n for r in refs], dtype=np.float64)
-    power = np.array([np.mean(r.power) for r in refs])
-    return index, power / power[0]
+def reference_gains(index: np.ndarray, power: np.ndarray, mode: str,
+                    window: int) -> np.ndarray:
+    """Receiver gain at each reference reading relative to the first (1 = as calibrated).
+
+    ``index``: step indices of the references; ``power``: their mean readings (W). ``mode``
+    ``linear`` takes the readings as they are; ``smooth`` replaces each by a straight-line
+    least-squares fit over the ``window`` references around it (fewer at the ends), which
+    keeps a linear drift exactly and divides the reading noise by about sqrt(window);
+    ``none`` returns ones.
+    """
+    if mode == "none" or index.size == 0:
+        return np.ones(index.size)
+    gains = power / power[0]
+    if mode == "smooth" and index.size > 2:
+        fitted = np.empty_like(gains)
+        width = min(window, index.size)
+        for m in range(index.size):
+            lo = min(max(m - width // 2, 0), index.size - width)
+            x, y = index[lo:lo + width], gains[lo:lo + width]
+            slope, offset = np.polyfit(x - x.mean(), y, 1)
+            fitted[m] = offset + slope * (index[m] - x.mean())
+        gains = fitted / fitted[0]
+    return gains
 
 
 def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
@@ -58,7 +74,10 @@ def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
     cells["sample_index"] = np.full(shape, -1, dtype=np.int64)
     intensity = np.full(shape, np.nan)
     std = np.full(shape, np.nan)
-    ref_n, ref_g = gain(records)
+    refs = [r for r in records if r.kind == REFERENCE]
+    ref_n = np.array([r.n for r in refs], dtype=np.float64)
+    ref_p = np.array([np.mean(r.power) for r in refs])
+    ref_g = reference_gains(ref_n, ref_p, plan.drift_correction, plan.drift_window)
     R = plan.rig.radius
     for rec in records:
         if rec.kind != SAMPLE:
@@ -85,12 +104,11 @@ def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
         name: (("theta", "phi"), cells[name], {"units": unit, "long_name": text})
         for name, (unit, text) in CELL_VARS.items()
     }
-    refs = [r for r in records if r.kind == REFERENCE]
     ref_vars = {
-        "reference_index": (np.array([r.n for r in refs], dtype=np.int64), "1",
-                            "step index of the reference reading"),
-        "reference_power": (np.array([np.mean(r.power) for r in refs]), "W",
-                            "mean reading at the reference position"),
+        "reference_index": (ref_n.astype(np.int64), "1", "step index of the reference reading"),
+        "reference_power": (ref_p, "W", "mean reading at the reference position"),
+        "reference_gain_db": (10.0 * np.log10(ref_g), "dB",
+                              "receiver gain applied at the reference, relative to the first"),
         "reference_time": (np.array([r.time for r in refs]), "s since 1970-01-01T00:00:00Z",
                            "time of the reference reading"),
     }
@@ -102,6 +120,9 @@ def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
         "samples_per_point": plan.samples_per_point,
         "settle_s": plan.settle_s,
         "reference_every_lines": plan.reference_every,
+        "reference_samples": plan.reference_samples,
+        "drift_correction": plan.drift_correction,
+        "drift_window": plan.drift_window,
         "reference_theta": plan.reference[0],
         "reference_phi": plan.reference[1],
         "refer_to_sphere": int(plan.refer_to_sphere),

@@ -26,6 +26,9 @@ from raysim.sphere import SphereGrid
 
 SAMPLE = "sample"
 REFERENCE = "reference"
+#: none: record the references only; linear: interpolate their gains between them;
+#: smooth: local straight-line fits over ``drift_window`` references, then interpolate.
+DRIFT_MODES = ("none", "linear", "smooth")
 
 
 @dataclass(frozen=True)
@@ -48,8 +51,11 @@ class ScanPlan:
     """A scan plan. Lengths in m, angles in rad, power in W, times in s.
 
     ``simulator`` holds the settings a simulated run starts from (the plan's
-    ``[simulator]`` table). ``power_unit`` is the power the receiver reads when the
-    intensity is 1 (the incident plane wave's), so intensity = power / power_unit.
+    ``[simulator]`` table). Each reference reading averages ``reference_samples`` readings;
+    ``drift_correction`` (see :data:`DRIFT_MODES`) says how the reference readings correct
+    the samples, ``drift_window`` how many references a ``smooth`` fit spans.
+    ``power_unit`` is the power the receiver reads when the intensity is 1 (the incident
+    plane wave's), so intensity = power / power_unit.
     ``refer_to_sphere`` scales each reading by (r / R)^2, r the probe's distance from the
     focus per the rig's calibration, to refer it to the sphere of radius R (the rays of a
     focusing reflector converge on the focus).
@@ -64,6 +70,9 @@ class ScanPlan:
     samples_per_point: int = 4
     reference_every: int = 4
     reference: tuple[float, float] = (0.0, 0.0)
+    reference_samples: int = 64
+    drift_correction: str = "smooth"
+    drift_window: int = 9
     power_unit: float = 1e-5
     refer_to_sphere: bool = True
     simulator: SimSettings = field(default_factory=SimSettings)
@@ -89,10 +98,14 @@ class ScanPlan:
         return out
 
     def fingerprint(self, extra: dict[str, Any] | None = None) -> str:
-        """A hash of everything that decides the samples (plan, rig, ``extra`` settings)."""
+        """A hash of everything that decides the samples (plan, rig, ``extra`` settings).
+
+        The drift correction is left out: it only decides how the journal's readings are
+        turned into intensities, so it may change between a scan and its resumption.
+        """
         rig = asdict(self.rig)
         rig.pop("resources")
-        skip = ("text", "rig_text", "rig", "simulator")
+        skip = ("text", "rig_text", "rig", "simulator", "drift_correction", "drift_window")
         content = {k: v for k, v in asdict(self).items() if k not in skip}
         content["rig"] = rig
         content["extra"] = extra or {}
@@ -152,6 +165,12 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
     reference = (acq.angle("reference_theta_deg", 0.0, low=0.0, high=90.0),
                  acq.angle("reference_phi_deg", 0.0, low=-360.0, high=360.0))
     power_unit_dbm = acq.number("power_unit_dbm", -20.0, low=-150.0, high=60.0)
+    reference_samples = acq.integer("reference_samples", 64, low=1)
+    drift = acq.string("drift_correction", "smooth")
+    if drift not in DRIFT_MODES:
+        raise PlanError(f"{acq.where}: 'drift_correction' must be one of "
+                        f"{', '.join(DRIFT_MODES)}, got {drift!r}")
+    window = acq.integer("drift_window", 9, low=2)
     refer = acq.boolean("refer_to_sphere", True)
     acq.done()
 
@@ -159,7 +178,8 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
     top.done()
 
     plan = ScanPlan(F, D, frequency_hz, grid, rig, settle_s, samples, every, reference,
-                    dbm_to_w(power_unit_dbm), refer, simulator, text, rig_text)
+                    reference_samples, drift, window, dbm_to_w(power_unit_dbm), refer,
+                    simulator, text, rig_text)
     plan.check_reach()
     return plan
 

@@ -58,7 +58,9 @@ phi_step_deg = {phi_step}
 
 [acquisition]
 samples_per_point = {samples}
+reference_samples = {reference_samples}
 reference_every_lines = {every}
+drift_correction = "{drift_correction}"
 power_unit_dbm = -20.0
 
 [simulator]
@@ -73,7 +75,8 @@ time_scale = {time_scale}
 def write_plan(folder: Path, *, theta_max: float = 60.0, theta_step: float = 20.0,
                phi_step: float = 60.0, samples: int = 2, every: int = 2, seed: int = 3,
                noise: float = 0.0, drift: float = 0.0, time_scale: float = 0.0,
-               visa_timeout: float = 0.5, move_timeout: float = 5.0, radius: float = R) -> Path:
+               visa_timeout: float = 0.5, move_timeout: float = 5.0, radius: float = R,
+               reference_samples: int = 2, drift_correction: str = "smooth") -> Path:
     """A plan and its rig.toml in ``folder``; returns the plan's path."""
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "rig.toml").write_text(RIG_TOML.format(radius=radius, visa_timeout=visa_timeout,
@@ -81,7 +84,9 @@ def write_plan(folder: Path, *, theta_max: float = 60.0, theta_step: float = 20.
     plan = folder / "plan.toml"
     plan.write_text(PLAN_TOML.format(F=F, D=D, theta_max=theta_max, theta_step=theta_step,
                                      phi_step=phi_step, samples=samples, every=every, seed=seed,
-                                     noise=noise, drift=drift, time_scale=time_scale))
+                                     noise=noise, drift=drift, time_scale=time_scale,
+                                     reference_samples=reference_samples,
+                                     drift_correction=drift_correction))
     return plan
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hardware.assemble import reference_gains
 from hardware.errors import JournalError, PlanError
 from hardware.journal import read_journal
 from hardware.plan import REFERENCE, load_plan
@@ -57,7 +58,7 @@ def test_scan_measures_the_field(tmp_path: Path) -> None:
 def test_references_remove_the_drift(tmp_path: Path) -> None:
     """With drift and no noise, what remains is the drift's departure from its linear
     interpolation between the reference readings."""
-    plan = load_plan(write_plan(tmp_path, drift=0.2))
+    plan = load_plan(write_plan(tmp_path, drift=0.2, drift_correction="linear"))
     ds = scan(plan, tmp_path / "scan.nc", simulate=aligned_field(tmp_path)).fieldmap
     settings = plan.simulator
     refs = [s.index for s in plan.steps() if s.kind == REFERENCE]
@@ -71,6 +72,22 @@ def test_references_remove_the_drift(tmp_path: Path) -> None:
     raw = np.abs(true_gain - 1).max()
     left = np.abs(ds["intensity"].values / expected_pattern() - 1).max()
     assert raw > 0.02 and left < raw / 5
+
+
+def test_reference_gains_modes() -> None:
+    index = np.arange(0.0, 4000.0, 100.0)
+    drift = 1.0 + 2e-6 * index                      # a linear drift
+    assert np.array_equal(reference_gains(index, 3e-5 * drift, "none", 5), np.ones(40))
+    assert np.allclose(reference_gains(index, 3e-5 * drift, "linear", 5), drift, rtol=1e-14)
+    # a straight-line fit keeps a linear drift exactly
+    assert np.allclose(reference_gains(index, 3e-5 * drift, "smooth", 5), drift, rtol=1e-12)
+    # and divides the reading noise by about sqrt(5) inside the series
+    rng = np.random.default_rng(8)
+    index = np.arange(0.0, 4e5, 100.0)
+    noisy = 1.0 + 1e-3 * rng.standard_normal(index.size)
+    smooth = reference_gains(index, noisy, "smooth", 5) * noisy[0]
+    inner = slice(10, -10)
+    assert np.std(smooth[inner] - 1.0) == pytest.approx(1e-3 / math.sqrt(5), rel=0.1)
 
 
 def bilinear(theta, phi):

@@ -45,14 +45,20 @@ def test_demo_plan_loads_and_fits_the_rig() -> None:
     assert plan.power_unit == pytest.approx(1e-5)
     assert plan.simulator.noise_db == 0.01
     assert len(plan.steps()) == 96 + 5
+    assert (plan.reference_samples, plan.drift_correction, plan.drift_window) == (64, "smooth", 9)
 
 
 def test_fingerprint_follows_what_decides_the_samples(tmp_path: Path) -> None:
     a = load_plan(write_plan(tmp_path / "a"))
     b = load_plan(write_plan(tmp_path / "b"))
     c = load_plan(write_plan(tmp_path / "c", samples=3))
+    d = load_plan(write_plan(tmp_path / "d", drift_correction="none"))
+    e = load_plan(write_plan(tmp_path / "e", reference_samples=5))
     assert a.fingerprint() == b.fingerprint()
     assert a.fingerprint() != c.fingerprint()
+    assert a.fingerprint() != e.fingerprint()
+    # the drift correction only post-processes the journal's readings
+    assert a.fingerprint() == d.fingerprint() and d.drift_correction == "none"
     assert a.fingerprint({"sim_noise_db": 0.0}) != a.fingerprint({"sim_noise_db": 0.01})
 
 
@@ -65,6 +71,8 @@ def test_fingerprint_follows_what_decides_the_samples(tmp_path: Path) -> None:
     ("seed = 3", "seed = 3\nnoise = 0.1", "unknown key 'noise'"),
     ("phi_max_deg = 360.0", "phi_max_deg = 420.0", "exceeds 360 deg"),
     ("[reflector]", "[reflectr]", "missing table [reflector]"),
+    ('drift_correction = "smooth"', 'drift_correction = "spline"',
+     "must be one of none, linear, smooth"),
 ])
 def test_bad_plan_values(tmp_path: Path, old: str, new: str, message: str) -> None:
     path = write_plan(tmp_path)
