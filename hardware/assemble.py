@@ -2,7 +2,7 @@
 
 Per cell: intensity = mean power / ``power_unit`` / g(n) * (r / R)^2 (the last factor only
 with ``refer_to_sphere``). g(n) is the receiver gain at step n relative to the first
-reference reading (see :func:`reference_gains`: as read, smoothed, or 1), interpolated
+reference reading (see :mod:`hardware.drift`: as read, smoothed, or 1), interpolated
 linearly in the step index between the references (held beyond the first and last); r is the
 probe's distance from the focus from the read-back axes and the rig file's calibration.
 ``intensity_std`` is the standard error of the mean (sample standard deviation of the
@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from hardware.drift import chi2_limit, drift
 from hardware.journal import Record
 from hardware.plan import REFERENCE, SAMPLE, ScanPlan
 from hardware.rig import rig_attrs
@@ -40,31 +41,6 @@ CELL_VARS = {
 }
 
 
-def reference_gains(index: np.ndarray, power: np.ndarray, mode: str,
-                    window: int) -> np.ndarray:
-    """Receiver gain at each reference reading relative to the first (1 = as calibrated).
-
-    ``index``: step indices of the references; ``power``: their mean readings (W). ``mode``
-    ``linear`` takes the readings as they are; ``smooth`` replaces each by a straight-line
-    least-squares fit over the ``window`` references around it (fewer at the ends), which
-    keeps a linear drift exactly and divides the reading noise by about sqrt(window);
-    ``none`` returns ones.
-    """
-    if mode == "none" or index.size == 0:
-        return np.ones(index.size)
-    gains = power / power[0]
-    if mode == "smooth" and index.size > 2:
-        fitted = np.empty_like(gains)
-        width = min(window, index.size)
-        for m in range(index.size):
-            lo = min(max(m - width // 2, 0), index.size - width)
-            x, y = index[lo:lo + width], gains[lo:lo + width]
-            slope, offset = np.polyfit(x - x.mean(), y, 1)
-            fitted[m] = offset + slope * (index[m] - x.mean())
-        gains = fitted / fitted[0]
-    return gains
-
-
 def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
                    attrs: Mapping[str, Any] | None = None) -> xr.Dataset:
     """The measured FieldMap of ``plan`` from its journal ``records`` (see the module doc)."""
@@ -75,16 +51,14 @@ def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
     intensity = np.full(shape, np.nan)
     std = np.full(shape, np.nan)
     refs = [r for r in records if r.kind == REFERENCE]
-    ref_n = np.array([r.n for r in refs], dtype=np.float64)
-    ref_p = np.array([np.mean(r.power) for r in refs])
-    ref_g = reference_gains(ref_n, ref_p, plan.drift_correction, plan.drift_window)
+    gain = drift(refs, plan.drift_correction, plan.drift_window)
     R = plan.rig.radius
     for rec in records:
         if rec.kind != SAMPLE:
             continue
         i, j = rec.i, rec.j
         readings = np.asarray(rec.power, dtype=np.float64)
-        g = float(np.interp(rec.n, ref_n, ref_g)) if ref_n.size else 1.0
+        g = gain.at(rec.n)
         theta_p, phi_p, r_p = plan.rig.probe(*rec.readback)
         scale = (r_p / R) ** 2 if plan.refer_to_sphere else 1.0
         factor = scale / (plan.power_unit * g)
@@ -105,9 +79,10 @@ def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
         for name, (unit, text) in CELL_VARS.items()
     }
     ref_vars = {
-        "reference_index": (ref_n.astype(np.int64), "1", "step index of the reference reading"),
-        "reference_power": (ref_p, "W", "mean reading at the reference position"),
-        "reference_gain_db": (10.0 * np.log10(ref_g), "dB",
+        "reference_index": (gain.index.astype(np.int64), "1",
+                            "step index of the reference reading"),
+        "reference_power": (gain.power, "W", "mean reading at the reference position"),
+        "reference_gain_db": (10.0 * np.log10(gain.gains), "dB",
                               "receiver gain applied at the reference, relative to the first"),
         "reference_time": (np.array([r.time for r in refs]), "s since 1970-01-01T00:00:00Z",
                            "time of the reference reading"),
@@ -122,6 +97,9 @@ def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
         "reference_every_lines": plan.reference_every,
         "reference_samples": plan.reference_samples,
         "drift_correction": plan.drift_correction,
+        "drift_correction_applied": gain.applied,
+        "drift_chi2": gain.chi2,
+        "drift_chi2_limit": chi2_limit(gain.index.size),
         "drift_window": plan.drift_window,
         "reference_theta": plan.reference[0],
         "reference_phi": plan.reference[1],

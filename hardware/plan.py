@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from hardware.config import Table, read_toml
+from hardware.drift import DRIFT_MODES
 from hardware.errors import PlanError
 from hardware.rig import Rig, load_rig, rig_from_table
 from hardware.sim_settings import SimSettings, sim_settings_from_table
@@ -26,9 +27,6 @@ from raysim.sphere import SphereGrid
 
 SAMPLE = "sample"
 REFERENCE = "reference"
-#: none: record the references only; linear: interpolate their gains between them;
-#: smooth: local straight-line fits over ``drift_window`` references, then interpolate.
-DRIFT_MODES = ("none", "linear", "smooth")
 
 
 @dataclass(frozen=True)
@@ -71,7 +69,7 @@ class ScanPlan:
     reference_every: int = 4
     reference: tuple[float, float] = (0.0, 0.0)
     reference_samples: int = 64
-    drift_correction: str = "smooth"
+    drift_correction: str = "auto"
     drift_window: int = 9
     power_unit: float = 1e-5
     refer_to_sphere: bool = True
@@ -166,7 +164,7 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
                  acq.angle("reference_phi_deg", 0.0, low=-360.0, high=360.0))
     power_unit_dbm = acq.number("power_unit_dbm", -20.0, low=-150.0, high=60.0)
     reference_samples = acq.integer("reference_samples", 64, low=1)
-    drift = acq.string("drift_correction", "smooth")
+    drift = acq.string("drift_correction", "auto")
     if drift not in DRIFT_MODES:
         raise PlanError(f"{acq.where}: 'drift_correction' must be one of "
                         f"{', '.join(DRIFT_MODES)}, got {drift!r}")

@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hardware.assemble import reference_gains
 from hardware.errors import JournalError, PlanError
 from hardware.journal import read_journal
 from hardware.plan import REFERENCE, load_plan
@@ -74,20 +73,19 @@ def test_references_remove_the_drift(tmp_path: Path) -> None:
     assert raw > 0.02 and left < raw / 5
 
 
-def test_reference_gains_modes() -> None:
-    index = np.arange(0.0, 4000.0, 100.0)
-    drift = 1.0 + 2e-6 * index                      # a linear drift
-    assert np.array_equal(reference_gains(index, 3e-5 * drift, "none", 5), np.ones(40))
-    assert np.allclose(reference_gains(index, 3e-5 * drift, "linear", 5), drift, rtol=1e-14)
-    # a straight-line fit keeps a linear drift exactly
-    assert np.allclose(reference_gains(index, 3e-5 * drift, "smooth", 5), drift, rtol=1e-12)
-    # and divides the reading noise by about sqrt(5) inside the series
-    rng = np.random.default_rng(8)
-    index = np.arange(0.0, 4e5, 100.0)
-    noisy = 1.0 + 1e-3 * rng.standard_normal(index.size)
-    smooth = reference_gains(index, noisy, "smooth", 5) * noisy[0]
-    inner = slice(10, -10)
-    assert np.std(smooth[inner] - 1.0) == pytest.approx(1e-3 / math.sqrt(5), rel=0.1)
+def test_auto_drift_correction_follows_the_references(tmp_path: Path) -> None:
+    field = aligned_field(tmp_path)
+    quiet = load_plan(write_plan(tmp_path / "a", noise=0.01, reference_samples=16,
+                                 drift_correction="auto"))
+    ds = scan(quiet, tmp_path / "a.nc", simulate=field).fieldmap
+    assert ds.attrs["drift_correction_applied"] == "none"
+    assert ds.attrs["drift_chi2"] < ds.attrs["drift_chi2_limit"]
+    assert np.all(ds["drift_db"].values == 0.0)
+    drifting = load_plan(write_plan(tmp_path / "b", noise=0.01, drift=0.3, reference_samples=16,
+                                    drift_correction="auto"))
+    ds = scan(drifting, tmp_path / "b.nc", simulate=field).fieldmap
+    assert ds.attrs["drift_correction_applied"] == "smooth"
+    assert ds.attrs["drift_chi2"] > 100 * ds.attrs["drift_chi2_limit"]
 
 
 def bilinear(theta, phi):

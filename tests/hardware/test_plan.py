@@ -45,7 +45,7 @@ def test_demo_plan_loads_and_fits_the_rig() -> None:
     assert plan.power_unit == pytest.approx(1e-5)
     assert plan.simulator.noise_db == 0.01
     assert len(plan.steps()) == 96 + 5
-    assert (plan.reference_samples, plan.drift_correction, plan.drift_window) == (64, "smooth", 9)
+    assert (plan.reference_samples, plan.drift_correction, plan.drift_window) == (64, "auto", 9)
 
 
 def test_fingerprint_follows_what_decides_the_samples(tmp_path: Path) -> None:
@@ -72,7 +72,7 @@ def test_fingerprint_follows_what_decides_the_samples(tmp_path: Path) -> None:
     ("phi_max_deg = 360.0", "phi_max_deg = 420.0", "exceeds 360 deg"),
     ("[reflector]", "[reflectr]", "missing table [reflector]"),
     ('drift_correction = "smooth"', 'drift_correction = "spline"',
-     "must be one of none, linear, smooth"),
+     "must be one of auto, none, linear, smooth"),
 ])
 def test_bad_plan_values(tmp_path: Path, old: str, new: str, message: str) -> None:
     path = write_plan(tmp_path)
