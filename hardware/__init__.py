@@ -17,6 +17,7 @@ instruments/   PyVISA drivers: ``power_meter`` (Keysight N1913A/N1914A SCPI), ``
 journal        append-only, fsynced JSON Lines journal of completed steps; resume rules.
 acquire        runs the steps on the instruments, journaling each one.
 assemble       journal records -> measured FieldMap (drift removal, standard errors).
+drift          receiver gain from the reference readings; removed only when significant.
 session        top-level ``scan`` and ``park``, against instruments or the simulator.
 interp         bilinear, phi-periodic sampling of a FieldMap between cell centres.
 loopback       line-based TCP servers on 127.0.0.1 for the simulated instruments.

@@ -6,7 +6,10 @@ helps only when the drift exceeds the noise of the references: the scan's intens
 be right to about 5e-5 in the ratio, and a noisy gain estimate applied line by line is a
 phi-dependent error the inversion turns into surface error. Hence ``auto``: the gains are
 tested against their own reading noise (reduced chi-square of the reference means about
-their weighted mean) and removed, smoothed, only when the drift is significant.
+their weighted mean) and removed only when the drift is significant; then the smoothing
+that best predicts each reference from the others (leave-one-out) is used, from plain
+interpolation (a drift fast against the reference spacing) to line fits over
+``drift_window`` references (a slow drift under noisy references).
 """
 
 from __future__ import annotations
@@ -19,9 +22,9 @@ import numpy as np
 
 from hardware.journal import Record
 
-#: auto: smooth when the references show significant drift, else none; none: record the
-#: references only; linear: interpolate their gains; smooth: local straight-line fits over
-#: ``window`` references, then interpolate.
+#: auto: none unless the references show significant drift, then linear or smooth with the
+#: window chosen by leave-one-out prediction; none: record the references only; linear:
+#: interpolate their gains; smooth: local straight-line fits over ``window`` references.
 DRIFT_MODES = ("auto", "none", "linear", "smooth")
 
 
@@ -31,13 +34,15 @@ class Drift:
 
     ``index``: step indices; ``power``: mean readings (W); ``gains``: the gain removed at
     each reference, relative to the first; ``applied``: the mode used (``auto`` resolved);
-    ``chi2``: reduced chi-square of the reference means (NaN when it cannot be formed).
+    ``window``: the smoothing window used (1 without smoothing); ``chi2``: reduced
+    chi-square of the reference means (NaN when it cannot be formed).
     """
 
     index: np.ndarray
     power: np.ndarray
     gains: np.ndarray
     applied: str
+    window: int
     chi2: float
 
     def at(self, n: float) -> float:
@@ -54,8 +59,38 @@ def drift(references: Sequence[Record], mode: str, window: int) -> Drift:
     chi2 = reduced_chi2(power, sem)
     applied = mode
     if mode == "auto":
-        applied = "smooth" if not math.isfinite(chi2) or chi2 > chi2_limit(index.size) else "none"
-    return Drift(index, power, reference_gains(index, power, applied, window), applied, chi2)
+        applied = "none"
+        if not math.isfinite(chi2) or chi2 > chi2_limit(index.size):
+            window = best_window(index, power, window)
+            applied = "linear" if window == 1 else "smooth"
+    if applied != "smooth":
+        window = 1
+    gains = reference_gains(index, power, applied, window)
+    return Drift(index, power, gains, applied, window, chi2)
+
+
+def best_window(index: np.ndarray, power: np.ndarray, largest: int) -> int:
+    """The smoothing window (1: none) whose fits best predict each reference from the others.
+
+    Window w >= 3 fits a line to the w - 1 nearest other references; window 1 draws it
+    through the 2 nearest (interpolation between the neighbours). Mean squared prediction
+    error over all references; the smallest wins, ties to the smaller window.
+    """
+    if index.size < 4:
+        return 1
+    best, best_error = 1, math.inf
+    for window in [1, *range(3, min(largest, index.size) + 1)]:
+        others = 2 if window == 1 else window - 1
+        error = 0.0
+        for m in range(index.size):
+            rest = np.delete(np.arange(index.size), m)
+            near = rest[np.argsort(np.abs(index[rest] - index[m]), kind="stable")[:others]]
+            x, y = index[near], power[near]
+            slope, offset = np.polyfit(x - x.mean(), y, 1)
+            error += (offset + slope * (index[m] - x.mean()) - power[m]) ** 2
+        if error < best_error * (1.0 - 1e-12):
+            best, best_error = window, error
+    return best
 
 
 def reduced_chi2(power: np.ndarray, sem: np.ndarray) -> float:

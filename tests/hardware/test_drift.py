@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from hardware.drift import chi2_limit, drift, reduced_chi2, reference_gains
+from hardware.drift import best_window, chi2_limit, drift, reduced_chi2, reference_gains
 from hardware.journal import Record
 
 
@@ -49,9 +49,23 @@ def test_auto_removes_drift_only_when_the_references_show_it() -> None:
     assert flat.chi2 < chi2_limit(30)
     ramp = 1.0 + 0.01 * np.linspace(0.0, 1.0, 30)      # 1 % over the scan, 20x the noise
     moving = drift(records(ramp, 2e-3, 16, seed=1), "auto", 9)
-    assert moving.applied == "smooth"
+    assert moving.applied == "smooth" and moving.window == 9
     assert np.allclose(moving.gains, ramp, atol=1.5e-3)
     assert moving.at(50.0) == pytest.approx(0.5 * (moving.gains[0] + moving.gains[1]))
     # quiet references (one reading, or no scatter) cannot rule drift out
     assert drift(records(ramp, 0.0, 1, seed=1), "auto", 9).applied == "smooth"
     assert drift(records(np.ones(3), 0.0, 4, seed=1), "linear", 9).applied == "linear"
+
+
+def test_window_follows_drift_speed_and_noise() -> None:
+    """Leave-one-out picks no smoothing for a drift fast against the reference spacing and
+    quiet references, and a wide window for a slow drift under noisy references."""
+    index = np.arange(0.0, 3600.0 * 40, 3600.0)
+    rng = np.random.default_rng(4)
+    fast = 1.0 + 0.01 * np.sin(2 * np.pi * index / 40000.0) + 1e-5 * rng.standard_normal(40)
+    assert best_window(index, fast, 9) == 1
+    slow = 1.0 + 1e-7 * index / 3600.0 + 3e-4 * rng.standard_normal(40)
+    assert best_window(index, slow, 9) >= 5
+    fast_drift = drift(records(fast, 1e-4, 16, seed=2), "auto", 9)
+    assert fast_drift.applied == "linear" and fast_drift.window == 1
+    assert np.allclose(fast_drift.gains, fast / fast[0], atol=1e-4)
