@@ -2,7 +2,8 @@
 
 Prints: the round-trip time of one query, power readings per second (INIT, SYST:ERR?, FETC?,
 SYST:ERR?), and whole-scan steps per second (move both axes with TE? checks and MD?/TP? polls,
-the readings, a synced journal record per step) for 1 and 4 readings a point. Motion is
+the readings, a synced journal record per step, the FieldMap written at the end) for 1 and 4
+readings a point (references take as many readings as a point here). Motion is
 instantaneous (time scale 0), so the figures are the software and protocol overhead a real
 rig adds to its own axis and settling times.
 
@@ -37,7 +38,8 @@ def plan_table(n_theta: int, n_phi: int, samples: int) -> dict:
         "reflector": {"focal_length_m": F, "diameter_m": D, "frequency_hz": 3e8},
         "grid": {"theta_max_deg": 80.0, "theta_step_deg": 80.0 / n_theta,
                  "phi_step_deg": 360.0 / n_phi},
-        "acquisition": {"samples_per_point": samples, "reference_every_lines": 4},
+        "acquisition": {"samples_per_point": samples, "reference_samples": samples,
+                        "reference_every_lines": 4},
         "simulator": {"noise_db": 0.01, "drift_db": 0.05, "time_scale": 0.0},
     }
 
