@@ -277,7 +277,7 @@ def deposit_tubes(
                     ny = -wp.cos(beta)
                 qx = vec8d()
                 qy = vec8d()
-                m = 0
+                m = int(0)
                 for k in range(n):
                     k1 = (k + 1) % n
                     s0 = nx * px[k] + ny * py[k]
