@@ -277,7 +277,7 @@ def deposit_tubes(
                     ny = -wp.cos(beta)
                 qx = vec8d()
                 qy = vec8d()
-                m = int(0)
+                m = int(0)  # noqa: UP018, RUF046 - Warp needs a dynamic int here (a literal 0 cannot be mutated in the loop)
                 for k in range(n):
                     k1 = (k + 1) % n
                     s0 = nx * px[k] + ny * py[k]
