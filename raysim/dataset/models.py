@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 from typing import Any, ClassVar
 
 import numpy as np
@@ -198,7 +198,7 @@ class PanelErrors(ErrorModel):
 
     def shape(self, rng, grid):
         layout = _layout(grid)
-        size = np.sqrt([max(layout.panel_area(p), 1e-12) for p in range(layout.n_panels)])
+        size = _panel_sizes(layout)
         n = layout.n_panels
         return {"piston": rng.standard_normal(n),
                 "tilt_x": rng.standard_normal(n) * math.sqrt(12.0) / size,
@@ -282,6 +282,12 @@ class GravityAstigmatism(ErrorModel):
         return {"amplitude": Variable((), (), "m", "rim astigmatism: value on the rim at phi0"),
                 "exponent": Variable((), (), "1", "rim astigmatism: power p of r/a"),
                 "angle": Variable((), (), "rad", "rim astigmatism: axis phi0 of the high side")}
+
+
+@lru_cache(maxsize=8)
+def _panel_sizes(layout: PanelLayout) -> NDArray[np.float64]:
+    """Square root of each panel's area (m)."""
+    return np.sqrt([max(layout.panel_area(p), 1e-12) for p in range(layout.n_panels)])
 
 
 def _layout(grid: ApertureGrid) -> PanelLayout:
