@@ -20,7 +20,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from raysim.dataset.distributions import Distribution
-from raysim.deformation import Deformation, GaussianBumps, PanelRigid, Zernike
+from raysim.dataset.zernike import ZernikeSeries
+from raysim.deformation import Deformation, GaussianBumps, PanelRigid
 from raysim.panels import PanelLayout
 
 Params = dict[str, Any]
@@ -139,7 +140,7 @@ class ZernikeSpectrum(ErrorModel):
 
     def build(self, params, grid):
         rows = tuple((n, m, float(c)) for (n, m), c in zip(self.terms, params["coefficient"], strict=True))
-        return Zernike(rows, 0.5 * grid.D)
+        return ZernikeSeries(rows, 0.5 * grid.D)
 
     def variables(self, grid):
         return {"coefficient": Variable((f"{self.name}_term",), (len(self.terms),), "m",

@@ -11,6 +11,8 @@ from scipy import stats
 from raysim.dataset import draw_sample, load_spec, parse_spec, sample_seed, validation_mask
 from raysim.dataset.memo import Memo
 from raysim.dataset.models import RimAstigmatism
+from raysim.dataset.zernike import ZernikeSeries
+from raysim.deformation import zernike_radial
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO_TEXT = (ROOT / "scenes" / "dataset_demo.toml").read_text()
@@ -41,6 +43,32 @@ def test_rim_astigmatism_rms_and_slopes():
     gx, gy = d.gradient(x, y)
     assert np.allclose(gx, (d(x + h, y) - d(x - h, y)) / (2 * h), rtol=1e-6, atol=1e-13)
     assert np.allclose(gy, (d(x, y + h) - d(x, y - h)) / (2 * h), rtol=1e-6, atol=1e-13)
+
+
+def test_zernike_series_is_noll_normalised_orthogonal_and_has_exact_slopes():
+    a = 55.0
+    terms = [(n, m) for n in range(0, 7) for m in range(-n, n + 1, 2)]
+    # polar Gauss-Legendre x uniform quadrature over the disk, exact for these polynomials
+    nodes, weights = np.polynomial.legendre.leggauss(12)
+    r = 0.5 * a * (nodes + 1.0)
+    phi = (np.arange(32) + 0.5) / 32 * 2 * np.pi
+    R, P = np.meshgrid(r, phi)
+    w = np.meshgrid(weights * r, phi)[0] / np.sum(weights * r) / len(phi)
+    X, Y = R * np.cos(P), R * np.sin(P)
+    values = np.array([ZernikeSeries(((n, m, 1.0),), a)(X, Y) for n, m in terms])
+    gram = np.einsum("ikl,jkl,kl->ij", values, values, w)
+    assert np.allclose(gram, np.eye(len(terms)), atol=1e-12)  # RMS = coefficient, orthogonal
+    # against the radial polynomial of raysim.deformation with its own angular factor
+    n, m = 5, -3
+    radial = zernike_radial(n, m, R / a)[0]
+    assert np.allclose(values[terms.index((n, m))], np.sqrt(2 * (n + 1)) * radial * np.sin(3 * P))
+    rng = np.random.default_rng(2)
+    series = ZernikeSeries(tuple((n, m, rng.normal() * 1e-4) for n, m in terms), a)
+    x, y = np.append(rng.uniform(-50, 50, 200), 0.0), np.append(rng.uniform(-50, 50, 200), 0.0)
+    h = 1e-3
+    gx, gy = series.gradient(x, y)
+    assert np.allclose(gx, (series(x + h, y) - series(x - h, y)) / (2 * h), rtol=1e-6, atol=1e-12)
+    assert np.allclose(gy, (series(x, y + h) - series(x, y - h)) / (2 * h), rtol=1e-6, atol=1e-12)
 
 
 def test_each_model_reaches_its_drawn_rms_on_the_grid(coarse_demo):
