@@ -53,6 +53,8 @@ class RunReport:
 
     def summary(self) -> str:
         """One line for the user."""
+        if not self.computed:
+            return f"{self.store}: {self.done}/{self.samples} samples done, nothing left to compute"
         line = (f"{self.store}: {self.done}/{self.samples} samples done ({self.skipped} already "
                 f"there, {self.computed} computed on {self.workers} workers in {self.seconds:.1f} s, "
                 f"{self.samples_per_second:.3g} samples/s)")
@@ -110,7 +112,11 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
     if len(pending) or len(ideal_pending):
         writer = zstore.Writer(group)
         with _client(scheduler, workers, threads, len(pending) + len(ideal_pending)) as (client, n_workers):
-            client.register_plugin(DatasetWorkerPlugin(threads, device))
+            try:
+                client.register_plugin(DatasetWorkerPlugin(threads, device))
+            except Exception as exc:  # e.g. a device the workers lack, Warp failing to load
+                raise DatasetError(f"the Dask workers could not be prepared "
+                                   f"({type(exc).__name__}: {' '.join(str(exc).split())})") from exc
             _run(client, path, spec, device, pending, ideal_pending, writer, report, skipped,
                  failures, ideal_failures)
     final = zstore.status(group)
@@ -125,7 +131,7 @@ def _run(client, path: str, spec: DatasetSpec, device: str, pending: np.ndarray,
          ideal_pending: np.ndarray, writer: zstore.Writer, report: Progress, skipped: int,
          failures: list, ideal_failures: list) -> None:
     """Submit the tasks and count their outcomes as they complete."""
-    from distributed import as_completed
+    from distributed import KilledWorker, as_completed
 
     token = uuid.uuid4().hex[:10]
     fp = spec.fingerprint
@@ -146,8 +152,11 @@ def _run(client, path: str, spec: DatasetSpec, device: str, pending: np.ndarray,
         kind, index = jobs[future.key]
         try:
             out = future.result()
-        except Exception as exc:  # the task's worker died every time (KilledWorker) or was lost
-            reason = f"worker lost while running it ({type(exc).__name__}: {exc})"
+        except Exception as exc:  # raised outside the task's own guard
+            if isinstance(exc, KilledWorker):
+                reason = f"its worker died each time it ran it ({type(exc).__name__})"
+            else:
+                reason = f"the task could not run ({type(exc).__name__}: {' '.join(str(exc).split())})"
             if kind == "sample":
                 writer.failed(index, reason)
             else:
@@ -187,9 +196,12 @@ def _client(scheduler: str | None, workers: int | None, threads: int, tasks: int
         return
     n = workers or max(1, usable_cores() // threads)
     n = max(1, min(n, tasks))
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address=None, silence_logs=logging.ERROR,
-                           env={"RAYSIM_THREADS": str(threads)})
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, silence_logs=logging.ERROR,
+                               env={"RAYSIM_THREADS": str(threads)})
+    except (RuntimeError, OSError) as exc:
+        raise DatasetError(f"could not start a local Dask cluster of {n} workers ({exc})") from exc
     try:
         client = Client(cluster)
         try:

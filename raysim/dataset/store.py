@@ -23,8 +23,11 @@ sphere's edges) and the versions of the packages that made the store.
 from __future__ import annotations
 
 import math
+import os
 import platform
+import shutil
 import time
+import uuid
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib import metadata
@@ -54,10 +57,27 @@ def versions() -> dict[str, str]:
 
 
 def create(path: str, spec: DatasetSpec) -> zarr.Group:
-    """A new store at ``path`` (which must not exist) with its coordinates, seeds and split."""
+    """A new store at ``path`` (which must not exist) with its coordinates, seeds and split.
+
+    A local store is built in a hidden sibling folder and renamed into place, so a run killed
+    while creating it leaves no half-made store that ``resume`` would have to trust.
+    """
+    if "://" in path:
+        return _fill(zarr.open_group(path, mode="w-", attributes=_attributes(spec)), spec)
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    scratch = target.parent / f".{target.name}.{uuid.uuid4().hex[:8]}.creating"
+    try:
+        _fill(zarr.open_group(str(scratch), mode="w-", attributes=_attributes(spec)), spec)
+        os.rename(scratch, target)  # fails if the target appeared meanwhile
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    return zarr.open_group(path, mode="r+")
+
+
+def _fill(group: zarr.Group, spec: DatasetSpec) -> zarr.Group:
     from raysim.dataset.sampling import sample_seed, validation_mask
 
-    group = zarr.open_group(path, mode="w-", attributes=_attributes(spec))
     for name, array in layout(spec).items():
         arr = group.create_array(name, shape=array.shape, chunks=array.chunks, dtype=array.dtype,
                                  fill_value=array.fill, dimension_names=array.dims,

@@ -16,10 +16,18 @@ import numpy as np
 import pytest
 import zarr
 
-from raysim.dataset import DatasetError, generate, load_spec, open_dataset, sample_intensity
+from raysim.dataset import (
+    DatasetError,
+    generate,
+    load_spec,
+    open_dataset,
+    sample_fieldmap,
+    sample_intensity,
+)
 from raysim.dataset import worker as dataset_worker
 from raysim.dataset.models import RimAstigmatism
 from raysim.deformation import GaussianBumps, PanelRigid, zernike_radial
+from raysim.field import validate
 from raysim.sphere import ideal_go_cell_mean
 
 pytestmark = pytest.mark.slow
@@ -170,6 +178,11 @@ def test_store_holds_distinct_physical_samples(reference, spec, monkeypatch):
         assert np.isnan(stored[~inside]).all()
         assert np.allclose(stored[inside], total, rtol=1e-9, atol=1e-15)
         assert float(ds["rms"][i]) == pytest.approx(np.sqrt(np.mean(total**2)), rel=1e-9)
+    # a sample read back as a FieldMap passes the FieldMap contract
+    fieldmap = validate(sample_fieldmap(ds, 3))
+    assert np.array_equal(fieldmap["intensity"].values, intensity[3])
+    assert np.array_equal(fieldmap["intensity_ideal"].values, ideal)
+    assert fieldmap.attrs["diameter"] == spec.scene.D and fieldmap.attrs["sample"] == 3
     # any sample regenerates alone, bit for bit (one thread per launch, as in the workers)
     monkeypatch.setenv("RAYSIM_THREADS", "1")
     for i in (0, n - 1):
