@@ -7,10 +7,11 @@ a gravity-like rim astigmatism, as a training set would hold. Run from the repos
 
     python benchmarks/bench_dataset.py [--samples 12] [--workers 1,2] [--json out/bench.json]
 
-It prints the stages of one sample (drawing, the deformation map, displacing the mesh and the
-trace, the Zarr writes) and, per cluster, the wall time, the steady throughput (samples
-finished per second between the first and the last completion, so start-up is left out) and
-the speed-up over one worker. The load average is printed too: on a shared machine the
+It prints the stages of one sample in this process (drawing, the deformation map, displacing
+the mesh, the trace; wall time, and the CPU time of the whole sample) and, per cluster, the
+wall time, the steady throughput (samples finished per second between the first and the last
+completion, so start-up is left out), the speed-up over one worker, and the median wall and
+CPU time of a sample's task as the store records them. The load average is printed too: on a shared machine the
 figures are only as good as the cores that were free.
 """
 
@@ -81,7 +82,9 @@ def one_sample(spec, threads: int, repeats: int = 3) -> dict[str, float]:
     ideal = _ideal_reflector(dish.diameter, dish.focal_length, dish.resolution, scene.panels)
     mesh_s = time.perf_counter() - start
     stages: dict[str, list[float]] = {"draw": [], "map": [], "deform": [], "trace": []}
+    cpu: list[float] = []
     for i in range(repeats + 1):
+        c0 = time.process_time()
         t0 = time.perf_counter()
         draw = draw_sample(spec, i)
         t1 = time.perf_counter()
@@ -91,12 +94,15 @@ def one_sample(spec, threads: int, repeats: int = 3) -> dict[str, float]:
         t3 = time.perf_counter()
         go.trace(deformed, scene.sphere, scene.source.direction, scene.subdivisions)
         t4 = time.perf_counter()
+        if i:
+            cpu.append(time.process_time() - c0)
         if i:  # the first round warms caches
             for key, value in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t4 - t3), strict=True):
                 stages[key].append(value)
     out = {key: float(np.median(v)) for key, v in stages.items()}
     out["ideal_mesh_once"] = mesh_s
     out["total"] = out["draw"] + out["map"] + out["deform"] + out["trace"]
+    out["total_cpu"] = float(np.median(cpu))  # CPU seconds of this process (all its threads)
     out["rays"] = float(len(ideal.vertices))
     return out
 
@@ -112,11 +118,14 @@ def cluster_run(spec_path: Path, workers: int, threads: int, folder: Path) -> di
     ds = open_dataset(store)
     finished = np.sort(ds["finished"].values)
     seconds = ds["seconds"].values
+    cpu = ds["cpu_seconds"].values
     span = finished[-1] - finished[0]
     steady = (len(finished) - workers) / span if span > 0 else float("nan")
     return {"workers": workers, "threads": threads, "samples": report.done, "failed": report.failed,
             "wall_s": wall, "steady_samples_per_s": steady,
-            "task_seconds_median": float(np.median(seconds))}
+            "task_seconds_median": float(np.median(seconds)),
+            "task_cpu_seconds_median": float(np.median(cpu)),
+            "load_average": os.getloadavg()[0]}
 
 
 def main() -> None:
@@ -147,11 +156,14 @@ def main() -> None:
             results["clusters"].append(row)
             print(f"{workers} worker(s) x 1 thread: {row['samples']} samples in {row['wall_s']:.1f} s "
                   f"wall, steady {row['steady_samples_per_s']:.3f} samples/s "
-                  f"(x{row['speedup']:.2f}), median task {row['task_seconds_median']:.2f} s")
+                  f"(x{row['speedup']:.2f}), median task {row['task_seconds_median']:.2f} s wall, "
+                  f"{row['task_cpu_seconds_median']:.2f} s CPU; load {row['load_average']:.1f}")
         row = cluster_run(spec_path, 1, 2, folder)
         results["clusters"].append(row)
         print(f"1 worker x 2 threads: {row['samples']} samples in {row['wall_s']:.1f} s wall, steady "
-              f"{row['steady_samples_per_s']:.3f} samples/s, median task {row['task_seconds_median']:.2f} s")
+              f"{row['steady_samples_per_s']:.3f} samples/s, "
+              f"median task {row['task_seconds_median']:.2f} s wall, "
+              f"{row['task_cpu_seconds_median']:.2f} s CPU; load {row['load_average']:.1f}")
         results["load_average_end"] = os.getloadavg()
         if args.json:
             args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -11,7 +11,8 @@ Layout (Zarr format 3, every array with ``dimension_names`` and a ``units`` attr
 - ``deformation(sample, y, x)``: delta (m), NaN outside the aperture r < D/2;
 - ``seed``, ``split`` (0 train, 1 validation), ``frequency_hz``, ``rms``, ``peak_to_peak``
   and every model's parameters per sample; ``status`` (0 pending, 1 done, 2 failed),
-  ``error`` (the reason of a failure), ``seconds`` and ``finished`` (UNIX time) per sample.
+  ``error`` (the reason of a failure), ``seconds``, ``cpu_seconds`` and ``finished`` (UNIX
+  time) per sample.
 
 Every array a worker writes is chunked one sample per chunk, so workers never share a chunk.
 A sample's ``status`` is written after all its data: it is the completion marker ``resume``
@@ -162,10 +163,11 @@ class Writer:
         self["rms"][index] = float(np.sqrt(np.mean(values**2))) if values.size else math.nan
         self["peak_to_peak"][index] = float(np.ptp(values)) if values.size else math.nan
 
-    def done(self, index: int, intensity: np.ndarray, seconds: float) -> None:
+    def done(self, index: int, intensity: np.ndarray, seconds: float, cpu_seconds: float = math.nan) -> None:
         """The sample's intensity, then its completion marker (last)."""
         self["intensity"][index] = intensity
         self["seconds"][index] = seconds
+        self["cpu_seconds"][index] = cpu_seconds
         self["error"][index] = ""
         self["finished"][index] = time.time()
         self["status"][index] = DONE

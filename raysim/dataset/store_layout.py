@@ -82,7 +82,9 @@ def layout(spec: DatasetSpec) -> dict[str, ArraySpec]:
                                     "peak-to-peak of delta over the aperture grid"),
         "status": _per_sample(n, (), (), "int8", 0, "1", "sample status (completion marker)", **flags),
         "error": _per_sample(n, (), (), "str", "", "1", "why the sample failed"),
-        "seconds": _per_sample(n, (), (), "float64", np.nan, "s", "compute time of the sample"),
+        "seconds": _per_sample(n, (), (), "float64", np.nan, "s", "wall-clock time of the sample's task"),
+        "cpu_seconds": _per_sample(n, (), (), "float64", np.nan, "s",
+                                   "CPU time of the sample's task (all threads of its worker process)"),
         "finished": _per_sample(n, (), (), "float64", np.nan, "s",
                                 "when the sample was finished (UNIX time)"),
     }

@@ -147,13 +147,14 @@ def run_sample(store: str, fingerprint: str, index: int, device: str = "cpu") ->
     ctx = context(store, fingerprint)
     spec, writer = ctx.spec, ctx.writer
     start = time.perf_counter()
+    cpu_start = time.process_time()
     try:
         draw = draw_sample(spec, index)
         writer.params(index, draw.params, spec.frequencies[draw.frequency_index],
                       spec.grid.evaluate(draw.deformation))
         values = simulate_sample(spec, draw.deformation, draw.frequency_index, device)
         seconds = time.perf_counter() - start
-        writer.done(index, values, seconds)
+        writer.done(index, values, seconds, time.process_time() - cpu_start)
         return {"index": index, "ok": True, "error": "", "seconds": seconds}
     except Exception as exc:
         reason = _reason(exc)

@@ -35,7 +35,7 @@ pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "scenes" / "dataset_demo.toml"
 RUN_TIMEOUT = 240  # s, for any command below
-PROVENANCE = {"seconds", "finished"}  # per-run bookkeeping: when and how long, not data
+PROVENANCE = {"seconds", "cpu_seconds", "finished"}  # per-run bookkeeping: when and how long, not data
 
 
 @pytest.fixture(scope="module")
@@ -277,11 +277,15 @@ def _kill_group(proc: subprocess.Popen) -> None:
         os.killpg(proc.pid, signal.SIGKILL)
 
 
-def _children(pid: int) -> list[int]:
+def _worker_processes(nanny_pid: int) -> list[int]:
+    """The worker processes a `dask worker` (nanny) process spawned (not its resource tracker)."""
     out: list[int] = []
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        text = (task / "children").read_text().split()
-        out += [int(c) for c in text]
+    for task in Path(f"/proc/{nanny_pid}/task").iterdir():
+        for child in (task / "children").read_text().split():
+            with contextlib.suppress(OSError):
+                cmdline = Path(f"/proc/{child}/cmdline").read_bytes()
+                if b"spawn_main" in cmdline:
+                    out.append(int(child))
     return out
 
 
@@ -321,7 +325,7 @@ def test_separate_scheduler_and_worker_with_a_worker_killed(reference, spec, tmp
         try:
             _wait_until(lambda: bool(_markers(store)) or run.poll() is not None, RUN_TIMEOUT,
                         "a first sample")
-            workers = _children(nanny.pid)
+            workers = _worker_processes(nanny.pid)
             killed = bool(workers) and run.poll() is None and len(_markers(store)) < spec.samples
             for pid in workers:  # the worker process under the nanny: the nanny restarts it
                 with contextlib.suppress(ProcessLookupError):
