@@ -11,8 +11,8 @@ It prints the stages of one sample in this process (drawing, the deformation map
 the mesh, the trace; wall time, and the CPU time of the whole sample) and, per cluster, the
 wall time, the steady throughput (samples finished per second between the first and the last
 completion, so start-up is left out), the speed-up over one worker, and the median wall and
-CPU time of a sample's task as the store records them. The load average is printed too: on a shared machine the
-figures are only as good as the cores that were free.
+CPU time of a sample's task as the store records them. The load average is printed too: on
+a shared machine the figures are only as good as the cores that were free.
 """
 
 from __future__ import annotations
