@@ -61,6 +61,8 @@ class RunReport:
         if self.failed:
             index, reason = self.failures[0] if self.failures else (-1, "see the store's 'error'")
             line += f"; {self.failed} failed (sample {index}: {reason})"
+        if self.ideal_failures:
+            line += f"; the ideal intensity failed ({self.ideal_failures[0][1]})"
         return line
 
 
