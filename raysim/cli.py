@@ -7,6 +7,7 @@ name ends in ``-deg``. Errors a user can cause end with one line on stderr and e
 from __future__ import annotations
 
 import sys
+import tempfile
 from pathlib import Path
 
 import typer
@@ -52,11 +53,20 @@ def fail(message: str) -> typer.Exit:
 
 
 def output_path(path: Path) -> Path:
-    """Check an output path's folder can be written before hours of work go into it."""
-    parent = path.expanduser().resolve().parent
-    parent.mkdir(parents=True, exist_ok=True)
+    """Check an output file can be written before any work goes into it; return it."""
+    path = path.expanduser()
     if path.is_dir():
         raise RaysimError(f"{path}: is a folder, give a file name")
+    parent = path.resolve().parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RaysimError(f"{path}: cannot create its folder ({exc.strerror})") from exc
+    try:  # a real probe: permissions alone do not tell (root, read-only mounts, /proc)
+        with tempfile.NamedTemporaryFile(dir=parent, prefix=".raysim-probe-"):
+            pass
+    except OSError as exc:
+        raise RaysimError(f"{path}: cannot write in {parent} ({exc.strerror})") from exc
     return path
 
 
@@ -94,14 +104,108 @@ def simulate(
 
         ds = run(loaded, method=method, device=device, progress=report)
     save(ds, output)
-    out.print(f"{output}: {summary(ds)}", highlight=False)
+    out.print(f"{output}: {summary(ds)}", highlight=False, soft_wrap=True)
 
 
 
 # --- invert, paper (solver) ------------------------------------------------------------
 
 
+@app.command("invert")
+def invert_command(
+    field: Path = typer.Argument(..., help="FieldMap NetCDF (simulated or measured scan)."),
+    output: Path = typer.Option(..., "-o", "--output", help="SurfaceMap NetCDF to write."),
+    solver: str = typer.Option("multigrid", help="direct, multigrid, gauss-seidel, sor or fft."),
+    grid: int = typer.Option(256, help="Aperture grid points across the diameter (>= 16)."),
+    rim: Path | None = typer.Option(None, help="Rim targets, CSV with header x,y,dz (m)."),
+    remove: str = typer.Option("", help="Terms to remove, e.g. piston,tilt,focus."),
+    refine: int = typer.Option(3, help="GO refinement iterations (0: the paper's linear answer)."),
+    panels_csv: Path | None = typer.Option(None, help="Write the per-panel adjustment table."),
+    gain: str = typer.Option("power", help="power (estimate the scan's scale) or none."),
+    iterations: int | None = typer.Option(None, help="Fixed sweeps for gauss-seidel / sor."),
+    device: str = typer.Option("cpu", help="Warp device of the GO refinement: cpu or cuda."),
+) -> None:
+    """Recover the surface deformation from an intensity scan (FieldMap -> SurfaceMap)."""
+    from solver.run import run_invert, summary
+
+    result = run_invert(field, output_path(output), solver=solver, N=grid, rim_csv=rim,
+                        remove=remove, refine=refine, gain=gain, iterations=iterations,
+                        device=device, panels_csv=panels_csv)
+    for line in summary(result):
+        out.print(line, highlight=False, soft_wrap=True)
+    out.print(f"wrote {output}", highlight=False, soft_wrap=True)
+
+
+@app.command("paper")
+def paper_command(
+    scale: float = typer.Option(1.0, help="Scale of the paper's Eq. 8 deformation (1: 1.2 mm)."),
+    grid: int = typer.Option(256, help="Aperture grid points across the diameter."),
+    refine: int = typer.Option(3, help="GO refinement iterations of raysim's default row."),
+    device: str = typer.Option("cpu", help="Warp device: cpu or cuda."),
+) -> None:
+    """The paper's GO case: its Table 2 figures beside raysim's on the project's own GO data."""
+    from solver.paper import compare
+
+    rows = compare(scale=scale, N=grid, refine=refine, device=device)
+    out.print(f"paper GO case, Eq. 8 x {scale:g}, N = {grid}, 90 x 360 cells", highlight=False)
+    out.print(f"{'method':44s} {'paper RRMS':>10s} {'paper s':>9s} {'RRMS':>9s} {'RMS um':>8s} "
+              f"{'time s':>7s}", highlight=False, soft_wrap=True)
+    for row in rows:
+        paper = f"{row.paper_rrms * 100:.2f} %" if row.paper_rrms is not None else "-"
+        out.print(f"{row.method:44s} {paper:>10s} {row.paper_seconds:>9s} "
+                  f"{row.rrms * 100:7.3f} % {row.rms_m * 1e6:8.2f} {row.seconds:7.2f}",
+                  highlight=False, soft_wrap=True)
+
+
+
 # --- render, report (raysim.render) ----------------------------------------------------
+@app.command()
+def render(
+    file: Path = typer.Argument(..., help="FieldMap or SurfaceMap NetCDF file."),
+    output: Path = typer.Option(..., "-o", "--output", help="PNG file to write."),
+    kind: str | None = typer.Option(
+        None, "--kind", help="3d, map or cut (default: 3d for a FieldMap, map for a SurfaceMap)."),
+    size: str | None = typer.Option(None, "--size", help="Width x height in pixels, e.g. 1600x1200."),
+    quantity: str = typer.Option("fa", "--quantity",
+                                 help="FieldMap colour: fa (I_ideal/I_def - 1), intensity, or normalized "
+                                      "(intensity over the ideal GO law)."),
+) -> None:
+    """Draw a FieldMap (hemisphere over the dish) or a SurfaceMap (deformation in um) as PNG.
+
+    Works with no display (EGL off-screen rendering).
+    """
+    from raysim.render import render as run
+
+    written = run(file, output_path(output), kind=kind, size=size, quantity=quantity)
+    out.print(f"{written}", highlight=False)
+
+
+@app.command()
+def report(
+    source: Path = typer.Argument(..., help="Scene TOML file, or a FieldMap (.nc) simulated or measured."),
+    output: Path = typer.Option(..., "-o", "--output", help="Folder for report.html, its figures and data."),
+    method: str = typer.Option("go", "--method", help="Simulation method: go, po or po+ptd."),
+    device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
+    solver: str | None = typer.Option(None, "--solver", help="Poisson solver (default: the solver's)."),
+    grid: int | None = typer.Option(None, "--grid",
+                                    help="Aperture grid points across D (default: the solver's)."),
+    refine: int | None = typer.Option(None, "--refine",
+                                      help="GO refinement iterations (0: the paper's linear answer)."),
+    invert: bool = typer.Option(True, "--invert/--no-invert",
+                                help="--no-invert leaves the inversion out: the field's figures only."),
+) -> None:
+    """Simulate, invert and draw a scene: an HTML report mirroring the paper's Figs. 8-10.
+
+    The page embeds its figures; the PNGs, field.nc and surface.nc are written beside it.
+    Given a FieldMap instead of a scene, the simulation is skipped.
+    """
+    from raysim.render.report import report as run
+
+    page = run(source, output, method=method, device=device, solver=solver, grid=grid, refine=refine,
+               invert=invert,
+               progress=lambda line: console.print(f"report: {line}", highlight=False))
+    out.print(f"{page}", highlight=False)
+
 
 
 # --- scan, rig (hardware) --------------------------------------------------------------

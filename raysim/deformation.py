@@ -167,7 +167,7 @@ class Zernike(Deformation):
         gx = np.zeros_like(rho)
         gy = np.zeros_like(rho)
         for n, m, coef in self.terms:
-            norm = math.sqrt(2.0 * (n + 1) / (1.0 if m == 0 else 2.0))
+            norm = math.sqrt(2.0 * (n + 1) / (2.0 if m == 0 else 1.0))  # Noll: sqrt(2(n+1)/(1+delta_m0))
             R, dR, R_over = zernike_radial(n, m, rho)
             am = abs(m)
             ang = np.cos(am * phi) if m >= 0 else np.sin(am * phi)

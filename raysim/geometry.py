@@ -176,7 +176,8 @@ def panel_footprint(layout: PanelLayout, panel: int, h: float) -> tuple[NDArray,
             phi_a, phi_b = layout.lateral_limits(panel, np.array([max(r, 1e-12)]))
             width = max(float(phi_b[0] - phi_a[0]), 0.0)
             n = max(1, int(np.ceil(r * width / h)))
-            t = np.linspace(0.0, 1.0, n + 1) if width > 0 else np.array([0.5])
+            # the tip of a wedge, where the two gap edges meet, is a single point
+            t = np.linspace(0.0, 1.0, n + 1) if r * width > 1e-9 else np.array([0.5])
             phi = phi_a[0] + t * width
         rows.append(np.column_stack([r * np.cos(phi), r * np.sin(phi)]))
         params.append(t)
@@ -187,7 +188,11 @@ def panel_footprint(layout: PanelLayout, panel: int, h: float) -> tuple[NDArray,
         for k in range(len(rows) - 1)
     ]
     faces_arr = np.concatenate(faces) if faces else np.zeros((0, 3), dtype=np.int64)
-    return xy, _counter_clockwise(xy, faces_arr)
+    faces_arr = _counter_clockwise(xy, faces_arr)
+    used = np.zeros(len(xy), dtype=bool)
+    used[faces_arr.ravel()] = True
+    renumber = np.cumsum(used) - 1
+    return xy[used], renumber[faces_arr]
 
 
 def _strip(a0: int, ta: NDArray, b0: int, tb: NDArray, closed: bool) -> NDArray[np.int64]:
@@ -258,17 +263,29 @@ class ParaboloidFit:
     rms: float
 
 
-def fit_paraboloid(points: NDArray) -> ParaboloidFit:
-    """Least-squares paraboloid with its axis along z through ``points`` (n, 3), metres."""
+def fit_paraboloid(points: NDArray, F: float | None = None) -> ParaboloidFit:
+    """Least-squares paraboloid with its axis along z through ``points`` (n, 3), metres.
+
+    With ``F`` given only the vertex (x0, y0, z0) is fitted: to first order that removes the
+    piston and tilts of the surface and keeps its focus term.
+    """
     x, y, z = points[:, 0], points[:, 1], points[:, 2]
-    A = np.column_stack([np.ones_like(x), x, y, x * x + y * y])
-    coef, *_ = np.linalg.lstsq(A, z, rcond=None)
-    a, b, c, k = coef
+    if F is not None:
+        k = 1.0 / (4.0 * F)
+        A = np.column_stack([np.ones_like(x), x, y])
+        coef, *_ = np.linalg.lstsq(A, z - k * (x * x + y * y), rcond=None)
+        a, b, c = coef
+        model = A @ coef + k * (x * x + y * y)
+    else:
+        A = np.column_stack([np.ones_like(x), x, y, x * x + y * y])
+        coef, *_ = np.linalg.lstsq(A, z, rcond=None)
+        a, b, c, k = coef
+        model = A @ coef
     if not k > 0:
         raise MeshError("the mesh is not a dish opening towards +z (no paraboloid fits)")
     x0, y0 = -b / (2 * k), -c / (2 * k)
     z0 = a - k * (x0 * x0 + y0 * y0)
-    rms = float(np.sqrt(np.mean((A @ coef - z) ** 2)))
+    rms = float(np.sqrt(np.mean((model - z) ** 2)))
     return ParaboloidFit(1.0 / (4.0 * k), float(x0), float(y0), float(z0), rms)
 
 
@@ -282,8 +299,8 @@ def load_reflector(path: str | Path, unit: float = 1.0, F: float | None = None,
     are the mesh's connected pieces. ``unit`` scales file coordinates to metres.
     """
     mesh = _read_mesh(path, unit)
-    fit = fit_paraboloid(mesh.vertices)
-    F_used = float(F) if F is not None else fit.F
+    fit = fit_paraboloid(np.asarray(mesh.vertices, dtype=np.float64), F)
+    F_used = fit.F
     shift = np.array([fit.x0, fit.y0, fit.z0])
     vertices = np.asarray(mesh.vertices, dtype=np.float64) - shift
     faces = np.asarray(mesh.faces, dtype=np.int64)

@@ -1,1 +1,26 @@
-"""solver: intensity scan (FieldMap) -> surface map (SurfaceMap)."""
+"""solver: intensity scan (FieldMap) -> surface map (SurfaceMap) of the main reflector.
+
+Frame and units as DESIGN.md: sphere angles theta, phi in rad; aperture x, y and delta in m.
+Modules, in the order the data flow through them:
+
+- ``errors``: the solver's user errors (SolverError, RimTargetsError, SurfaceMapError), all
+  :class:`raysim.errors.RaysimError`, so the CLI prints one line and exits 2.
+- ``aperture``: the N x N cell-centred aperture grid and its disk mask r < D/2.
+- ``equation``: FA = I_ideal / I_def - 1, G = -2 F d / R, the power gain, the noise bias.
+- ``resample``: sphere (theta, phi) -> aperture (x, y) through r = 2F tan(theta/2), with
+  inpainting of missing samples and the continuation to the rim.
+- ``poisson``: the Shortley-Weller Laplacian on the disk and the solvers direct, multigrid,
+  gauss-seidel, sor (on that matrix) and fft (the paper's square comparison).
+- ``boundary``: rim values: zero (the paper) or a harmonic fit to rim targets (CSV x,y,dz).
+- ``nonlinear``: GO model-based refinement (defect correction with Anderson acceleration).
+- ``fit``: piston / tilt / focus removal and the per-panel adjustment table.
+- ``metrics``: the paper's RMS and RRMS over the aperture's grid points.
+- ``surface``: the SurfaceMap NetCDF contract.
+- ``invert``: the pipeline, :func:`invert` (FieldMap dataset -> SurfaceMap dataset).
+- ``run``: file in, file out (what ``raysim invert`` calls); ``paper``: the paper's GO case.
+"""
+
+from solver.invert import invert
+from solver.run import run_invert
+
+__all__ = ["invert", "run_invert"]

@@ -126,11 +126,18 @@ def edge_disk_area(a: wp.vec2d, b: wp.vec2d, rho: wp.float64) -> wp.float64:
     t2 = (-B + s) / A
     if t2 <= F64_ZERO or t1 >= F64_ONE:
         return r2 * signed_angle(a, b)
-    t1 = wp.max(t1, F64_ZERO)
-    t2 = wp.min(t2, F64_ONE)
-    p1 = a + t1 * d
-    p2 = a + t2 * d
-    return r2 * signed_angle(a, p1) + F64_HALF * cross2(p1, p2) + r2 * signed_angle(p2, b)
+    # a..p1 and p2..b lie outside the disk (sectors), p1..p2 inside (triangle); an end inside
+    # the disk has no sector, and its angle is never taken: near the origin it is meaningless
+    area = F64_ZERO
+    p1 = a
+    if t1 > F64_ZERO:
+        p1 = a + t1 * d
+        area += r2 * signed_angle(a, p1)
+    p2 = b
+    if t2 < F64_ONE:
+        p2 = a + t2 * d
+        area += r2 * signed_angle(p2, b)
+    return area + F64_HALF * cross2(p1, p2)
 
 
 @wp.func
@@ -239,7 +246,7 @@ def deposit_tubes(
     i_hi = wp.min(i_hi, n_theta - 1)
 
     # azimuthal extent: all wedges when the triangle covers the pole
-    j_lo = 0
+    j_lo = int(0)
     j_hi = n_phi - 1
     if not inside:
         pa = wp.atan2(a[1], a[0])
@@ -249,6 +256,15 @@ def deposit_tubes(
         p_hi = wp.max(pa, wp.max(pb, pc))
         j_lo = int(wp.floor((p_lo - phi_min) / dphi))
         j_hi = int(wp.floor((p_hi - phi_min) / dphi))
+        # the radial and angular ranges are exact bounds: inside one cell, no clipping needed
+        th_in = th_lo >= theta_min and th_hi <= theta_min + wp.float64(n_theta) * dtheta
+        if i_lo == i_hi and j_lo == j_hi and th_in:
+            jj = j_lo
+            if full_circle == 1:
+                jj = ((j_lo % n_phi) + n_phi) % n_phi
+            if jj >= 0 and jj < n_phi:
+                wp.atomic_add(power, i_lo, jj, P)
+            return
 
     for j in range(j_lo, j_hi + 1):
         jj = j
@@ -265,7 +281,7 @@ def deposit_tubes(
         py[1] = b[1]
         px[2] = c[0]
         py[2] = c[1]
-        n = 3
+        n = int(3)
         if n_phi > 1:
             alpha = phi_min + wp.float64(j) * dphi
             beta = alpha + dphi
@@ -277,7 +293,7 @@ def deposit_tubes(
                     ny = -wp.cos(beta)
                 qx = vec8d()
                 qy = vec8d()
-                m = int(0)  # noqa: UP018, RUF046 - Warp needs a dynamic int here (a literal 0 cannot be mutated in the loop)
+                m = int(0)
                 for k in range(n):
                     k1 = (k + 1) % n
                     s0 = nx * px[k] + ny * py[k]

@@ -1,0 +1,154 @@
+"""Sphere (theta, phi) samples -> the aperture grid (x, y) through the ideal GO mapping.
+
+Frame (DESIGN.md): theta from -z at the focus, phi = atan2(y, x), both in rad, on a regular
+cell-centre grid (:class:`raysim.sphere.SphereGrid`); the aperture point (x, y) (m) sees the
+sphere at theta = 2 atan(r / 2F), phi = atan2(y, x) (paper Eq. 34).
+
+Steps, each stated in the result so a reader knows what was done to the data:
+
+1. usable rows: sphere cells whose theta range lies wholly inside the rim image
+   theta_rim = 2 atan(D / 4F); the cell the rim cuts holds part-lit power and is not used;
+2. missing samples (NaN) inside the usable rows are filled by smooth inpainting on the
+   (theta, phi) grid (least-squares Laplacian over the holes, periodic in phi);
+3. rows between the last usable one and the rim are continued by the cubic in theta through
+   the last four usable rows;
+4. a cubic spline in (theta, phi), periodic in phi and continued across the pole (theta -> -theta
+   is phi -> phi + pi), gives the values at the aperture points inside the disk.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from numpy.typing import NDArray
+from scipy.ndimage import map_coordinates
+
+from raysim.errors import FieldMapError
+from raysim.sphere import SphereGrid, theta_rim
+from solver.aperture import ApertureGrid
+
+PAD = 8             # cells of padding around the spline's array
+EXTRA_ROWS = 6      # rows extrapolated past the last usable one
+MAX_GAP_CELLS = 3   # how far (in cells) the last usable row may stop short of the rim
+
+
+@dataclass(frozen=True)
+class Coverage:
+    """What the sphere data cover: usable rows, filled holes, extrapolated band (rad)."""
+
+    n_rows: int
+    theta_last: float
+    n_filled: int
+    theta_rim: float
+
+
+def usable_rows(sphere: SphereGrid, F: float, D: float) -> int:
+    """Number of leading theta rows whose cells lie wholly inside the rim image."""
+    edges_hi = sphere.theta_edges[1:]
+    n = int(np.count_nonzero(edges_hi <= theta_rim(D, F) + 1e-12))
+    if n < 4:
+        raise FieldMapError("the scan has fewer than four theta rows inside the rim image")
+    if theta_rim(D, F) - sphere.theta[n - 1] > MAX_GAP_CELLS * sphere.dtheta:
+        raise FieldMapError(
+            f"the scan stops at theta = {np.degrees(sphere.theta_max):.2f} deg, short of the "
+            f"rim image at {np.degrees(theta_rim(D, F)):.2f} deg")
+    return n
+
+
+def check_full_circle(sphere: SphereGrid) -> None:
+    """The aperture needs every azimuth: raise unless the phi cells close around the axis."""
+    if not sphere.full_circle:
+        raise FieldMapError("the scan must cover the full circle in phi (0..360 deg)")
+
+
+def fill_missing(values: NDArray[np.float64], n_rows: int) -> tuple[NDArray[np.float64], int]:
+    """Fill NaN samples of the first ``n_rows`` rows so the field's Laplacian is least there.
+
+    The hole values minimise the sum of squares of the 5-point (theta, phi) Laplacian over
+    every stencil that touches a hole (a discrete biharmonic fill, exact for discrete-harmonic
+    fields; the last row uses a one-sided theta difference). Periodic in phi; across the pole
+    the theta neighbour of row 0 at phi is row 0 at phi + pi. Returns the filled copy and the
+    number of samples filled.
+    """
+    out = np.array(values, dtype=np.float64, copy=True)
+    block = out[:n_rows]
+    holes = ~np.isfinite(block)
+    n_holes = int(np.count_nonzero(holes))
+    if n_holes == 0:
+        return out, 0
+    if n_holes > 0.5 * holes.size:
+        raise FieldMapError("more than half of the samples inside the rim image are missing")
+    n_t, n_p = block.shape
+    cell = np.arange(n_t * n_p).reshape(n_t, n_p)
+    up = np.roll(cell[:1], n_p // 2, axis=1) if n_p % 2 == 0 else None
+    centre = cell[: n_t - 1] if up is not None else cell[1: n_t - 1]
+    t0 = 0 if up is not None else 1
+    rows_t = np.arange(t0, n_t - 1)
+    north = np.concatenate([up, cell[: n_t - 2]]) if up is not None else cell[: n_t - 2]
+    stencil = [centre, north, cell[rows_t + 1], np.roll(centre, 1, axis=1),
+               np.roll(centre, -1, axis=1)]
+    last = cell[n_t - 1:]                      # the last row: one-sided theta difference
+    stencil = [np.concatenate([a, b]) for a, b in zip(
+        stencil, [last, cell[n_t - 3: n_t - 2], cell[n_t - 2: n_t - 1],
+                  np.roll(last, 1, axis=1), np.roll(last, -1, axis=1)], strict=True)]
+    weights = [np.concatenate([np.full(centre.size, w), np.full(last.size, v)])
+               for w, v in zip((-4.0, 1.0, 1.0, 1.0, 1.0), (-1.0, 1.0, -2.0, 1.0, 1.0),
+                               strict=True)]
+    eq = np.arange(stencil[0].size)
+    lap = sp.csr_matrix((np.concatenate(weights),
+                         (np.tile(eq, 5), np.concatenate([c.ravel() for c in stencil]))),
+                        shape=(eq.size, n_t * n_p))
+    flat_holes = holes.ravel()
+    touching = np.asarray(lap[:, flat_holes].getnnz(axis=1) > 0)
+    lap = lap[touching]
+    unknown = lap[:, flat_holes].tocsc()
+    known = lap[:, ~flat_holes] @ block.ravel()[~flat_holes]
+    normal = (unknown.T @ unknown).tocsc()
+    block[holes] = spla.spsolve(normal, -(unknown.T @ known))
+    return out, n_holes
+
+
+def extend_rows(values: NDArray[np.float64], n_rows: int) -> NDArray[np.float64]:
+    """Rows 0..n_rows-1 kept; EXTRA_ROWS more continued by the cubic through the last four."""
+    k = np.arange(-3.0, 1.0)                                  # the last four rows, at 0
+    coef = np.linalg.solve(np.vander(k, 4), values[n_rows - 4:n_rows])
+    extra = np.vander(np.arange(1.0, EXTRA_ROWS + 1), 4) @ coef
+    return np.concatenate([values[:n_rows], extra], axis=0)
+
+
+def sphere_to_aperture(values: NDArray[np.float64], sphere: SphereGrid, aperture: ApertureGrid,
+                       F: float, D: float) -> tuple[NDArray[np.float64], Coverage]:
+    """Resample sphere samples (n_theta, n_phi) onto the aperture grid (N, N), NaN outside.
+
+    ``values`` is any smooth quantity on the sphere (here FA); F and D in m.
+    """
+    check_full_circle(sphere)
+    n_rows = usable_rows(sphere, F, D)
+    filled, n_filled = fill_missing(values, n_rows)
+    table = extend_rows(filled, n_rows)
+    padded = _pad(table, sphere)
+    mask = aperture.mask
+    theta = 2.0 * np.arctan(aperture.r[mask] / (2.0 * F))
+    phi = np.mod(aperture.phi[mask] - sphere.phi_min, 2.0 * np.pi) + sphere.phi_min
+    it = (theta - sphere.theta[0]) / sphere.dtheta + PAD
+    ip = (phi - sphere.phi[0]) / sphere.dphi + PAD
+    out = np.full((aperture.N, aperture.N), np.nan)
+    out[mask] = map_coordinates(padded, [it, ip], order=3, mode="nearest", prefilter=True)
+    coverage = Coverage(n_rows, float(sphere.theta[n_rows - 1]), n_filled, theta_rim(D, F))
+    return out, coverage
+
+
+def _pad(table: NDArray[np.float64], sphere: SphereGrid) -> NDArray[np.float64]:
+    """Pad PAD cells: periodic in phi; across the pole by phi + pi when theta starts at 0."""
+    wrapped = np.concatenate([table[:, -PAD:], table, table[:, :PAD]], axis=1)
+    n_p = sphere.n_phi
+    if sphere.theta_min <= 1e-12 and n_p % 2 == 0:
+        shifted = np.roll(table[:PAD], n_p // 2, axis=1)[::-1]
+        before = np.concatenate([shifted[:, -PAD:], shifted, shifted[:, :PAD]], axis=1)
+    else:
+        before = np.repeat(wrapped[:1], PAD, axis=0)
+    after = np.repeat(wrapped[-1:], PAD, axis=0)
+    return np.concatenate([before, wrapped, after], axis=0)

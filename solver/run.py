@@ -1,0 +1,86 @@
+"""File in, file out: what ``raysim invert`` does, as one function the command line wraps.
+
+Reads a FieldMap (NetCDF) and optional rim targets (CSV x,y,dz in m), runs
+:func:`solver.invert.invert`, writes the SurfaceMap atomically, optionally writes the per-panel
+adjustment table, and returns the SurfaceMap with a short human summary.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import xarray as xr
+
+from raysim.errors import RaysimError
+from raysim.field import load as load_fieldmap
+from solver import boundary, surface
+from solver.fit import panel_adjustments, write_panel_csv
+from solver.invert import DEFAULT_N, DEFAULT_REFINE, DEFAULT_SOLVER, invert
+
+
+def panel_layout_of(field: xr.Dataset):
+    """The panel layout of the scene a FieldMap records, or None (a measured scan has none)."""
+    text = field.attrs.get("scene")
+    if not text:
+        return None
+    try:
+        from raysim.scene import parse_scene
+
+        return parse_scene(str(text), source="FieldMap scene").panels
+    except Exception:  # an unparsable recorded scene just means no layout
+        return None
+
+
+def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str], *,
+               solver: str = DEFAULT_SOLVER, N: int = DEFAULT_N,
+               rim_csv: str | os.PathLike[str] | None = None, remove: str | None = None,
+               refine: int = DEFAULT_REFINE, gain: str = "power", iterations: int | None = None,
+               device: str | None = "cpu",
+               panels_csv: str | os.PathLike[str] | None = None) -> xr.Dataset:
+    """Invert the FieldMap at ``field_path`` and write the SurfaceMap to ``output``.
+
+    Options as :func:`solver.invert.invert`; ``rim_csv`` is a CSV ``x,y,dz`` (m) of rim
+    targets; ``panels_csv`` receives the per-panel adjustment table (needs a FieldMap whose
+    scene has panels). Nothing is written when an input is bad.
+    """
+    field = load_fieldmap(field_path)
+    rim = boundary.read_rim_csv(rim_csv) if rim_csv is not None else None
+    layout = None
+    if panels_csv is not None:
+        layout = panel_layout_of(field)
+        if layout is None:
+            raise RaysimError(f"{field_path}: records no panel layout (no scene with [panels]); "
+                              "--panels-csv needs one")
+    result = invert(field, solver=solver, N=N, rim=rim, remove=remove,
+                    refine_iterations=refine, gain=gain, iterations=iterations, device=device)
+    result.attrs["source_fieldmap"] = str(field_path)
+    surface.save(result, output)
+    if layout is not None:
+        grid = surface.grid_of(result)
+        write_panel_csv(panel_adjustments(grid, result["deformation"].values, layout),
+                        Path(panels_csv))
+    return result
+
+
+def summary(result: xr.Dataset) -> list[str]:
+    """Lines for the user: accuracy (when the truth is known), solver, boundary, time."""
+    a = result.attrs
+    lines = []
+    if "rms_m" in a:
+        lines.append(f"RMS error {a['rms_m'] * 1e6:.2f} um, RRMS {a['rrms'] * 100:.3f} % "
+                     f"(truth peak-to-peak {a['truth_peak_to_peak_m'] * 1e3:.4f} mm)")
+    else:
+        lines.append("truth unknown: no RMS / RRMS")
+    state = "converged" if a.get("solver_converged") else "NOT converged"
+    lines.append(f"solver {a['solver']} ({a.get('solver_iterations', 0)} iterations, "
+                 f"residual {a.get('solver_residual', 0.0):.1e}, {state}); "
+                 f"GO refinement {a.get('refine_iterations', 0)} iterations")
+    lines.append(f"boundary: {a['boundary']}")
+    if a["harmonic_part"] == "unobservable":
+        lines.append("harmonic part (tilt, astigmatism, any r^n cos n phi) is UNOBSERVABLE "
+                     "without rim targets: the map assumes zero on the rim")
+    lines.append(f"removed terms: {a['removed_terms']}; gain {a['gain_mode']} "
+                 f"(scale {a['gain']:.6f}); missing samples {a['samples_missing']}")
+    lines.append(f"time {a['time_s']:.2f} s")
+    return lines

@@ -1,0 +1,130 @@
+"""The whole inversion on exact GO data from the independent reference trace."""
+
+import numpy as np
+import pytest
+
+from raysim.errors import FieldMapError
+from solver import metrics
+from solver.aperture import ApertureGrid
+from solver.boundary import RimTargets
+from solver.errors import RimTargetsError, SolverError
+from solver.invert import invert
+from tests.reference_go import paper_delta, reference_forward
+from tests.solver.conftest import A, harmonic_delta
+
+
+def third(x, y):
+    return paper_delta(x, y, scale=1 / 3)
+
+
+def linear(field, truth, **options):
+    return invert(field, refine_iterations=0, truth=truth, **options)
+
+
+def test_the_linear_equation_errs_as_the_design_says(paper_field):
+    """Exact GO data, linear equation: about 9 % RRMS, almost all piston, tilt and focus."""
+    result = linear(paper_field, paper_delta)
+    assert 0.08 < result.attrs["rrms"] < 0.105
+    removed = linear(paper_field, paper_delta, remove="piston,tilt,focus")
+    assert removed.attrs["rrms"] < 0.01
+    assert removed.attrs["removed_terms"] == "piston,tilt,focus"
+    assert removed.attrs["removed_piston_m"] > 1e-4          # the error is mostly piston
+    assert abs(removed.attrs["removed_tilt_x_rad"]) < 1e-12  # Eq. 8 is round
+
+
+def test_the_linear_error_grows_with_the_square_of_the_deformation(paper_field,
+                                                                  paper_field_third):
+    big = linear(paper_field, paper_delta).attrs["rms_m"]
+    small = linear(paper_field_third, third).attrs["rms_m"]
+    assert 1.8 < np.log(big / small) / np.log(3.0) < 2.5
+
+
+@pytest.mark.slow
+def test_go_refinement_removes_the_linearisation_error(paper_field):
+    result = invert(paper_field, refine_iterations=2, truth=paper_delta,
+                    forward=reference_forward(order=2))
+    assert result.attrs["rrms"] < 0.002                      # the paper: 4.06 %
+    updates = [float(v) for v in result.attrs["refine_update_rms_m"].split(",")]
+    assert updates[0] > 1e-4 > 1e-5 > result.attrs["rms_m"]
+
+
+def test_any_constant_gain_gives_the_same_map(paper_field):
+    scaled = paper_field.copy(deep=True)
+    scaled["intensity"] = scaled["intensity"] * 1.7
+    a = linear(paper_field, None, remove="focus")
+    b = linear(scaled, None, remove="focus")
+    assert np.isclose(b.attrs["gain"], 1.7, rtol=1e-9)
+    np.testing.assert_allclose(b["deformation"].values, a["deformation"].values,
+                               rtol=0, atol=1e-12)
+    trusting = linear(scaled, None, remove="focus", gain="none")
+    grid = ApertureGrid(110.0, 256)
+    assert metrics.rms_error(grid, trusting["deformation"].values, a["deformation"].values) > 1e-5
+
+
+def test_missing_samples_are_filled_and_reported(paper_field):
+    holed = paper_field.copy(deep=True)
+    values = holed["intensity"].values
+    holes = np.random.default_rng(11).random(values.shape) < 0.02
+    values[holes] = np.nan
+    holed["intensity"] = (("theta", "phi"), values)
+    clean = linear(paper_field, paper_delta)
+    got = linear(holed, paper_delta)
+    assert got.attrs["samples_missing"] == int(holes[:79].sum())
+    assert abs(got.attrs["rrms"] - clean.attrs["rrms"]) < 0.003
+
+
+def test_rim_targets_fix_the_unobservable_harmonic_part(harmonic_field):
+    phi = np.linspace(0, 2 * np.pi, 64, endpoint=False) + 0.01
+    x, y = 0.995 * A * np.cos(phi), 0.995 * A * np.sin(phi)
+    rim = RimTargets(x, y, harmonic_delta(x, y), source="test targets")
+    without = linear(harmonic_field, harmonic_delta)
+    assert without.attrs["harmonic_part"] == "unobservable"
+    assert without.attrs["harmonic_observable"] == 0
+    assert without.attrs["rms_m"] > 50e-6                     # the astigmatism is missed
+    with_rim = linear(harmonic_field, harmonic_delta, rim=rim)
+    assert with_rim.attrs["harmonic_part"] == "fixed by rim targets"
+    assert "64 points from test targets" in with_rim.attrs["boundary"]
+    assert with_rim.attrs["rms_m"] < 15e-6
+
+
+def test_intensity_std_gives_a_deformation_std_that_matches_the_scatter(paper_field, sphere):
+    sigma = 0.01 * np.log(10) / 10                            # 0.01 dB, relative
+    grid = ApertureGrid(110.0, 96)
+    clean = invert(paper_field, N=96, refine_iterations=0, truth=None)["deformation"].values
+    scatter = []
+    result = None
+    for seed in range(3):
+        noisy = paper_field.copy(deep=True)
+        i = noisy["intensity"].values
+        noisy["intensity"] = (("theta", "phi"),
+                              i * (1 + sigma * np.random.default_rng(seed).standard_normal(i.shape)))
+        noisy["intensity_std"] = (("theta", "phi"), sigma * i, {"units": "1"})
+        result = invert(noisy, N=96, refine_iterations=0, truth=None, uncertainty_samples=24,
+                        seed=seed + 100)
+        scatter.append(result["deformation"].values - clean)
+    assert result.attrs["noise_source"] == "intensity_std"
+    assert np.isclose(result.attrs["noise_relative_std"], sigma, rtol=0.05)
+    predicted = metrics.rms(grid, result["deformation_std"].values)
+    observed = np.sqrt(np.mean([metrics.rms(grid, s) ** 2 for s in scatter]))
+    assert 0.6 < predicted / observed < 1.6
+
+
+def test_bad_requests_raise_specific_errors(paper_field):
+    with pytest.raises(SolverError, match="gain"):
+        invert(paper_field, gain="auto")
+    with pytest.raises(SolverError, match="refine"):
+        invert(paper_field, refine_iterations=-1)
+    with pytest.raises(SolverError, match="unknown solver"):
+        invert(paper_field, solver="cholesky")
+    with pytest.raises(SolverError, match="truth has shape"):
+        invert(paper_field, refine_iterations=0, truth=np.zeros((3, 3)))
+    phi = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    rim = RimTargets(A * np.cos(phi), A * np.sin(phi), np.zeros(8))
+    with pytest.raises(SolverError, match="fft"):
+        invert(paper_field, solver="fft", rim=rim)
+    with pytest.raises(RimTargetsError, match="at least 8"):
+        invert(paper_field, rim=RimTargets(A * np.cos(phi[:5]), A * np.sin(phi[:5]), phi[:5] * 0))
+    with pytest.raises(FieldMapError, match="intensity_ideal"):
+        invert(paper_field.drop_vars("intensity_ideal"))
+    with pytest.raises(SolverError, match="off axis"):
+        invert(paper_field.assign_attrs(incidence_theta=np.radians(2.0)))

@@ -1,0 +1,75 @@
+"""Sphere -> aperture resampling through the ideal mapping r = 2F tan(theta/2)."""
+
+import numpy as np
+import pytest
+
+from raysim.errors import FieldMapError
+from raysim.sphere import SphereGrid
+from solver.aperture import ApertureGrid
+from solver.resample import fill_missing, sphere_to_aperture, usable_rows
+
+F, D, R = 33.0, 110.0, 10.0
+
+
+def smooth(x, y):
+    """A smooth aperture field with no symmetry (so pole and seam errors would show)."""
+    return np.sin(0.09 * x + 0.05 * y + 0.4) + 0.3 * np.cos(0.13 * y - 0.02 * x * y / 10)
+
+
+def sampled(sphere):
+    t, p = np.meshgrid(sphere.theta, sphere.phi, indexing="ij")
+    r = 2 * F * np.tan(t / 2)
+    return smooth(r * np.cos(p), r * np.sin(p))
+
+
+def test_resampled_values_match_the_field_at_the_aperture_points():
+    sphere = SphereGrid(R, 90, 360)
+    grid = ApertureGrid(D, 128)
+    got, coverage = sphere_to_aperture(sampled(sphere), sphere, grid, F, D)
+    X, Y = grid.XY
+    expected = smooth(X, Y)
+    r_last = 2 * F * np.tan(coverage.theta_last / 2)
+    inner = grid.mask & (grid.r <= r_last)
+    assert np.max(np.abs(got - expected)[inner]) < 5e-5
+    band = grid.mask & (grid.r > r_last)
+    assert band.any() and np.max(np.abs(got - expected)[band]) < 2e-3
+    assert np.all(np.isnan(got[~grid.mask]))
+    assert coverage.n_rows == 79 and coverage.n_filled == 0
+
+
+def test_holes_are_filled_and_counted():
+    sphere = SphereGrid(R, 90, 360)
+    grid = ApertureGrid(D, 128)
+    values = sampled(sphere)
+    clean, _ = sphere_to_aperture(values, sphere, grid, F, D)
+    rng = np.random.default_rng(1)
+    holes = rng.random(values.shape) < 0.03
+    holes[0, :10] = True                     # next to the pole
+    holes[40, 355:] = True                   # across the phi seam
+    values[holes] = np.nan
+    got, coverage = sphere_to_aperture(values, sphere, grid, F, D)
+    assert coverage.n_filled == int(holes[: coverage.n_rows].sum())
+    error = np.abs(got - clean)
+    assert np.max(error[grid.mask & (grid.r < 50.0)]) < 1e-4
+    assert np.nanmax(error) < 3e-2          # one-sided near the last usable row
+
+
+def test_fill_missing_is_exact_for_discrete_harmonic_fields():
+    kappa = np.arccosh(2 - np.cos(2 * np.pi / 12))        # cosh(k t) cos(2 pi p / 12) is
+    t, p = np.meshgrid(np.arange(8.0), np.arange(12.0), indexing="ij")   # discrete-harmonic
+    values = 0.3 * t + np.cosh(kappa * t) * np.cos(2 * np.pi * p / 12) + 2.0
+    holes = np.zeros(values.shape, bool)
+    holes[2, 3] = holes[3, 3] = holes[3, 4] = holes[4, 11] = holes[3, 0] = True
+    truth = values.copy()
+    values[holes] = np.nan
+    filled, count = fill_missing(values, 8)
+    assert count == 5
+    np.testing.assert_allclose(filled, truth, atol=1e-9)
+
+
+def test_partial_scans_are_refused():
+    with pytest.raises(FieldMapError, match="full circle"):
+        sphere = SphereGrid(R, 90, 180, phi_max=np.pi)
+        sphere_to_aperture(np.ones((90, 180)), sphere, ApertureGrid(D, 32), F, D)
+    with pytest.raises(FieldMapError, match="short of the rim"):
+        usable_rows(SphereGrid(R, 60, 360, theta_max=np.radians(60.0)), F, D)
