@@ -5,7 +5,7 @@ The dish is the paper's (D = 110 m, F = 33 m, R = 10 m, 90 x 360 one-degree cell
 0.15 m mesh); each sample is a Zernike spectrum (orders 2..6) plus actuator-scale bumps plus
 a gravity-like rim astigmatism, as a training set would hold. Run from the repository root:
 
-    python benchmarks/bench_dataset.py [--samples 12] [--workers 1,2] [--json out/bench.json]
+    python benchmarks/bench_dataset.py [--samples 8] [--workers 1,2] [--json out/bench.json]
 
 It prints the stages of one sample in this process (drawing, the deformation map, displacing
 the mesh, the trace; wall time, and the CPU time of the whole sample) and, per cluster, the
@@ -130,7 +130,7 @@ def cluster_run(spec_path: Path, workers: int, threads: int, folder: Path) -> di
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--samples", type=int, default=12)
+    parser.add_argument("--samples", type=int, default=8)
     parser.add_argument("--workers", default="1,2", help="comma-separated local worker counts")
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
     args = parser.parse_args()
