@@ -28,7 +28,9 @@ install: $(STAMP)
 demo: $(STAMP)
 	@mkdir -p out
 	$(BIN)/raysim simulate scenes/paper_go.toml -o out/paper_go.nc
-	@echo "demo outputs are in $(CURDIR)/out/"
+	$(BIN)/raysim render out/paper_go.nc -o out/paper_go_fa.png
+	$(BIN)/raysim report out/paper_go.nc -o out/report
+	@echo "demo outputs are in $(CURDIR)/out/; the paper's figures: $(CURDIR)/out/report/report.html"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest

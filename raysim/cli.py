@@ -80,6 +80,13 @@ def simulate(
     n_theta: int | None = typer.Option(None, "--n-theta", help="Cells in theta (polar angle from -z)."),
     n_phi: int | None = typer.Option(None, "--n-phi", help="Cells in phi (azimuth)."),
     device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
+    total: bool = typer.Option(False, "--total", help="PO: intensity of scattered plus incident field."),
+    save_field: bool = typer.Option(False, "--save-field",
+                                    help="PO: also store the complex field components E_re, E_im."),
+    samples_per_wavelength: float | None = typer.Option(
+        None, "--samples-per-wavelength",
+        help="PO: Gauss points per wavelength along mesh face edges (default 1.5; 3-4 for "
+             "field points near the surface, far from its focus)."),
 ) -> None:
     """Simulate a scene: intensity of the ideal and deformed reflector on the probe sphere.
 
@@ -102,7 +109,8 @@ def simulate(
         def report(stage: str, fraction: float) -> None:
             bar.update(task, completed=fraction, description=f"{method} {loaded.name}: {stage}")
 
-        ds = run(loaded, method=method, device=device, progress=report)
+        ds = run(loaded, method=method, device=device, progress=report, total=total,
+                 save_field=save_field, samples_per_wavelength=samples_per_wavelength)
     save(ds, output)
     out.print(f"{output}: {summary(ds)}", highlight=False, soft_wrap=True)
 
@@ -159,6 +167,53 @@ def paper_command(
 
 
 # --- render, report (raysim.render) ----------------------------------------------------
+@app.command()
+def render(
+    file: Path = typer.Argument(..., help="FieldMap or SurfaceMap NetCDF file."),
+    output: Path = typer.Option(..., "-o", "--output", help="PNG file to write."),
+    kind: str | None = typer.Option(
+        None, "--kind", help="3d, map or cut (default: 3d for a FieldMap, map for a SurfaceMap)."),
+    size: str | None = typer.Option(None, "--size", help="Width x height in pixels, e.g. 1600x1200."),
+    quantity: str = typer.Option("fa", "--quantity",
+                                 help="FieldMap colour: fa (I_ideal/I_def - 1), intensity, or normalized "
+                                      "(intensity over the ideal GO law)."),
+) -> None:
+    """Draw a FieldMap (hemisphere over the dish) or a SurfaceMap (deformation in um) as PNG.
+
+    Works with no display (EGL off-screen rendering).
+    """
+    from raysim.render import render as run
+
+    written = run(file, output_path(output), kind=kind, size=size, quantity=quantity)
+    out.print(f"{written}", highlight=False)
+
+
+@app.command()
+def report(
+    source: Path = typer.Argument(..., help="Scene TOML file, or a FieldMap (.nc) simulated or measured."),
+    output: Path = typer.Option(..., "-o", "--output", help="Folder for report.html, its figures and data."),
+    method: str = typer.Option("go", "--method", help="Simulation method: go, po or po+ptd."),
+    device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
+    solver: str | None = typer.Option(None, "--solver", help="Poisson solver (default: the solver's)."),
+    grid: int | None = typer.Option(None, "--grid",
+                                    help="Aperture grid points across D (default: the solver's)."),
+    refine: int | None = typer.Option(None, "--refine",
+                                      help="GO refinement iterations (0: the paper's linear answer)."),
+    invert: bool = typer.Option(True, "--invert/--no-invert",
+                                help="--no-invert leaves the inversion out: the field's figures only."),
+) -> None:
+    """Simulate, invert and draw a scene: an HTML report mirroring the paper's Figs. 8-10.
+
+    The page embeds its figures; the PNGs, field.nc and surface.nc are written beside it.
+    Given a FieldMap instead of a scene, the simulation is skipped.
+    """
+    from raysim.render.report import report as run
+
+    page = run(source, output, method=method, device=device, solver=solver, grid=grid, refine=refine,
+               invert=invert,
+               progress=lambda line: console.print(f"report: {line}", highlight=False))
+    out.print(f"{page}", highlight=False)
+
 
 
 # --- scan, rig (hardware) --------------------------------------------------------------
@@ -297,6 +352,46 @@ def rig_park(
 
 
 # --- dataset (raysim.dataset) ----------------------------------------------------------
+@app.command()
+def dataset(
+    spec: Path = typer.Argument(..., help="Dataset spec TOML (see scenes/dataset_demo.toml)."),
+    output: Path = typer.Option(..., "-o", "--output", help="Zarr store to write (a folder, data.zarr)."),
+    workers: int | None = typer.Option(None, "--workers",
+                                       help="Local worker processes (default: one per usable core)."),
+    scheduler: str | None = typer.Option(None, "--scheduler",
+                                         help="Address of a running Dask scheduler (tcp://host:port) "
+                                              "instead of a local cluster."),
+    resume: bool = typer.Option(False, "--resume", help="Complete an interrupted store of the same spec."),
+    device: str = typer.Option("cpu", "--device", help="Warp device of the workers: cpu or cuda."),
+    threads: int = typer.Option(1, "--threads", help="CPU threads of each Warp launch in a worker."),
+) -> None:
+    """Simulate a dataset of random surface errors into a Zarr store, on Dask.
+
+    Each sample's deformation (m) and intensity on the probe sphere are written by the worker
+    that made it; a failed sample is recorded with its reason and the others go on. Exit
+    status 1 when some samples failed (rerun with --resume to retry them).
+    """
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from raysim.dataset import generate, load_spec
+
+    loaded = load_spec(spec)
+    if "://" not in str(output):
+        output.expanduser().resolve().parent.mkdir(parents=True, exist_ok=True)
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=console, transient=True) as bar:
+        task = bar.add_task(f"dataset {loaded.name}", total=loaded.samples)
+
+        def report(done: int, failed: int, total: int) -> None:
+            note = f" ({failed} failed)" if failed else ""
+            bar.update(task, completed=done + failed, description=f"dataset {loaded.name}{note}")
+
+        result = generate(loaded, output, workers=workers, scheduler=scheduler, resume=resume,
+                          device=device, threads=threads, progress=report)
+    out.print(result.summary(), highlight=False, soft_wrap=True)
+    if result.failed or result.ideal_failures:
+        raise typer.Exit(code=1)
+
 
 
 def main() -> None:

@@ -25,21 +25,31 @@ Progress = Callable[[str, float], None]
 
 
 def simulate(scene: Scene, method: str = "go", device: str | None = "cpu",
-             progress: Progress | None = None) -> xr.Dataset:
+             progress: Progress | None = None, *, total: bool = False, save_field: bool = False,
+             samples_per_wavelength: float | None = None) -> xr.Dataset:
     """Simulate ``scene`` and return its FieldMap (an ``xarray.Dataset``; see raysim.field).
 
     Parameters
     ----------
     scene : a validated scene (``raysim.load_scene``).
-    method : ``go`` (geometric optics); ``po`` and ``po+ptd`` where those engines exist.
+    method : ``go`` (geometric optics), ``po`` (physical optics); ``po+ptd`` where it exists.
     device : ``cpu`` or ``cuda`` (Warp device).
     progress : optional callback (stage name, fraction done in 0..1).
+    total : PO only: intensity of the total field (scattered plus incident) at the probe,
+        instead of the scattered field alone.
+    save_field : PO only: also store the complex field components (V/m per V/m incident).
+    samples_per_wavelength : PO only: Gauss points per wavelength along the mesh faces'
+        edges (default :data:`raysim.po.DEFAULT_SAMPLES_PER_WAVELENGTH`).
     """
     if method not in METHODS:
         raise RaysimError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
     report = progress or (lambda stage, fraction: None)
+    if method == "po":
+        return _simulate_po(scene, device, report, total, save_field, samples_per_wavelength)
     if method != "go":
         raise RaysimError(f"method {method!r} is not available yet in this version")
+    if total or save_field or samples_per_wavelength is not None:
+        raise RaysimError("--total, --save-field and --samples-per-wavelength apply to --method po only")
     start = time.perf_counter()
     report("mesh", 0.0)
     ideal, deformed = reflectors_for(scene)
@@ -84,6 +94,74 @@ def simulate(scene: Scene, method: str = "go", device: str | None = "cpu",
     )
 
 
+def _simulate_po(scene: Scene, device: str | None, report: Progress, total: bool, save_field: bool,
+                 samples_per_wavelength: float | None) -> xr.Dataset:
+    """The PO branch of :func:`simulate`: both reflectors through :func:`raysim.po.sphere_field`,
+    intensities at the cell centres (``sampling = centre``)."""
+    from raysim import po
+
+    spw = po.DEFAULT_SAMPLES_PER_WAVELENGTH if samples_per_wavelength is None else samples_per_wavelength
+    if not spw > 0:
+        raise RaysimError(f"--samples-per-wavelength must be > 0, got {spw:g}")
+    start = time.perf_counter()
+    report("mesh", 0.0)
+    ideal, deformed = reflectors_for(scene)
+    mesh_seconds = time.perf_counter() - start
+    wave = po.Illumination.plane_wave(scene.source.frequency_hz, scene.source.direction, scene.source.e_hat)
+
+    def stage(offset: float, label: str) -> Progress:
+        return lambda name, f: report(f"{label}: {name}", offset + 0.475 * f)
+
+    result_ideal = po.sphere_field(ideal, scene.sphere, wave, spw, device, progress=stage(0.05, "ideal"))
+    result_def = po.sphere_field(deformed, scene.sphere, wave, spw, device,
+                                 progress=stage(0.525, "deformed"))
+    E_ideal, E_def = result_ideal.E, result_def.E
+    if total:
+        E_inc = po.incident_field(scene.sphere.points(deformed.F), wave.k, wave.k_hat, wave.e_hat)
+        E_inc = E_inc.reshape(E_def.shape)
+        E_ideal, E_def = E_ideal + E_inc, E_def + E_inc
+    report("done", 1.0)
+    seconds = time.perf_counter() - start
+    pairs = result_ideal.pairs + result_def.pairs
+    radiate_seconds = result_ideal.seconds_radiate + result_def.seconds_radiate
+    attrs = {
+        "scene_name": scene.name,
+        "deformation": scene.deformation.describe(),
+        "incidence_theta": scene.source.incidence_theta,
+        "incidence_phi": scene.source.incidence_phi,
+        "polarization": scene.source.polarization,
+        "mesh_resolution": ideal_resolution(scene),
+        "mesh_faces": len(deformed.faces),
+        "panels": int(deformed.n_panels),
+        "field": "total" if total else "scattered",
+        "samples_per_wavelength": float(spw),
+        "samples": int(result_def.n_samples),
+        "samples_lit": int(result_def.n_lit),
+        "samples_lit_ideal": int(result_ideal.n_lit),
+        "pairs": int(pairs),
+        "pair_rate": pairs / radiate_seconds if radiate_seconds > 0 else 0.0,
+        "device": str(device or "cpu"),
+        "seconds_mesh": mesh_seconds,
+        "seconds_total": seconds,
+    }
+    extra = {}
+    if save_field:
+        dims = ("theta", "phi", "component")
+        unit = {"units": "1", "reference": "incident plane-wave E amplitude",
+                "component": "x, y, z in the reflector frame", "field": attrs["field"]}
+        for name, E in (("E", E_def), ("E_ideal", E_ideal)):
+            extra[f"{name}_re"] = (dims, E.real, {**unit, "long_name": f"real part of {name}"})
+            extra[f"{name}_im"] = (dims, E.imag, {**unit, "long_name": f"imaginary part of {name}"})
+    ds = fieldmap(
+        scene.sphere, np.sum(np.abs(E_def) ** 2, axis=-1), np.sum(np.abs(E_ideal) ** 2, axis=-1),
+        focal_length=deformed.F, diameter=deformed.D, frequency_hz=scene.source.frequency_hz,
+        method="po", sampling="centre", scene=scene.text, attrs=attrs, extra=extra,
+    )
+    if save_field:
+        ds = ds.assign_coords(component=("component", ["x", "y", "z"]))
+    return ds
+
+
 def ideal_resolution(scene: Scene) -> float:
     """Triangle edge (m) of the generated mesh, or NaN for a mesh loaded from a file."""
     return float(scene.dish.resolution) if scene.dish.mesh is None else math.nan
@@ -93,6 +171,10 @@ def summary(ds: xr.Dataset) -> str:
     """One line: points, rays, time and power balance of a simulated FieldMap."""
     n = ds.sizes["theta"] * ds.sizes["phi"]
     lit = np.isfinite(ds["intensity"].values) & (ds["intensity"].values > 0)
+    if ds.attrs.get("method") == "po":
+        return (f"{n} points, {ds.attrs.get('samples', 0):,} samples per reflector, "
+                f"{ds.attrs.get('pairs', 0):,} pairs at {ds.attrs.get('pair_rate', 0.0) / 1e6:.0f} M/s, "
+                f"{ds.attrs.get('seconds_total', float('nan')):.1f} s")
     return (f"{n} points ({int(lit.sum())} lit), {ds.attrs.get('rays', 0):,} rays, "
             f"{ds.attrs.get('seconds_total', float('nan')):.1f} s, power balance "
             f"{ds.attrs.get('power_balance', float('nan')):+.1e} (ideal "

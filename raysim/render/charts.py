@@ -1,0 +1,237 @@
+"""2D pictures with matplotlib (Agg, no display): (theta, phi) maps and cuts of a FieldMap,
+x-y maps and cuts of a SurfaceMap.
+
+Frames: sphere angles shown in degrees (theta from -z at the focus, phi = atan2(y, x)); the plan
+views look down -z with x to the right and y up, the same way for the sphere (radius = theta)
+and the aperture (x, y in m), so a feature at azimuth phi sits at the same clock position in both.
+Deformations are shown in micrometres.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from matplotlib.colors import TwoSlopeNorm
+
+from raysim.render import backend
+from raysim.render.data import (
+    UM,
+    Quantity,
+    error_summary,
+    fa,
+    field_quantity,
+    field_subtitle,
+    field_title,
+    nice_ceiling,
+    peak_to_peak,
+    rim_theta,
+    rms,
+    surface_panels,
+    surface_subtitle,
+    surface_title,
+    symmetric_limit,
+)
+
+RIM_STYLE = {"color": "black", "linestyle": "--", "linewidth": 0.9}
+
+
+# --- FieldMap --------------------------------------------------------------------------------
+def field_map(ds: xr.Dataset, quantity: str | Quantity = "fa", size: tuple[int, int] = (1600, 1200),
+              title: str | None = None) -> Any:
+    """Figure: a quantity on the sphere (a name of FIELD_QUANTITIES or a Quantity on the map's
+    cells) as a plan view (radius = theta, deg) and as a rectangular (phi, theta) map, with the
+    rim image dashed."""
+    q = quantity if isinstance(quantity, Quantity) else field_quantity(ds, quantity)
+    fig = backend.figure(size)
+    fig.suptitle(field_title(ds, title or q.label) + "\n" + field_subtitle(ds), fontsize=12)
+    left, right = fig.subplots(1, 2, width_ratios=[1.0, 1.35])
+    image = plan_view(left, ds, q)
+    left.set_title("plan view from above (radius = theta)")
+    phi = np.degrees(ds["phi"].values)
+    theta = np.degrees(ds["theta"].values)
+    right.pcolormesh(cell_edges(phi), cell_edges(theta), np.ma.masked_invalid(q.values),
+                     cmap=colour_map(q.cmap), norm=_norm(q), shading="flat", rasterized=True)
+    right.axhline(np.degrees(rim_theta(ds)), **RIM_STYLE, label="rim image")
+    right.set_xlabel("phi (deg), atan2(y, x) at the focus")
+    right.set_ylabel("theta (deg) from -z at the focus")
+    right.set_xlim(cell_edges(phi)[0], cell_edges(phi)[-1])
+    right.set_ylim(cell_edges(theta)[0], cell_edges(theta)[-1])
+    right.set_xticks(np.arange(0, 361, 45))
+    right.legend(loc="upper right", fontsize=9)
+    right.set_title("(phi, theta) map; grey: no value")
+    fig.colorbar(image, ax=[left, right], label=q.label, shrink=0.8, extend=_extend(q))
+    return fig
+
+
+def plan_view(ax: Any, ds: xr.Dataset, q: Quantity) -> Any:
+    """Draw ``q`` on ``ax`` as seen from above: the cell (theta, phi) at radius theta (deg) in
+    direction phi; returns the mappable."""
+    t = cell_edges(np.degrees(ds["theta"].values))
+    p = cell_edges(ds["phi"].values)
+    T, P = np.meshgrid(t, p, indexing="ij")
+    image = ax.pcolormesh(T * np.cos(P), T * np.sin(P), np.ma.masked_invalid(q.values),
+                          cmap=colour_map(q.cmap), norm=_norm(q), shading="flat", rasterized=True)
+    rim = np.degrees(rim_theta(ds))
+    circle = np.linspace(0, 2 * np.pi, 361)
+    ax.plot(rim * np.cos(circle), rim * np.sin(circle), **RIM_STYLE)
+    for ring in (30, 60):
+        ax.plot(ring * np.cos(circle), ring * np.sin(circle), color="0.5", linewidth=0.5)
+        ax.text(ring * np.cos(np.radians(-45)), ring * np.sin(np.radians(-45)), f" {ring}°", fontsize=8,
+                color="0.2", va="top")
+    ax.set_aspect("equal")
+    ax.set_xlabel("theta cos(phi) (deg), towards +x")
+    ax.set_ylabel("theta sin(phi) (deg), towards +y")
+    return image
+
+
+def field_cut(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200),
+              phis_deg: tuple[float, ...] = (0.0, 90.0, 180.0, 270.0)) -> Any:
+    """Figure: intensity (deformed and ideal) and FA against theta along cuts of constant phi
+    (the cells nearest ``phis_deg``)."""
+    fig = backend.figure(size)
+    fig.suptitle(field_title(ds, "Cuts of constant phi") + "\n" + field_subtitle(ds), fontsize=12)
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    theta = np.degrees(ds["theta"].values)
+    phi = np.degrees(ds["phi"].values)
+    ratio = fa(ds)
+    colours = ["C0", "C1", "C2", "C3", "C4", "C5"]
+    for k, target in enumerate(phis_deg):
+        j = int(np.argmin(np.abs((phi - target + 180.0) % 360.0 - 180.0)))
+        c = colours[k % len(colours)]
+        top.plot(theta, ds["intensity"].values[:, j], color=c, label=f"deformed, phi = {phi[j]:.1f}°")
+        top.plot(theta, ds["intensity_ideal"].values[:, j], color=c, linestyle=":", linewidth=1.0)
+        bottom.plot(theta, ratio[:, j], color=c, label=f"phi = {phi[j]:.1f}°")
+    top.plot([], [], color="0.3", linestyle=":", label="ideal (dotted)")
+    for ax in (top, bottom):
+        ax.axvline(np.degrees(rim_theta(ds)), **RIM_STYLE)
+        ax.grid(True, alpha=0.3)
+    top.set_ylabel("intensity |E|² / |E_inc|²")
+    top.legend(fontsize=9, ncol=2)
+    bottom.set_ylabel("FA = I_ideal / I_def - 1")
+    limit = symmetric_limit(ratio, 99.5)
+    bottom.set_ylim(-1.3 * limit, 1.3 * limit)
+    bottom.set_xlabel("theta (deg) from -z at the focus; dashed: rim image")
+    bottom.legend(fontsize=9, ncol=2)
+    return fig
+
+
+# --- SurfaceMap ------------------------------------------------------------------------------
+def surface_map(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200)) -> Any:
+    """Figure: the deformation (µm) over the aperture; with a truth, truth / recovered / error
+    side by side (truth and recovered on one colour scale), each with its RMS."""
+    panels = surface_panels(ds)
+    fig = backend.figure(size)
+    summary = error_summary(ds)
+    fig.suptitle(surface_title(ds) + "\n" + surface_subtitle(ds) + (f"\n{summary}" if summary else ""),
+                 fontsize=12)
+    axes = np.atleast_1d(fig.subplots(1, len(panels)))
+    shared = nice_ceiling(symmetric_limit(np.concatenate([v.ravel() for n, v in panels if n != "error"]),
+                                          100.0) * UM)
+    x, y = ds["x"].values, ds["y"].values
+    for ax, (name, values) in zip(axes, panels, strict=True):
+        limit = nice_ceiling(symmetric_limit(values, 100.0) * UM) if name == "error" else shared
+        image = ax.pcolormesh(cell_edges(x), cell_edges(y), np.ma.masked_invalid(values * UM), cmap="RdBu_r",
+                              vmin=-limit, vmax=limit, shading="flat", rasterized=True)
+        rim_circle(ax, aperture_radius(ds))
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_title(f"{name}: RMS {rms(values) * UM:.4g} µm, p-v {peak_to_peak(values) * UM:.4g} µm",
+                     fontsize=11)
+        if len(panels) == 1:
+            fig.colorbar(image, ax=ax, label=f"{name} delta along z (µm)", shrink=0.8)
+        else:
+            fig.colorbar(image, ax=ax, orientation="horizontal", label=f"{name} delta along z (µm)",
+                         shrink=0.9, pad=0.08)
+    return fig
+
+
+def surface_cut(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200)) -> Any:
+    """Figure: profiles (µm) along the x axis (y = 0) and the y axis (x = 0): recovered, truth
+    and error when a truth exists."""
+    panels = dict(surface_panels(ds))
+    fig = backend.figure(size)
+    summary = error_summary(ds)
+    fig.suptitle(surface_title(ds, "Surface deformation along cuts") + "\n" + surface_subtitle(ds)
+                 + (f"\n{summary}" if summary else ""), fontsize=12)
+    axes = fig.subplots(2, 1, sharex=True)
+    x, y = ds["x"].values, ds["y"].values
+    cuts = (("along the x axis (y = 0)", x, lambda v: profile_at_zero(v, y, axis=0), "x (m)"),
+            ("along the y axis (x = 0)", y, lambda v: profile_at_zero(v, x, axis=1), "y (m)"))
+    for ax, (title, coord, take, axis) in zip(axes, cuts, strict=True):
+        recovered = panels.get("recovered", panels.get("deformation"))
+        name = "recovered" if "truth" in panels else "deformation"
+        handles = ax.plot(coord, take(recovered) * UM, color="C0", label=name)
+        if "truth" in panels:
+            handles += ax.plot(coord, take(panels["truth"]) * UM, color="C3", linestyle="--", label="truth")
+            # the error on its own scale (right), so a small error stays readable
+            right = ax.twinx()
+            error = take(panels["error"]) * UM
+            handles += right.plot(coord, error, color="0.35", linewidth=1.0, label="error (right scale)")
+            limit = 1.2 * nice_ceiling(symmetric_limit(error, 100.0))
+            right.set_ylim(-limit, limit)
+            right.set_ylabel("error (µm)", color="0.35")
+            right.tick_params(axis="y", colors="0.35")
+        ax.axhline(0.0, color="0.6", linewidth=0.6)
+        ax.set_title(title, fontsize=11)
+        ax.set_ylabel("delta along z (µm)")
+        ax.grid(True, alpha=0.3)
+        ax.legend(handles=handles, fontsize=9, loc="upper right")
+        ax.set_xlabel(axis)
+    return fig
+
+
+# --- helpers ---------------------------------------------------------------------------------
+def profile_at_zero(values: np.ndarray, coord: np.ndarray, axis: int) -> np.ndarray:
+    """The profile of ``values`` (y, x) at ``coord`` = 0 along ``axis``, linear between the
+    two grid lines either side (NaN where either is NaN)."""
+    k = int(np.clip(np.searchsorted(coord, 0.0) - 1, 0, len(coord) - 2))
+    w = (0.0 - coord[k]) / (coord[k + 1] - coord[k])
+    a, b = np.take(values, k, axis=axis), np.take(values, k + 1, axis=axis)
+    return (1.0 - w) * a + w * b
+
+
+def cell_edges(centres: np.ndarray) -> np.ndarray:
+    """Cell edges of regularly spaced cell centres."""
+    centres = np.asarray(centres, dtype=np.float64)
+    if centres.size == 1:
+        return np.array([centres[0] - 0.5, centres[0] + 0.5])
+    step = (centres[-1] - centres[0]) / (centres.size - 1)
+    return np.concatenate([[centres[0] - 0.5 * step], centres + 0.5 * step])
+
+
+def colour_map(name: str) -> Any:
+    import matplotlib
+
+    return matplotlib.colormaps[name].with_extremes(bad="#b0b0b0")
+
+
+def _norm(q: Quantity) -> Any:
+    if q.diverging:
+        return TwoSlopeNorm(vcenter=0.0, vmin=q.clim[0], vmax=q.clim[1])
+    from matplotlib.colors import Normalize
+
+    return Normalize(vmin=q.clim[0], vmax=q.clim[1])
+
+
+def _extend(q: Quantity) -> str:
+    finite = q.values[np.isfinite(q.values)]
+    if finite.size == 0:
+        return "neither"
+    low, high = finite.min() < q.clim[0], finite.max() > q.clim[1]
+    return {(True, True): "both", (True, False): "min", (False, True): "max"}.get((low, high), "neither")
+
+
+def rim_circle(ax: Any, radius: float) -> None:
+    """Draw the aperture's rim, a circle of ``radius`` (m) about the axis."""
+    circle = np.linspace(0, 2 * np.pi, 361)
+    ax.plot(radius * np.cos(circle), radius * np.sin(circle), color="black", linewidth=0.8)
+
+
+def aperture_radius(ds: xr.Dataset) -> float:
+    """D/2 (m) of a SurfaceMap: its ``diameter`` attribute, else its largest |x|."""
+    if "diameter" in ds.attrs:
+        return 0.5 * float(ds.attrs["diameter"])
+    return float(np.abs(ds["x"].values).max())

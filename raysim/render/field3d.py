@@ -1,0 +1,234 @@
+"""A FieldMap in 3D: the probe hemisphere coloured by a field quantity, above its reflector.
+
+Reflector frame (DESIGN.md), metres: vertex at the origin, axis +z, focus (0, 0, F). The
+hemisphere of radius R about the focus is drawn cell by cell (theta from -z, phi = atan2(y, x)),
+each cell one colour (GO maps hold cell means). Below it the reflector: the scene's panels with
+their outlines (gaps) when the FieldMap carries a scene, else the ideal paraboloid from the
+attributes alone (a measured scan). The focus is a black dot; arrows show the incident plane
+wave's direction of travel.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from raysim.errors import RaysimError
+from raysim.field import grid_of
+from raysim.render import backend
+from raysim.render.data import Quantity, field_quantity, field_subtitle, field_title, frequency_text
+
+DISH_CELLS = 70  # triangle edge of the drawn dish: D / DISH_CELLS (coarse; gaps drawn as lines)
+NAN_COLOR = "#b0b0b0"
+
+
+def hemisphere(ds: xr.Dataset, values: np.ndarray) -> Any:
+    """The sphere cells of ``ds`` as pyvista PolyData quads (m), ``values`` (n_theta, n_phi) as
+    cell data in row-major (theta, phi) order; faces wound so their normals point at the focus."""
+    pv = backend.pyvista()
+    grid = grid_of(ds)
+    F = float(ds.attrs["focal_length"])
+    t, p = np.meshgrid(grid.theta_edges, grid.phi_edges, indexing="ij")
+    points = np.column_stack([(grid.radius * np.sin(t) * np.cos(p)).ravel(),
+                              (grid.radius * np.sin(t) * np.sin(p)).ravel(),
+                              (F - grid.radius * np.cos(t)).ravel()])
+    n_p = grid.n_phi + 1
+    i, j = np.meshgrid(np.arange(grid.n_theta), np.arange(grid.n_phi), indexing="ij")
+    a = (i * n_p + j).ravel()
+    # (theta, phi) -> (theta, phi + dphi) -> (theta + dtheta, phi + dphi): counter-clockwise
+    # seen from the focus, so the front face is the inner face
+    quads = np.column_stack([np.full(a.size, 4), a, a + n_p, a + n_p + 1, a + 1])
+    mesh = pv.PolyData(points, quads.ravel())
+    mesh.cell_data["value"] = np.asarray(values, dtype=np.float64).ravel()
+    return mesh
+
+
+def reflector(ds: xr.Dataset) -> tuple[Any, Any, str]:
+    """The reflector to draw under the hemisphere: pyvista PolyData of its triangles and of its
+    panel outlines (m), and a description.
+
+    From the FieldMap's scene (panels and gaps as laid out there) when it has one and it can be
+    rebuilt here; otherwise the ideal paraboloid z = r^2/(4F) of diameter D from the attributes.
+    Drawn coarsely (triangle edge D / DISH_CELLS); the same map draws from a cache.
+    """
+    text = ds.attrs.get("scene")
+    return _reflector(float(ds.attrs["diameter"]), float(ds.attrs["focal_length"]),
+                      str(text) if text else None)
+
+
+@functools.lru_cache(maxsize=4)
+def _reflector(D: float, F: float, text: str | None) -> tuple[Any, Any, str]:
+    from raysim.geometry import paraboloid
+
+    layout, what = None, "ideal paraboloid (from the map's attributes)"
+    if text:
+        try:
+            from raysim.scene import parse_scene
+
+            scene = parse_scene(text, source="FieldMap scene")
+            if scene.dish.mesh is None and scene.dish.diameter and scene.dish.focal_length:
+                D, F = scene.D, scene.F
+                layout = scene.panels
+                what = (f"{layout.n_panels} panels, {layout.gap * 1e3:g} mm gaps" if layout is not None
+                        else "one-piece paraboloid")
+        except RaysimError:
+            pass  # a scene that refers to files not present here: draw the ideal dish
+    dish = paraboloid(D, F, resolution=D / DISH_CELLS, layout=layout)
+    mesh = polydata(dish.vertices, dish.faces)
+    edges = mesh.extract_feature_edges(boundary_edges=True, feature_edges=False, manifold_edges=False,
+                                       non_manifold_edges=False)
+    return mesh, edges, what
+
+
+def polydata(vertices: np.ndarray, faces: np.ndarray) -> Any:
+    """Triangles (m) as pyvista PolyData."""
+    pv = backend.pyvista()
+    cells = np.column_stack([np.full(len(faces), 3, dtype=np.int64), faces]).ravel()
+    return pv.PolyData(np.asarray(vertices, dtype=np.float64), cells)
+
+
+def source_direction(ds: xr.Dataset) -> np.ndarray:
+    """Unit vector along which the incident plane wave travels (on axis: (0, 0, -1))."""
+    t = float(ds.attrs.get("incidence_theta", 0.0) or 0.0)
+    p = float(ds.attrs.get("incidence_phi", 0.0) or 0.0)
+    return -np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
+
+
+def field_plotter(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = (1600, 1200),
+                  show_reflector: bool = True, overview: bool = False) -> Any:
+    """Build (not render) the 3D picture of a FieldMap; returns the pyvista Plotter.
+
+    The close-up (default) looks down into the hemisphere from above the rim on the -y side,
+    with the reflector's panels around it; ``overview=True`` is the whole antenna from the
+    side, without text. Tests use the returned plotter's camera to project points to pixels.
+    """
+    q = field_quantity(ds, quantity)
+    D, F, R = (float(ds.attrs[k]) for k in ("diameter", "focal_length", "sphere_radius"))
+    pl = backend.plotter(size)
+    scale = size[1] / 900.0
+    _add_hemisphere(pl, ds, q, scale, bar=not overview)
+    what = "no reflector drawn"
+    if show_reflector:
+        dish, edges, what = reflector(ds)
+        pl.add_mesh(dish, color="#cfcfcf", ambient=0.35, diffuse=0.7, specular=0.05,
+                    smooth_shading=True, name="reflector")
+        if edges.n_cells:
+            pl.add_mesh(edges, color="#6e6e6e", line_width=1.0, name="panel_edges")
+    _add_focus_and_source(pl, ds, F, R, D, scale, labels=not overview)
+    if overview:
+        _overview_camera(pl, D, F)
+        return pl
+    title = field_title(ds, f"{what_of(q)} on the probe hemisphere").replace(" — ", "\n", 1)
+    pl.add_text(title, position="upper_edge", font_size=backend.points(13 * scale), color="black",
+                name="title")
+    notes = [f"colour: {q.label}; grey: no value", field_subtitle(ds), f"reflector: {what}"]
+    pl.add_text("\n".join(notes), position="lower_right", font_size=backend.points(9 * scale),
+                color="#202020", name="notes")
+    _camera(pl, np.array([0.0, 0.0, F - 0.55 * R]), 0.72 * D, 58.0, -78.0)
+    return pl
+
+
+def field_image(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = (1600, 1200),
+                inset: bool = True) -> np.ndarray:
+    """The 3D FieldMap picture as an RGB array (height, width, 3): the close-up of
+    :func:`field_plotter` with, when ``inset``, an overview of the whole antenna pasted in the
+    lower-left corner (30 % of each side), rendered by the same window without its text."""
+    pl = field_plotter(ds, quantity, size)
+    image = np.array(backend.screenshot(pl, None))
+    if inset:
+        for name in ("title", "notes", "labels"):
+            pl.remove_actor(name, render=False)
+        pl.remove_scalar_bar(render=False)
+        w, h = int(0.3 * size[0]), int(0.3 * size[1])
+        pl.window_size = [w, h]
+        _overview_camera(pl, float(ds.attrs["diameter"]), float(ds.attrs["focal_length"]))
+        picture = np.array(backend.screenshot(pl, None))[:h, :w]
+        picture[[0, -1], :] = 60
+        picture[:, [0, -1]] = 60
+        bottom = size[1] - int(0.02 * size[1])
+        image[bottom - h:bottom, :w] = picture
+    pl.close()
+    return image
+
+
+def what_of(q: Quantity) -> str:
+    """The quantity's name for a title."""
+    return {"fa": "Intensity ratio FA", "intensity": "Intensity",
+            "normalized": "Intensity over the ideal GO law"}[q.name]
+
+
+def _add_hemisphere(pl: Any, ds: xr.Dataset, q: Quantity, scale: float, bar: bool = True) -> None:
+    mesh = hemisphere(ds, q.values)
+    args = {"title": q.short + "\n", "vertical": True, "position_x": 0.89, "position_y": 0.25,
+            "height": 0.55, "width": 0.045, "title_font_size": backend.points(14 * scale),
+            "label_font_size": backend.points(12 * scale), "color": "black", "n_labels": 5,
+            "fmt": _fmt(q.clim)}
+    # data surfaces unlit, so the colour on the picture is the colour on the bar; only the inner
+    # face (towards the focus) is drawn, as the probe sees it
+    pl.add_mesh(mesh, scalars="value", cmap=q.cmap, clim=list(q.clim), nan_color=NAN_COLOR,
+                lighting=False, scalar_bar_args=args, name="hemisphere", show_scalar_bar=bar,
+                culling="back")
+    pv = backend.pyvista()
+    grid = grid_of(ds)
+    # the open edge of the hemisphere (theta = 90 deg) as a thin circle for the shape
+    edge = pv.Circle(radius=grid.radius * math.sin(grid.theta_max), resolution=180)
+    edge = edge.extract_feature_edges(boundary_edges=True, feature_edges=False,
+                                      manifold_edges=False, non_manifold_edges=False)
+    edge.translate((0.0, 0.0, float(ds.attrs["focal_length"]) - grid.radius * math.cos(grid.theta_max)),
+                   inplace=True)
+    pl.add_mesh(edge, color="#303030", line_width=max(1.0, 1.5 * scale), name="hemisphere_edge")
+
+
+def _add_focus_and_source(pl: Any, ds: xr.Dataset, F: float, R: float, D: float, scale: float,
+                          labels: bool = True) -> None:
+    pv = backend.pyvista()
+    focus = np.array([0.0, 0.0, F])
+    pl.add_mesh(pv.Sphere(radius=0.04 * R, center=focus), color="black", name="focus")
+    k_hat = source_direction(ds)
+    length = 1.1 * R
+    tails = []
+    for k, offset in enumerate((-1.7 * R, 1.7 * R)):
+        # two parallel rays of the plane wave either side of the hemisphere (one on the axis
+        # would hide the data), tips level with a point above the focus
+        tip = focus + np.array([offset, 0.0, 0.3 * R])
+        tail = tip - k_hat * length
+        tails.append(tail)
+        pl.add_mesh(pv.Arrow(start=tail, direction=k_hat, scale=length, tip_length=0.25,
+                             tip_radius=0.08, shaft_radius=0.03),
+                    color="#c0392b", name=f"source_{k}")
+    if not labels:
+        return
+    hz = float(ds.attrs.get("frequency_hz", float("nan")))
+    points = np.array([focus + np.array([0.08 * R, 0.0, 0.08 * R]), tails[0] + np.array([0.0, 0.0, 0.1 * R])])
+    pl.add_point_labels(points, ["focus", f"plane wave, {frequency_text(hz)}"],
+                        font_size=backend.points(13 * scale), text_color="black",
+                        shape=None, show_points=False, always_visible=True, name="labels")
+
+
+def _camera(pl: Any, centre: np.ndarray, distance: float, elevation_deg: float, azimuth_deg: float) -> None:
+    """Look at ``centre`` (m) from ``distance`` (m) at an elevation and azimuth (deg), z up."""
+    el, az = math.radians(elevation_deg), math.radians(azimuth_deg)
+    direction = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+    pl.camera.focal_point = tuple(centre)
+    pl.camera.position = tuple(centre + direction * distance)
+    pl.camera.up = (0.0, 0.0, 1.0)
+    pl.camera.view_angle = 30.0
+    pl.camera.clipping_range = (0.02 * distance, 4.0 * distance)
+
+
+def _overview_camera(pl: Any, D: float, F: float) -> None:
+    """The whole antenna from the -y side, 24 deg above the aperture plane."""
+    _camera(pl, np.array([0.0, 0.0, 0.45 * F]), 1.55 * D, 24.0, -70.0)
+
+
+def _fmt(clim: tuple[float, float]) -> str:
+    span = max(abs(clim[0]), abs(clim[1]))
+    if span == 0 or span >= 1000 or span < 1e-2:
+        return "%.2e"
+    if span >= 10:
+        return "%.1f"
+    return "%.3f"
