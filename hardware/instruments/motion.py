@@ -17,7 +17,7 @@ from collections.abc import Mapping
 
 import pyvisa
 
-from hardware.instruments.visa import VisaLink
+from hardware.instruments.visa import CheckedInstrument, VisaLink
 from raysim.errors import InstrumentError
 
 MAX_QUEUE = 10
@@ -45,11 +45,11 @@ def describe_error(code: int) -> str:
     return GENERAL_ERRORS.get(code, f"error {code}")
 
 
-class MotionController:
+class MotionController(CheckedInstrument):
     """An ESP301 on one VISA link (terminators CR out, CR LF in)."""
 
     def __init__(self, link: VisaLink, poll_s: float = 0.002) -> None:
-        self.link = link
+        super().__init__(link)
         self.poll_s = poll_s
         self.version = ""
 
@@ -59,13 +59,7 @@ class MotionController:
         """Connect to the controller at ``resource`` and check it is an ESP301 (``VE?``)."""
         link = VisaLink(resource, name="motion controller", timeout_s=timeout_s, rm=rm,
                         read_termination="\r\n", write_termination="\r")
-        controller = cls(link)
-        try:
-            controller.identify()
-        except BaseException:
-            controller.close()
-            raise
-        return controller
+        return cls._connect(link)
 
     def identify(self) -> str:
         """Ask ``VE?``; raise unless the answer names an ESP301."""
@@ -75,17 +69,6 @@ class MotionController:
                                   f"'{version}', expected a Newport ESP301")
         self.version = version
         return version
-
-    def command(self, command: str) -> None:
-        """Send a command, then check ``TE?``."""
-        self.link.write(command)
-        self.check_errors(after=command)
-
-    def query(self, command: str) -> str:
-        """Send a query, read its answer, then check ``TE?``."""
-        answer = self.link.query(command)
-        self.check_errors(after=command)
-        return answer
 
     def check_errors(self, after: str = "") -> None:
         """Read ``TE?`` until 0; raise :class:`InstrumentError` naming the first error."""
@@ -178,7 +161,3 @@ class MotionController:
                 self.link.write(f"{axis}ST")
             except InstrumentError:
                 return
-
-    def close(self) -> None:
-        """Close the link (never raises)."""
-        self.link.close()

@@ -12,7 +12,7 @@ import math
 
 import pyvisa
 
-from hardware.instruments.visa import VisaLink
+from hardware.instruments.visa import CheckedInstrument, VisaLink
 from raysim.errors import InstrumentError
 
 MODELS = ("N1913A", "N1914A")
@@ -20,7 +20,7 @@ MAX_QUEUE = 32          # entries drained from the error queue at most
 OVERRANGE = 9.0e37      # SCPI's "not a number" is 9.91E37
 
 
-class PowerMeter:
+class PowerMeter(CheckedInstrument):
     """A Keysight N1913A/N1914A (or a compatible meter) on one VISA link.
 
     Parameters
@@ -29,20 +29,14 @@ class PowerMeter:
     """
 
     def __init__(self, link: VisaLink) -> None:
-        self.link = link
+        super().__init__(link)
         self.idn = ""
 
     @classmethod
     def open(cls, resource: str, *, timeout_s: float = 2.0,
              rm: pyvisa.ResourceManager | None = None) -> PowerMeter:
         """Connect to the meter at ``resource`` and check it is one (``*IDN?``)."""
-        meter = cls(VisaLink(resource, name="power meter", timeout_s=timeout_s, rm=rm))
-        try:
-            meter.identify()
-        except BaseException:
-            meter.close()
-            raise
-        return meter
+        return cls._connect(VisaLink(resource, name="power meter", timeout_s=timeout_s, rm=rm))
 
     def identify(self) -> str:
         """Ask ``*IDN?``; raise unless the model field names an N1913A or N1914A."""
@@ -53,17 +47,6 @@ class PowerMeter:
                                   f"'{idn}', expected a Keysight {' or '.join(MODELS)}")
         self.idn = idn
         return idn
-
-    def command(self, command: str) -> None:
-        """Send a command, then check the error queue."""
-        self.link.write(command)
-        self.check_errors(after=command)
-
-    def query(self, command: str) -> str:
-        """Send a query, read its answer, then check the error queue."""
-        answer = self.link.query(command)
-        self.check_errors(after=command)
-        return answer
 
     def check_errors(self, after: str = "") -> None:
         """Drain ``SYST:ERR?``; raise :class:`InstrumentError` naming the first entry if any."""
@@ -112,7 +95,3 @@ class PowerMeter:
     def read_power(self) -> float:
         """One reading in W."""
         return 1e-3 * 10.0 ** (self.read_dbm() / 10.0)
-
-    def close(self) -> None:
-        """Close the link (never raises)."""
-        self.link.close()

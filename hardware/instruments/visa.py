@@ -130,3 +130,43 @@ def _no_delay(inst: pyvisa.resources.Resource) -> None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         except OSError:
             pass
+
+
+class CheckedInstrument:
+    """An instrument on one :class:`VisaLink` whose every command and query is followed by a
+    read of its error queue. Drivers supply ``identify()`` and ``check_errors(after)``."""
+
+    def __init__(self, link: VisaLink) -> None:
+        self.link = link
+
+    @classmethod
+    def _connect(cls, link: VisaLink, **kwargs):
+        """Wrap ``link``, check the instrument's identity, and close the link if that fails."""
+        instrument = cls(link, **kwargs)
+        try:
+            instrument.identify()
+        except BaseException:
+            instrument.close()
+            raise
+        return instrument
+
+    def identify(self) -> str:  # pragma: no cover - every driver overrides it
+        raise NotImplementedError
+
+    def check_errors(self, after: str = "") -> None:  # pragma: no cover - every driver overrides it
+        raise NotImplementedError
+
+    def command(self, command: str) -> None:
+        """Send a command, then check the error queue."""
+        self.link.write(command)
+        self.check_errors(after=command)
+
+    def query(self, command: str) -> str:
+        """Send a query, read its answer, then check the error queue."""
+        answer = self.link.query(command)
+        self.check_errors(after=command)
+        return answer
+
+    def close(self) -> None:
+        """Close the link (never raises)."""
+        self.link.close()
