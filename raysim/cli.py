@@ -87,6 +87,9 @@ def simulate(
         None, "--samples-per-wavelength",
         help="PO: Gauss points per wavelength along mesh face edges (default 1.5; 3-4 for "
              "field points near the surface, far from its focus)."),
+    edges: str | None = typer.Option(
+        None, "--edges",
+        help="po+ptd: rim (the outer rim, default) or all (also every panel edge beside a gap)."),
 ) -> None:
     """Simulate a scene: intensity of the ideal and deformed reflector on the probe sphere.
 
@@ -110,7 +113,7 @@ def simulate(
             bar.update(task, completed=fraction, description=f"{method} {loaded.name}: {stage}")
 
         ds = run(loaded, method=method, device=device, progress=report, total=total,
-                 save_field=save_field, samples_per_wavelength=samples_per_wavelength)
+                 save_field=save_field, samples_per_wavelength=samples_per_wavelength, edges=edges)
     save(ds, output)
     out.print(f"{output}: {summary(ds)}", highlight=False, soft_wrap=True)
 
