@@ -168,6 +168,12 @@ def _simulate_po(scene: Scene, device: str | None, report: Progress, total: bool
             "edge_points_lit": int(fringe["deformed"].n_lit),
             "seconds_edges": fringe["ideal"].seconds + fringe["deformed"].seconds,
         })
+        layout = deformed.layout
+        if edges == "all" and layout is not None and layout.gap > 0:
+            attrs["edge_gap_wavelengths"] = layout.gap / wave.wavelength
+            attrs["edge_note"] = ("each panel edge is an isolated half-plane: the fringe currents of a "
+                                  "gap's two edges add whatever the gap's width, which holds for gaps "
+                                  "wider than about a wavelength only")
     extra = {}
     if save_field:
         dims = ("theta", "phi", "component")

@@ -124,7 +124,8 @@ def test_simulate_adds_the_edges_to_po():
         assert np.abs(field(both, name) - edges - field(po_only, name)).max() < 1e-12
         assert np.abs(edges).max() > 1e-4 * np.abs(field(po_only, name)).max()
     rim_only = simulate(replace(scene), method="po+ptd")
-    assert rim_only.attrs["edges"] == "rim"
+    assert both.attrs["edge_gap_wavelengths"] == pytest.approx(GAP / (po.C0 / 0.3e9))
+    assert rim_only.attrs["edges"] == "rim" and "edge_gap_wavelengths" not in rim_only.attrs
     assert rim_only.attrs["edge_points"] < both.attrs["edge_points"]
 
 
