@@ -5,7 +5,8 @@ Run: ``.venv/bin/python benchmarks/bench_ptd.py [--threads N] [--skip-paper] [--
 
 - default: the fringe kernel's pair rate beside PO's, then the paper case (0.3 GHz, 90 x 360,
   both reflectors): PO alone, then the rim's fringe field, in wall and process CPU time (on a
-  shared machine CPU-seconds / threads is the wall time on idle cores).
+  shared machine CPU-seconds / threads is the wall time on idle cores), the difference PTD
+  makes on the sphere and ``paper_po_ptd.png``.
 - ``--halfplane``: PO and PO + PTD against Sommerfeld's half-plane for k rho = 12.6 .. 100
   (the test's reference), as a table and ``halfplane.png``.
 - ``--convergence``: the paper case's rim field for 2 .. 8 edge points per wavelength.
@@ -72,27 +73,72 @@ def kernel_rates(threads: int) -> None:
     print(f"PO kernel:     {rad.pairs:,} pairs: {rad.pairs / c.cpu / 1e6:.1f} M pairs per CPU-second")
 
 
-def paper_case(threads: int) -> None:
-    """PO of both reflectors, then the rim's fringe field of both: what PTD adds."""
+def paper_case(threads: int, out: Path) -> None:
+    """PO of both reflectors, then the rim's fringe field of both: what PTD adds, in time and
+    on the sphere (``paper_po_ptd.png``)."""
     from raysim import po, ptd
     from raysim.geometry import reflectors_for
     from raysim.scene import load_scene
     from raysim.simulate import simulate
+    from raysim.sphere import ideal_go_intensity
 
     scene = load_scene(ROOT / "scenes" / "paper_po.toml")
     with Clock() as c_po:
-        ds = simulate(scene, method="po")
+        ds = simulate(scene, method="po", save_field=True)
     ideal, deformed = reflectors_for(scene)
     wave = po.Illumination.plane_wave(scene.source.frequency_hz, scene.source.direction, scene.source.e_hat)
     with Clock() as c_ptd:
-        results = [ptd.sphere_edge_field(r, scene.sphere, wave, "rim") for r in (ideal, deformed)]
-    pairs = sum(r.pairs for r in results)
+        edge = {name: ptd.sphere_edge_field(r, scene.sphere, wave, "rim")
+                for name, r in (("ideal", ideal), ("deformed", deformed))}
+    pairs = sum(r.pairs for r in edge.values())
     print(f"paper case (0.3 GHz, 90 x 360, ideal + deformed), {threads} thread(s):")
     print(f"  PO:          {ds.attrs['pairs']:,} pairs, wall {c_po.wall:7.1f} s, CPU {c_po.cpu:7.1f} s "
           f"-> {c_po.cpu / threads:6.1f} s on {threads} idle core(s)")
-    print(f"  PTD (rim):   {results[0].n_points:,} edge points, {pairs:,} pairs, wall {c_ptd.wall:6.1f} s, "
-          f"CPU {c_ptd.cpu:6.1f} s -> {c_ptd.cpu / threads:5.1f} s on {threads} idle core(s)")
+    print(f"  PTD (rim):   {edge['ideal'].n_points:,} edge points, {pairs:,} pairs, "
+          f"wall {c_ptd.wall:6.1f} s, CPU {c_ptd.cpu:6.1f} s -> {c_ptd.cpu / threads:5.1f} s on "
+          f"{threads} idle core(s)")
     print(f"  PTD adds {100 * c_ptd.cpu / c_po.cpu:.1f} % to PO's CPU time")
+
+    def field(name):
+        return ds[f"{name}_re"].values + 1j * ds[f"{name}_im"].values
+
+    I_po = {"ideal": np.sum(np.abs(field("E_ideal")) ** 2, -1),
+            "deformed": np.sum(np.abs(field("E")) ** 2, -1)}
+    I_ptd = {"ideal": np.sum(np.abs(field("E_ideal") + edge["ideal"].E) ** 2, -1),
+             "deformed": np.sum(np.abs(field("E") + edge["deformed"].E) ** 2, -1)}
+    FA_po = I_po["ideal"] / I_po["deformed"] - 1.0
+    FA_ptd = I_ptd["ideal"] / I_ptd["deformed"] - 1.0
+    theta = np.degrees(scene.sphere.theta)
+    print("  PO vs PO+PTD on the sphere (deformed dish), rms over the cells of each theta band:")
+    for lo, hi in ((0, 20), (20, 40), (40, 60), (60, 79.6), (79.6, 90)):
+        m = (theta >= lo) & (theta < hi)
+        rel = I_ptd["deformed"][m] / I_po["deformed"][m] - 1.0
+        print(f"    theta {lo:4g}..{hi:4g} deg: |I_ptd / I_po - 1| rms {np.sqrt(np.mean(rel**2)):.2e} "
+              f"max {np.abs(rel).max():.2e}; FA change rms {np.sqrt(np.mean((FA_ptd - FA_po)[m] ** 2)):.2e} "
+              f"(FA itself rms {np.sqrt(np.mean(FA_ptd[m] ** 2)):.2e})")
+    import matplotlib.pyplot as plt
+
+    law = ideal_go_intensity(scene.sphere.theta, F, R)
+    fig, axes = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
+    for j, style in ((0, "-"), (90, "--")):
+        cut = f"phi {j + 0.5:g} deg"
+        axes[0].plot(theta, I_po["ideal"][:, j] / law, "C0" + style, lw=1, label=f"PO, {cut}")
+        axes[0].plot(theta, I_ptd["ideal"][:, j] / law, "C3" + style, lw=1, label=f"PO+PTD, {cut}")
+        axes[1].plot(theta, FA_po[:, j], "C0" + style, lw=1, label=f"PO, {cut}")
+        axes[1].plot(theta, FA_ptd[:, j], "C3" + style, lw=1, label=f"PO+PTD, {cut}")
+    axes[0].axhline(1.0, color="k", lw=0.6, label="GO")
+    axes[0].set_ylabel("ideal dish: I / (rho / R)^2")
+    axes[1].set_ylabel("FA = I_ideal / I_def - 1")
+    axes[1].set_xlabel("theta (deg)")
+    for ax in axes:
+        ax.axvline(np.degrees(2 * np.arctan(D / (4 * F))), color="grey", lw=0.6)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    axes[0].set_title("Paper case, 0.3 GHz: PO and PO + PTD (rim) on the probe sphere", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out / "paper_po_ptd.png", dpi=120)
+    plt.close(fig)
+    print(f"  wrote {out / 'paper_po_ptd.png'}")
 
 
 def halfplane(out: Path) -> None:
@@ -316,7 +362,7 @@ def main() -> None:
           f"(over {os.cpu_count()} cores: more means other jobs share them)")
     kernel_rates(threads)
     if not args.skip_paper:
-        paper_case(threads)
+        paper_case(threads, args.out)
     if args.halfplane:
         halfplane(args.out)
     if args.convergence:

@@ -15,11 +15,12 @@ p' in (0, pi); the observation direction is s_hat = (sin b cos p, sin b sin p, c
 
 On the Keller cone (b = b') the problem is the 2-D half-plane with k_t = k sin b' for E_t and
 H_t (soft and hard). Its exact diffraction coefficients, [sec((p - p')/2) -+ sec((p + p')/2)]
-times -exp(-j pi/4) / (2 sqrt(2 pi k_t)) (Sommerfeld; Balanis, *Advanced Engineering
-Electromagnetics*, 2nd ed., ch. 13), minus those of PO's current on the lit face (the end
-point of its integral), -2 sin p' / (cos p + cos p') and 2 sin p / (cos p + cos p'), give
-Ufimtsev's fringe coefficients of the half-plane (Ufimtsev, *Fundamentals of the Physical
-Theory of Diffraction*, 2007, ch. 4 and 7). With s = sin(p/2), c = cos(p'/2) and
+times -exp(-j pi/4) / (2 sqrt(2 pi k_t)) (Sommerfeld's solution; Balanis, *Advanced
+Engineering Electromagnetics*, 2nd ed., the half-plane coefficients of the chapter on the
+geometrical theory of diffraction), minus those of PO's current on the lit face (the end point
+of its integral), -2 sin p' / (cos p + cos p') and 2 sin p / (cos p + cos p'), are the
+half-plane's fringe coefficients (Ufimtsev's f^(1), g^(1): *Fundamentals of the Physical Theory
+of Diffraction*, Wiley, 2007). With s = sin(p/2), c = cos(p'/2) and
 cos p + cos p' = 2 (c - s)(c + s) they simplify to
 
     soft: 2 sin(p'/2) / (s + c),        hard: 2 cos(p/2) / (s + c),
@@ -45,13 +46,16 @@ the probe sphere is in the near field of the dish. The result is finite for ever
 the one singular case Michaeli's form keeps (grazing incidence observed along the grazing
 ray, Ufimtsev's singularity) is capped (see the kernels' module).
 
-Checked against Sommerfeld's exact half-plane solution (tests/raysim/test_ptd_halfplane.py).
+Everything above is derived here in the exp(+j w t) convention of DESIGN.md (no sign is
+carried over from the references, whose conventions differ) and checked against Sommerfeld's
+exact half-plane solution at normal and skew incidence (tests/raysim/test_ptd_halfplane.py).
+Validity: each edge is an isolated half-plane. Two edges facing each other across a panel gap
+much narrower than a wavelength are not: their fringe currents add, whatever the width.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -242,7 +246,7 @@ def edge_field(reflector: Reflector, points: ArrayLike, wave: Illumination, edge
 
 def sphere_edge_field(reflector: Reflector, grid: SphereGrid, wave: Illumination, edges: str = "rim",
                       points_per_wavelength: float = DEFAULT_POINTS_PER_WAVELENGTH,
-                      device: str | None = "cpu", progress: Callable | None = None) -> EdgeResult:
+                      device: str | None = "cpu", progress: Progress | None = None) -> EdgeResult:
     """:func:`edge_field` at the cell centres of ``grid``; ``E`` shaped (n_theta, n_phi, 3)."""
     result = edge_field(reflector, grid.points(reflector.F).reshape(-1, 3), wave, edges,
                         points_per_wavelength, device, progress=progress)
