@@ -206,7 +206,9 @@ def summary(ds: xr.Dataset) -> str:
     n = ds.sizes["theta"] * ds.sizes["phi"]
     lit = np.isfinite(ds["intensity"].values) & (ds["intensity"].values > 0)
     if ds.attrs.get("method") in ("po", "po+ptd"):
-        return (f"{n} points, {ds.attrs.get('samples', 0):,} samples per reflector, "
+        edges = (f"{ds.attrs['edges']} edges ({ds.attrs.get('edge_points', 0):,} points), "
+                 if "edges" in ds.attrs else "")
+        return (f"{n} points, {ds.attrs.get('samples', 0):,} samples per reflector, {edges}"
                 f"{ds.attrs.get('pairs', 0):,} pairs at {ds.attrs.get('pair_rate', 0.0) / 1e6:.0f} M/s, "
                 f"{ds.attrs.get('seconds_total', float('nan')):.1f} s")
     return (f"{n} points ({int(lit.sum())} lit), {ds.attrs.get('rays', 0):,} rays, "
