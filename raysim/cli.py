@@ -87,6 +87,9 @@ def simulate(
         None, "--samples-per-wavelength",
         help="PO: Gauss points per wavelength along mesh face edges (default 1.5; 3-4 for "
              "field points near the surface, far from its focus)."),
+    edges: str | None = typer.Option(
+        None, "--edges",
+        help="po+ptd: rim (the outer rim, default) or all (also every panel edge beside a gap)."),
 ) -> None:
     """Simulate a scene: intensity of the ideal and deformed reflector on the probe sphere.
 
@@ -110,7 +113,7 @@ def simulate(
             bar.update(task, completed=fraction, description=f"{method} {loaded.name}: {stage}")
 
         ds = run(loaded, method=method, device=device, progress=report, total=total,
-                 save_field=save_field, samples_per_wavelength=samples_per_wavelength)
+                 save_field=save_field, samples_per_wavelength=samples_per_wavelength, edges=edges)
     save(ds, output)
     out.print(f"{output}: {summary(ds)}", highlight=False, soft_wrap=True)
 
@@ -150,8 +153,21 @@ def paper_command(
     grid: int = typer.Option(256, help="Aperture grid points across the diameter."),
     refine: int = typer.Option(3, help="GO refinement iterations of raysim's default row."),
     device: str = typer.Option("cpu", help="Warp device: cpu or cuda."),
+    po: bool = typer.Option(False, "--po", help="The PO & PTD frequency sweep (Table 3) instead of "
+                                               "the GO case (Table 2). Slow on a CPU: about an hour."),
+    frequencies: str = typer.Option("0.1e9,0.3e9,0.6e9,1e9,3e9", "--frequencies",
+                                    help="--po: frequencies (Hz), comma-separated."),
+    coarse_3ghz: str = typer.Option("90x36", "--coarse-3ghz",
+                                    help="--po: sphere grid (n_theta x n_phi) at 2 GHz and above "
+                                         "(90x360 below); 90x360 for the full grid."),
+    fields: Path | None = typer.Option(None, "--fields",
+                                       help="--po: folder to keep each FieldMap in and reuse it from."),
 ) -> None:
-    """The paper's GO case: its Table 2 figures beside raysim's on the project's own GO data."""
+    """The paper's tables beside raysim's: the GO case (Table 2), or with --po the PO & PTD
+    frequency sweep (Table 3)."""
+    if po:
+        _paper_po(grid, refine, device, frequencies, coarse_3ghz, fields)
+        return
     from solver.paper import compare
 
     rows = compare(scale=scale, N=grid, refine=refine, device=device)
@@ -162,6 +178,41 @@ def paper_command(
         paper = f"{row.paper_rrms * 100:.2f} %" if row.paper_rrms is not None else "-"
         out.print(f"{row.method:44s} {paper:>10s} {row.paper_seconds:>9s} "
                   f"{row.rrms * 100:7.3f} % {row.rms_m * 1e6:8.2f} {row.seconds:7.2f}",
+                  highlight=False, soft_wrap=True)
+
+
+def _paper_po(grid: int, refine: int, device: str, frequencies: str, coarse: str,
+              fields: Path | None) -> None:
+    """``raysim paper --po``: Table 3 with the project's PO + PTD data, the paper beside it."""
+    from solver.invert import DEFAULT_SOLVER
+    from solver.paper import po_sweep
+
+    try:
+        freqs = [float(f) for f in frequencies.split(",") if f.strip()]
+        n_theta, n_phi = (int(n) for n in coarse.lower().split("x"))
+    except ValueError as exc:
+        raise RaysimError(f"--frequencies takes Hz separated by commas and --coarse-3ghz a grid "
+                          f"such as 90x36 ({exc})") from exc
+    if not freqs or min(freqs) <= 0 or n_theta < 1 or n_phi < 1:
+        raise RaysimError("--frequencies must be positive (Hz) and --coarse-3ghz at least 1x1")
+    rows = po_sweep(freqs, N=grid, coarse=(n_theta, n_phi), refine=refine, device=device,
+                    fields_dir=fields, log=lambda line: console.print(f"paper: {line}", highlight=False))
+    out.print(f"paper Table 3: PO & PTD (rim) data, Eq. 8 (1.2 mm), R = 10 m, N = {grid}", highlight=False)
+    out.print(f"paper setting: FDM + Gauss-Seidel, 1000 iterations, linear; raysim default: "
+              f"{DEFAULT_SOLVER}, GO refinement {refine}", highlight=False, soft_wrap=True)
+    out.print(f"{'f GHz':>6s} {'sphere grid':>11s} {'paper RMS um':>12s} {'paper RRMS':>10s} "
+              f"{'RMS um':>8s} {'RRMS':>8s} {'default RMS um':>14s} {'default RRMS':>12s} "
+              f"{'sim s':>7s}", highlight=False, soft_wrap=True)
+    for r in rows:
+        paper_rms = f"{r.paper_rms_m * 1e6:.2f}" if r.paper_rms_m is not None else "-"
+        paper_rrms = f"{r.paper_rrms * 100:.2f} %" if r.paper_rrms is not None else "-"
+        out.print(f"{r.frequency_hz / 1e9:6g} {f'{r.n_theta} x {r.n_phi}':>11s} {paper_rms:>12s} "
+                  f"{paper_rrms:>10s} {r.rms_m * 1e6:8.2f} {r.rrms * 100:6.2f} % "
+                  f"{r.default_rms_m * 1e6:14.2f} {r.default_rrms * 100:10.2f} % {r.seconds_simulate:7.0f}",
+                  highlight=False, soft_wrap=True)
+    if any(r.n_phi != 360 for r in rows):
+        out.print("coarse grids (fewer phi cells) keep the CPU time in check; the Eq. 8 "
+                  "deformation is axially symmetric, so they lose nothing it can show",
                   highlight=False, soft_wrap=True)
 
 
