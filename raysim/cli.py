@@ -87,6 +87,9 @@ def simulate(
         None, "--samples-per-wavelength",
         help="PO: Gauss points per wavelength along mesh face edges (default 1.5; 3-4 for "
              "field points near the surface, far from its focus)."),
+    edges: str | None = typer.Option(
+        None, "--edges",
+        help="po+ptd: rim (the outer rim, default) or all (also every panel edge beside a gap)."),
 ) -> None:
     """Simulate a scene: intensity of the ideal and deformed reflector on the probe sphere.
 
@@ -110,7 +113,7 @@ def simulate(
             bar.update(task, completed=fraction, description=f"{method} {loaded.name}: {stage}")
 
         ds = run(loaded, method=method, device=device, progress=report, total=total,
-                 save_field=save_field, samples_per_wavelength=samples_per_wavelength)
+                 save_field=save_field, samples_per_wavelength=samples_per_wavelength, edges=edges)
     save(ds, output)
     out.print(f"{output}: {summary(ds)}", highlight=False, soft_wrap=True)
 
@@ -170,8 +173,21 @@ def paper_command(
     grid: int = typer.Option(256, help="Aperture grid points across the diameter."),
     refine: int = typer.Option(3, help="GO refinement iterations of raysim's default row."),
     device: str = typer.Option("cpu", help="Warp device: cpu or cuda."),
+    po: bool = typer.Option(False, "--po", help="The PO & PTD frequency sweep (Table 3) instead of "
+                                               "the GO case (Table 2). Slow on a CPU: about an hour."),
+    frequencies: str = typer.Option("0.1e9,0.3e9,0.6e9,1e9,3e9", "--frequencies",
+                                    help="--po: frequencies (Hz), comma-separated."),
+    coarse_3ghz: str = typer.Option("90x36", "--coarse-3ghz",
+                                    help="--po: sphere grid (n_theta x n_phi) at 2 GHz and above "
+                                         "(90x360 below); 90x360 for the full grid."),
+    fields: Path | None = typer.Option(None, "--fields",
+                                       help="--po: folder to keep each FieldMap in and reuse it from."),
 ) -> None:
-    """The paper's GO case: its Table 2 figures beside raysim's on the project's own GO data."""
+    """The paper's tables beside raysim's: the GO case (Table 2), or with --po the PO & PTD
+    frequency sweep (Table 3)."""
+    if po:
+        _paper_po(grid, refine, device, frequencies, coarse_3ghz, fields)
+        return
     from solver.paper import compare
 
     rows = compare(scale=scale, N=grid, refine=refine, device=device)
@@ -182,6 +198,41 @@ def paper_command(
         paper = f"{row.paper_rrms * 100:.2f} %" if row.paper_rrms is not None else "-"
         out.print(f"{row.method:44s} {paper:>10s} {row.paper_seconds:>9s} "
                   f"{row.rrms * 100:7.3f} % {row.rms_m * 1e6:8.2f} {row.seconds:7.2f}",
+                  highlight=False, soft_wrap=True)
+
+
+def _paper_po(grid: int, refine: int, device: str, frequencies: str, coarse: str,
+              fields: Path | None) -> None:
+    """``raysim paper --po``: Table 3 with the project's PO + PTD data, the paper beside it."""
+    from solver.invert import DEFAULT_SOLVER
+    from solver.paper import po_sweep
+
+    try:
+        freqs = [float(f) for f in frequencies.split(",") if f.strip()]
+        n_theta, n_phi = (int(n) for n in coarse.lower().split("x"))
+    except ValueError as exc:
+        raise RaysimError(f"--frequencies takes Hz separated by commas and --coarse-3ghz a grid "
+                          f"such as 90x36 ({exc})") from exc
+    if not freqs or min(freqs) <= 0 or n_theta < 1 or n_phi < 1:
+        raise RaysimError("--frequencies must be positive (Hz) and --coarse-3ghz at least 1x1")
+    rows = po_sweep(freqs, N=grid, coarse=(n_theta, n_phi), refine=refine, device=device,
+                    fields_dir=fields, log=lambda line: console.print(f"paper: {line}", highlight=False))
+    out.print(f"paper Table 3: PO & PTD (rim) data, Eq. 8 (1.2 mm), R = 10 m, N = {grid}", highlight=False)
+    out.print(f"paper setting: FDM + Gauss-Seidel, 1000 iterations, linear; raysim default: "
+              f"{DEFAULT_SOLVER}, GO refinement {refine}", highlight=False, soft_wrap=True)
+    out.print(f"{'f GHz':>6s} {'sphere grid':>11s} {'paper RMS um':>12s} {'paper RRMS':>10s} "
+              f"{'RMS um':>8s} {'RRMS':>8s} {'default RMS um':>14s} {'default RRMS':>12s} "
+              f"{'sim s':>7s}", highlight=False, soft_wrap=True)
+    for r in rows:
+        paper_rms = f"{r.paper_rms_m * 1e6:.2f}" if r.paper_rms_m is not None else "-"
+        paper_rrms = f"{r.paper_rrms * 100:.2f} %" if r.paper_rrms is not None else "-"
+        out.print(f"{r.frequency_hz / 1e9:6g} {f'{r.n_theta} x {r.n_phi}':>11s} {paper_rms:>12s} "
+                  f"{paper_rrms:>10s} {r.rms_m * 1e6:8.2f} {r.rrms * 100:6.2f} % "
+                  f"{r.default_rms_m * 1e6:14.2f} {r.default_rrms * 100:10.2f} % {r.seconds_simulate:7.0f}",
+                  highlight=False, soft_wrap=True)
+    if any(r.n_phi != 360 for r in rows):
+        out.print("coarse grids (fewer phi cells) keep the CPU time in check; the Eq. 8 "
+                  "deformation is axially symmetric, so they lose nothing it can show",
                   highlight=False, soft_wrap=True)
 
 
@@ -238,8 +289,180 @@ def report(
 
 # --- scan, rig (hardware) --------------------------------------------------------------
 
+rig_app = typer.Typer(help="The scanning rig (track, slider, rotation, power meter).",
+                      no_args_is_help=True)
+app.add_typer(rig_app, name="rig")
+
+
+def _vector3(text: str | None, option: str) -> tuple[float, float, float] | None:
+    """'X,Y,Z' (m) to a tuple, or None."""
+    if text is None:
+        return None
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3:
+        raise RaysimError(f"{option} '{text}': give three numbers X,Y,Z in metres")
+    return values  # type: ignore[return-value]
+
+
+@app.command()
+def scan(
+    plan: Path = typer.Argument(..., help="Scan plan (TOML), e.g. scenes/scan_demo.toml."),
+    output: Path = typer.Option(..., "-o", "--output", help="Measured FieldMap to write (.nc)."),
+    resource: list[str] | None = typer.Option(
+        None, "--resource", help="Instrument address ROLE=VISA, ROLE meter or motion (twice)."),
+    simulate: Path | None = typer.Option(
+        None, "--simulate", help="Scan this FieldMap with a simulated rig on loopback sockets."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the journal of a stopped scan."),
+    rig: Path | None = typer.Option(None, "--rig", help="Rig file (TOML) over the plan's."),
+    journal: Path | None = typer.Option(None, "--journal", help="Journal file [OUTPUT.journal]."),
+    from_journal: bool = typer.Option(
+        False, "--from-journal", help="Write the FieldMap from the journal alone (no rig)."),
+    seed: int | None = typer.Option(None, "--seed", help="Simulator: noise and drift seed."),
+    noise_db: float | None = typer.Option(None, "--noise-db", help="Simulator: noise (dB rms)."),
+    drift_db: float | None = typer.Option(None, "--drift-db",
+                                          help="Simulator: drift amplitude (dB)."),
+    centre_offset: str | None = typer.Option(
+        None, "--centre-offset", help="Simulator: true track-centre offset X,Y,Z from the "
+        "focus (m)."),
+    time_scale: float | None = typer.Option(
+        None, "--time-scale", help="Simulator: move-time factor (0 instant, 1 real time)."),
+) -> None:
+    """Scan the hemisphere with the rig (or a simulated one) into a measured FieldMap.
+
+    Every completed sample is journaled to disk first; after a stop (Ctrl-C, kill, an
+    instrument fault) the same command with --resume continues where it stopped.
+    """
+    import dataclasses
+    import signal
+
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    from hardware.plan import load_plan
+    from hardware.session import fieldmap_from_journal, journal_path, parse_resources
+    from hardware.session import scan as run_scan
+    from raysim.field import save
+
+    scan_plan = load_plan(plan, rig=rig)
+    output = output_path(output)
+    if from_journal:
+        ds = fieldmap_from_journal(scan_plan, journal or journal_path(output))
+        save(ds, output)
+        out.print(f"wrote {output} from the journal: {ds.attrs['samples_measured']} of "
+                  f"{ds.attrs['samples_expected']} samples")
+        return
+    overrides = {"seed": seed, "noise_db": noise_db, "drift_db": drift_db,
+                 "centre_offset": _vector3(centre_offset, "--centre-offset"),
+                 "time_scale": time_scale}
+    for name in ("noise_db", "drift_db", "time_scale"):
+        if overrides[name] is not None and not 0.0 <= overrides[name] < 1e3:
+            raise RaysimError(f"--{name.replace('_', '-')} must be >= 0")
+    sim = dataclasses.replace(scan_plan.simulator,
+                              **{k: v for k, v in overrides.items() if v is not None})
+    done = [0, 0]
+
+    def on_signal(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, on_signal)
+    columns = (TextColumn("scan"), BarColumn(), MofNCompleteColumn(), TextColumn("elapsed"),
+               TimeElapsedColumn(), TextColumn("left"), TimeRemainingColumn())
+    try:
+        with Progress(*columns, console=console, disable=not console.is_terminal) as bar:
+            task = bar.add_task("scan", total=None)
+
+            def progress(steps_done: int, steps_total: int) -> None:
+                if done[1] == 0:
+                    bar.reset(task, total=steps_total, completed=steps_done)
+                bar.update(task, completed=steps_done)
+                done[:] = [steps_done, steps_total]
+
+            result = run_scan(scan_plan, output, resources=parse_resources(resource),
+                              simulate=simulate, sim=sim, resume=resume, journal=journal,
+                              progress=progress)
+    except KeyboardInterrupt:
+        where = journal or journal_path(output)
+        console.print(f"[bold red]interrupted:[/] {done[0]} of {done[1]} steps are in {where}; "
+                      "run the same command with --resume to continue", highlight=False)
+        raise typer.Exit(code=130) from None
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    ds = result.fieldmap
+    out.print(f"wrote {result.output}: {ds.attrs['samples_measured']} samples, "
+              f"{result.steps_taken} of {result.steps_total} steps taken now "
+              f"(journal {result.journal})")
+
+
+@rig_app.command("park")
+def rig_park(
+    rig: Path = typer.Argument(..., help="Rig file (TOML), e.g. scenes/rig.toml."),
+    resource: list[str] | None = typer.Option(
+        None, "--resource", help="Motion controller address motion=VISA."),
+    simulate: bool = typer.Option(False, "--simulate", help="Park a simulated rig."),
+) -> None:
+    """Move the probe to the park position that clears the optical path."""
+    import math
+
+    from hardware.rig import load_rig
+    from hardware.session import park, parse_resources
+
+    rig_obj, _ = load_rig(rig)
+    slider, rotation = park(rig_obj, resources=parse_resources(resource), simulate=simulate)
+    out.print(f"parked: slider {math.degrees(slider):.4f} deg, rotation "
+              f"{math.degrees(rotation):.4f} deg")
+
+
 
 # --- dataset (raysim.dataset) ----------------------------------------------------------
+@app.command()
+def dataset(
+    spec: Path = typer.Argument(..., help="Dataset spec TOML (see scenes/dataset_demo.toml)."),
+    output: Path = typer.Option(..., "-o", "--output", help="Zarr store to write (a folder, data.zarr)."),
+    workers: int | None = typer.Option(None, "--workers",
+                                       help="Local worker processes (default: one per usable core)."),
+    scheduler: str | None = typer.Option(None, "--scheduler",
+                                         help="Address of a running Dask scheduler (tcp://host:port) "
+                                              "instead of a local cluster."),
+    resume: bool = typer.Option(False, "--resume", help="Complete an interrupted store of the same spec."),
+    device: str = typer.Option("cpu", "--device", help="Warp device of the workers: cpu or cuda."),
+    threads: int = typer.Option(1, "--threads", help="CPU threads of each Warp launch in a worker."),
+) -> None:
+    """Simulate a dataset of random surface errors into a Zarr store, on Dask.
+
+    Each sample's deformation (m) and intensity on the probe sphere are written by the worker
+    that made it; a failed sample is recorded with its reason and the others go on. Exit
+    status 1 when some samples failed (rerun with --resume to retry them).
+    """
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from raysim.dataset import generate, load_spec
+
+    loaded = load_spec(spec)
+    if "://" not in str(output):
+        output.expanduser().resolve().parent.mkdir(parents=True, exist_ok=True)
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=console, transient=True) as bar:
+        task = bar.add_task(f"dataset {loaded.name}", total=loaded.samples)
+
+        def report(done: int, failed: int, total: int) -> None:
+            note = f" ({failed} failed)" if failed else ""
+            bar.update(task, completed=done + failed, description=f"dataset {loaded.name}{note}")
+
+        result = generate(loaded, output, workers=workers, scheduler=scheduler, resume=resume,
+                          device=device, threads=threads, progress=report)
+    out.print(result.summary(), highlight=False, soft_wrap=True)
+    if result.failed or result.ideal_failures:
+        raise typer.Exit(code=1)
+
 
 
 def main() -> None:

@@ -19,3 +19,8 @@ class FieldMapError(RaysimError, ValueError):
 
 class DeviceError(RaysimError, RuntimeError):
     """The requested compute device (for example ``cuda``) is not available."""
+
+
+class InstrumentError(RaysimError, RuntimeError):
+    """An instrument is unreachable, silent, not the expected model, reports an error in its
+    queue, or a motion does not reach its target."""

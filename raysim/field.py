@@ -26,7 +26,7 @@ import xarray as xr
 
 from raysim import __version__
 from raysim.errors import FieldMapError
-from raysim.netcdf import write_atomic
+from raysim.netcdf import read, write_atomic
 from raysim.sphere import SphereGrid
 
 METHODS = ("go", "po", "po+ptd", "measured")
@@ -166,15 +166,7 @@ def save(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
 
 def load(path: str | os.PathLike[str]) -> xr.Dataset:
     """Read and check a FieldMap; raise :class:`FieldMapError` with one line if it is unusable."""
-    path = Path(path)
-    if not path.is_file():
-        raise FieldMapError(f"{path}: no such file")
-    try:
-        with xr.open_dataset(path) as ds:
-            loaded = ds.load()
-    except (OSError, ValueError) as exc:
-        raise FieldMapError(f"{path}: not a readable NetCDF file ({exc.__class__.__name__})") from exc
-    return validate(loaded, source=str(path))
+    return validate(read(path, FieldMapError), source=str(path))
 
 
 def _checked(values: np.ndarray, shape: tuple[int, int], name: str) -> np.ndarray:

@@ -13,6 +13,18 @@ from pathlib import Path
 import xarray as xr
 
 
+def read(path: str | os.PathLike[str], error: type[Exception]) -> xr.Dataset:
+    """Load a NetCDF file whole into memory; raise ``error`` with one line if it cannot be read."""
+    path = Path(path)
+    if not path.is_file():
+        raise error(f"{path}: no such file")
+    try:
+        with xr.open_dataset(path) as ds:
+            return ds.load()
+    except Exception as exc:  # every backend failure means "not a NetCDF file we can read"
+        raise error(f"{path}: not a readable NetCDF file ({exc.__class__.__name__})") from exc
+
+
 def write_atomic(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
     """Write ``ds`` to ``path`` as NetCDF-4 so that ``path`` is either old or complete."""
     path = Path(path)

@@ -10,30 +10,19 @@ and the rest of raysim sees metres, hertz and radians. Every defect raises
 
 from __future__ import annotations
 
-import difflib
 import math
 import tomllib
-from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from raysim.deformation import (
-    Deformation,
-    GaussianBumps,
-    GriddedMap,
-    NoDeformation,
-    PanelRigid,
-    PaperDeformation,
-    Sum,
-    Zernike,
-    paper_peak_to_peak,
-)
+from raysim.deformation import Deformation
 from raysim.errors import SceneError
 from raysim.panels import PanelLayout
+from raysim.scene_deformation import deformation_of
 from raysim.sphere import SphereGrid, theta_rim
+from raysim.tomlcheck import INT, LIST, NUM, STR, TABLE, TABLES, KeyChecker, resolve
 
 DEFAULT_RESOLUTION = 0.15  # m: triangle edge that keeps GO ratios within 1 % of the signal
 
@@ -128,30 +117,18 @@ class Scene:
 
 
 # --- the schema: section -> key -> expected kind ------------------------------------------
-_NUM, _INT, _STR, _LIST, _TABLES = "number", "integer", "string", "list", "list of tables"
 _SCHEMA: dict[str, dict[str, str]] = {
-    "": {"name": _STR, "description": _STR, "dish": "table", "panels": "table",
-         "deformation": _TABLES, "source": "table", "sphere": "table", "go": "table"},
-    "dish": {"diameter_m": _NUM, "focal_length_m": _NUM, "resolution_m": _NUM, "mesh": _STR,
-             "ideal_mesh": _STR, "mesh_unit_m": _NUM},
-    "panels": {"ring_edges_m": _LIST, "panels_per_ring": _LIST, "gap_m": _NUM, "phi0_deg": _NUM},
-    "source": {"frequency_hz": _NUM, "incidence_theta_deg": _NUM, "incidence_phi_deg": _NUM,
-               "polarization_deg": _NUM},
-    "sphere": {"radius_m": _NUM, "n_theta": _INT, "n_phi": _INT, "theta_min_deg": _NUM,
-               "theta_max_deg": _NUM, "phi_min_deg": _NUM, "phi_max_deg": _NUM},
-    "go": {"subdivisions": _INT},
+    "": {"name": STR, "description": STR, "dish": TABLE, "panels": TABLE,
+         "deformation": TABLES, "source": TABLE, "sphere": TABLE, "go": TABLE},
+    "dish": {"diameter_m": NUM, "focal_length_m": NUM, "resolution_m": NUM, "mesh": STR,
+             "ideal_mesh": STR, "mesh_unit_m": NUM},
+    "panels": {"ring_edges_m": LIST, "panels_per_ring": LIST, "gap_m": NUM, "phi0_deg": NUM},
+    "source": {"frequency_hz": NUM, "incidence_theta_deg": NUM, "incidence_phi_deg": NUM,
+               "polarization_deg": NUM},
+    "sphere": {"radius_m": NUM, "n_theta": INT, "n_phi": INT, "theta_min_deg": NUM,
+               "theta_max_deg": NUM, "phi_min_deg": NUM, "phi_max_deg": NUM},
+    "go": {"subdivisions": INT},
 }
-_DEFORMATION_KEYS: dict[str, dict[str, str]] = {
-    "none": {},
-    "paper": {"scale": _NUM, "peak_to_peak_um": _NUM},
-    "zernike": {"terms": _LIST, "radius_m": _NUM},
-    "bumps": {"bumps": _TABLES},
-    "panel_rigid": {"rms_um": _NUM, "seed": _INT, "table": _STR},
-    "map": {"file": _STR, "scale": _NUM},
-}
-_BUMP_KEYS = {"x_m": _NUM, "y_m": _NUM, "amplitude_um": _NUM, "sigma_m": _NUM}
-
-
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene TOML file (relative file names resolve beside it)."""
     path = Path(path)
@@ -168,89 +145,28 @@ def parse_scene(text: str, source: str = "scene", base: Path | None = None) -> S
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{source}: not valid TOML ({exc})") from exc
     base = base or Path.cwd()
-    ctx = _Context(source)
-    ctx.check_keys(raw, "")
+    ctx = KeyChecker(source)
+    ctx.check_keys(raw, "", _SCHEMA[""])
     dish = _dish(ctx, raw.get("dish", {}), base)
     panels = _panels(ctx, raw.get("panels"), dish)
     source_ = _source(ctx, raw.get("source", {}))
     sphere = _sphere(ctx, raw.get("sphere", {}), dish)
     go = raw.get("go", {})
-    ctx.check_keys(go, "go")
+    ctx.check_keys(go, "go", _SCHEMA["go"])
     subdivisions = ctx.integer(go, "go", "subdivisions", 1, lo=1, hi=16)
-    deformation = _deformation(ctx, raw.get("deformation", []), dish, panels, base)
+    deformation = deformation_of(ctx, raw.get("deformation", []), dish, panels, base)
     name = raw.get("name") or (Path(source).stem if source != "scene" else "scene")
     return Scene(name=str(name), dish=dish, panels=panels, deformation=deformation,
                  source=source_, sphere=sphere, subdivisions=subdivisions, text=text,
                  path=Path(source) if source != "scene" else None)
 
 
-class _Context:
-    """Key checks that name the file and key in each message."""
-
-    def __init__(self, source: str) -> None:
-        self.source = source
-
-    def fail(self, where: str, message: str) -> SceneError:
-        return SceneError(f"{self.source}: {where} {message}" if where else f"{self.source}: {message}")
-
-    def check_keys(self, table: Any, section: str, schema: Mapping[str, str] | None = None) -> None:
-        if not isinstance(table, dict):
-            raise self.fail(f"[{section}]", "must be a table")
-        known = schema if schema is not None else _SCHEMA[section]
-        for key, value in table.items():
-            if key not in known:
-                hint = difflib.get_close_matches(key, list(known), n=1)
-                extra = f" (did you mean '{hint[0]}'?)" if hint else f" (known: {', '.join(known)})"
-                name = f"{section}.{key}" if section else key
-                raise self.fail("", f"unknown key '{name}'{extra}")
-            _check_kind(self, f"{section}.{key}" if section else key, value, known[key])
-
-    def number(self, table, section, key, default=None, lo=None, hi=None, lo_open=False):
-        name = f"{section}.{key}"
-        if key not in table:
-            if default is None:
-                raise self.fail("", f"missing key '{name}'")
-            return float(default)
-        value = float(table[key])
-        if not math.isfinite(value):
-            raise self.fail("", f"'{name}' must be finite, got {value}")
-        if lo is not None and (value <= lo if lo_open else value < lo):
-            raise self.fail("", f"'{name}' must be {'>' if lo_open else '>='} {lo:g}, got {value:g}")
-        if hi is not None and value > hi:
-            raise self.fail("", f"'{name}' must be <= {hi:g}, got {value:g}")
-        return value
-
-    def integer(self, table, section, key, default, lo=None, hi=None) -> int:
-        value = int(table.get(key, default))
-        name = f"{section}.{key}"
-        if lo is not None and value < lo:
-            raise self.fail("", f"'{name}' must be >= {lo}, got {value}")
-        if hi is not None and value > hi:
-            raise self.fail("", f"'{name}' must be <= {hi}, got {value}")
-        return value
-
-
-def _check_kind(ctx: _Context, name: str, value: Any, kind: str) -> None:
-    ok = {
-        _NUM: isinstance(value, int | float) and not isinstance(value, bool),
-        _INT: isinstance(value, int) and not isinstance(value, bool),
-        _STR: isinstance(value, str),
-        _LIST: isinstance(value, list),
-        _TABLES: isinstance(value, list) and all(isinstance(v, dict) for v in value),
-        "table": isinstance(value, dict),
-    }[kind]
-    if not ok:
-        unit = name.rsplit("_", 1)[-1] if "_" in name else ""
-        hint = f" (a bare number in {unit}, no unit text)" if kind == _NUM and isinstance(value, str) else ""
-        raise ctx.fail("", f"'{name}' must be a {kind}, got {value!r}{hint}")
-
-
-def _dish(ctx: _Context, table: dict, base: Path) -> Dish:
-    ctx.check_keys(table, "dish")
+def _dish(ctx: KeyChecker, table: dict, base: Path) -> Dish:
+    ctx.check_keys(table, "dish", _SCHEMA["dish"])
     mesh = table.get("mesh")
-    mesh_path = _resolve(ctx, base, mesh, "dish.mesh") if mesh else None
+    mesh_path = resolve(ctx, base, mesh, "dish.mesh") if mesh else None
     ideal = table.get("ideal_mesh")
-    ideal_path = _resolve(ctx, base, ideal, "dish.ideal_mesh") if ideal else None
+    ideal_path = resolve(ctx, base, ideal, "dish.ideal_mesh") if ideal else None
     if ideal_path and not mesh_path:
         raise ctx.fail("", "'dish.ideal_mesh' needs 'dish.mesh'")
     D = F = None
@@ -272,18 +188,10 @@ def _dish(ctx: _Context, table: dict, base: Path) -> Dish:
     return Dish(D, F, resolution, mesh_path, ideal_path, unit)
 
 
-def _resolve(ctx: _Context, base: Path, name: str, key: str) -> Path:
-    path = Path(name)
-    path = path if path.is_absolute() else base / path
-    if not path.is_file():
-        raise ctx.fail("", f"'{key}': no such file {path}")
-    return path
-
-
-def _panels(ctx: _Context, table: dict | None, dish: Dish) -> PanelLayout | None:
+def _panels(ctx: KeyChecker, table: dict | None, dish: Dish) -> PanelLayout | None:
     if table is None:
         return None
-    ctx.check_keys(table, "panels")
+    ctx.check_keys(table, "panels", _SCHEMA["panels"])
     if "ring_edges_m" not in table or "panels_per_ring" not in table:
         raise ctx.fail("", "[panels] needs 'ring_edges_m' and 'panels_per_ring'")
     edges = table["ring_edges_m"]
@@ -318,8 +226,8 @@ def _check_frequency(f: float, name: str) -> None:
                          f"for {f:g} GHz write {f * 1e9:g}")
 
 
-def _source(ctx: _Context, table: dict) -> Source:
-    ctx.check_keys(table, "source")
+def _source(ctx: KeyChecker, table: dict) -> Source:
+    ctx.check_keys(table, "source", _SCHEMA["source"])
     f = ctx.number(table, "source", "frequency_hz")
     try:
         _check_frequency(f, "'source.frequency_hz'")
@@ -333,8 +241,8 @@ def _source(ctx: _Context, table: dict) -> Source:
     return Source(f, math.radians(t), math.radians(p), math.radians(pol))
 
 
-def _sphere(ctx: _Context, table: dict, dish: Dish) -> SphereGrid:
-    ctx.check_keys(table, "sphere")
+def _sphere(ctx: KeyChecker, table: dict, dish: Dish) -> SphereGrid:
+    ctx.check_keys(table, "sphere", _SCHEMA["sphere"])
     R = ctx.number(table, "sphere", "radius_m", lo=0.0, lo_open=True)
     if dish.focal_length is not None and R >= dish.focal_length:
         raise ctx.fail("", f"'sphere.radius_m' = {R:g} m must be smaller than the focal length "
@@ -358,103 +266,3 @@ def _sphere(ctx: _Context, table: dict, dish: Dish) -> SphereGrid:
                       math.radians(p0), math.radians(p1))
 
 
-def _deformation(ctx: _Context, entries: list, dish: Dish, panels: PanelLayout | None,
-                 base: Path) -> Deformation:
-    parts: list[Deformation] = []
-    for i, entry in enumerate(entries):
-        where = f"deformation[{i}]"
-        kind = entry.get("type")
-        if kind not in _DEFORMATION_KEYS:
-            raise ctx.fail("", f"'{where}.type' must be one of {', '.join(_DEFORMATION_KEYS)}, got {kind!r}")
-        body = {k: v for k, v in entry.items() if k != "type"}
-        ctx.check_keys(body, where, _DEFORMATION_KEYS[kind])
-        parts.extend(_one_deformation(ctx, where, kind, body, dish, panels, base))
-    if not parts:
-        return NoDeformation()
-    return parts[0] if len(parts) == 1 else Sum(tuple(parts))
-
-
-def _one_deformation(ctx, where, kind, body, dish, panels, base) -> list[Deformation]:
-    if kind == "none":
-        return []
-    if kind in ("paper", "zernike") and (dish.diameter is None or dish.focal_length is None):
-        raise ctx.fail("", f"'{where}' ({kind}) needs dish.diameter_m and dish.focal_length_m")
-    if kind == "paper":
-        if "scale" in body and "peak_to_peak_um" in body:
-            raise ctx.fail("", f"'{where}': give 'scale' or 'peak_to_peak_um', not both")
-        scale = ctx.number(body, where, "scale", 1.0)
-        if "peak_to_peak_um" in body:
-            ptp = ctx.number(body, where, "peak_to_peak_um", lo=0.0) * 1e-6
-            scale = ptp / paper_peak_to_peak(dish.diameter, dish.focal_length)
-        return [PaperDeformation(dish.diameter, dish.focal_length, scale)]
-    if kind == "zernike":
-        rows = body.get("terms", [])
-        ok = all(isinstance(r, list) and len(r) == 3 and isinstance(r[0], int) and isinstance(r[1], int)
-                 and isinstance(r[2], int | float) for r in rows)
-        if not rows or not ok:
-            raise ctx.fail("", f"'{where}.terms' must be a list of [n, m, coefficient_um] rows")
-        for _, _, c in rows:
-            if abs(c) > 1e5:
-                raise ctx.fail("", f"'{where}.terms' coefficient {c:g} um is over 10 cm: units are um")
-        radius = ctx.number(body, where, "radius_m", dish.diameter / 2, lo=0.0, lo_open=True)
-        try:
-            return [Zernike(tuple((n, m, c * 1e-6) for n, m, c in rows), radius)]
-        except SceneError as exc:
-            raise ctx.fail("", f"'{where}': {exc}") from exc
-    if kind == "bumps":
-        bumps = []
-        for j, b in enumerate(body.get("bumps", [])):
-            name = f"{where}.bumps[{j}]"
-            ctx.check_keys(b, name, _BUMP_KEYS)
-            amp = ctx.number(b, name, "amplitude_um")
-            if abs(amp) > 1e5:
-                raise ctx.fail("", f"'{name}.amplitude_um' = {amp:g} is over 10 cm: units are um")
-            bumps.append((ctx.number(b, name, "x_m"), ctx.number(b, name, "y_m"), amp * 1e-6,
-                          ctx.number(b, name, "sigma_m", lo=0.0, lo_open=True)))
-        if not bumps:
-            raise ctx.fail("", f"'{where}' needs at least one entry in 'bumps'")
-        return [GaussianBumps(tuple(bumps))]
-    if kind == "panel_rigid":
-        if panels is None:
-            raise ctx.fail("", f"'{where}' (panel_rigid) needs a [panels] layout")
-        if "table" in body:
-            return [_panel_table(ctx, where, _resolve(ctx, base, body["table"], f"{where}.table"), panels)]
-        rms = ctx.number(body, where, "rms_um", lo=0.0) * 1e-6
-        if rms > 0.1:
-            raise ctx.fail("", f"'{where}.rms_um' is over 10 cm: units are um")
-        seed = ctx.integer(body, where, "seed", 0, lo=0)
-        return [PanelRigid.random(panels, rms, seed)]
-    if kind == "map":
-        if "file" not in body:
-            raise ctx.fail("", f"'{where}' (map) needs 'file' (NetCDF or CSV x,y,dz in m)")
-        path = _resolve(ctx, base, body["file"], f"{where}.file")
-        try:
-            return [GriddedMap.from_file(path, ctx.number(body, where, "scale", 1.0))]
-        except SceneError as exc:
-            raise ctx.fail("", f"'{where}': {exc}") from exc
-    raise AssertionError(kind)  # pragma: no cover - the schema lists every kind
-
-
-def _panel_table(ctx: _Context, where: str, path: Path, panels: PanelLayout) -> PanelRigid:
-    """CSV with header panel,piston_um,tilt_x_urad,tilt_y_urad (tilts = d delta/dx, dy)."""
-    try:
-        data = np.genfromtxt(path, delimiter=",", names=True, dtype=np.float64)
-    except ValueError as exc:
-        raise ctx.fail("", f"'{where}.table' {path}: bad CSV ({exc})") from exc
-    need = {"panel", "piston_um", "tilt_x_urad", "tilt_y_urad"}
-    if data.dtype.names is None or not need <= set(data.dtype.names):
-        raise ctx.fail("", f"'{where}.table' {path}: header must be panel,piston_um,tilt_x_urad,tilt_y_urad")
-    data = np.atleast_1d(data)
-    ids = data["panel"]
-    if not np.all(np.isfinite(ids)) or np.any((ids < 0) | (ids >= panels.n_panels)) or np.any(ids % 1):
-        raise ctx.fail("", f"'{where}.table' {path}: panel ids must be integers 0..{panels.n_panels - 1}")
-    piston = np.zeros(panels.n_panels)
-    tx = np.zeros(panels.n_panels)
-    ty = np.zeros(panels.n_panels)
-    k = ids.astype(np.int64)
-    piston[k] = data["piston_um"] * 1e-6
-    tx[k] = data["tilt_x_urad"] * 1e-6
-    ty[k] = data["tilt_y_urad"] * 1e-6
-    if not (np.all(np.isfinite(piston)) and np.all(np.isfinite(tx)) and np.all(np.isfinite(ty))):
-        raise ctx.fail("", f"'{where}.table' {path}: every row needs numbers")
-    return PanelRigid(panels, piston, tx, ty)

@@ -26,13 +26,14 @@ Progress = Callable[[str, float], None]
 
 def simulate(scene: Scene, method: str = "go", device: str | None = "cpu",
              progress: Progress | None = None, *, total: bool = False, save_field: bool = False,
-             samples_per_wavelength: float | None = None) -> xr.Dataset:
+             samples_per_wavelength: float | None = None, edges: str | None = None) -> xr.Dataset:
     """Simulate ``scene`` and return its FieldMap (an ``xarray.Dataset``; see raysim.field).
 
     Parameters
     ----------
     scene : a validated scene (``raysim.load_scene``).
-    method : ``go`` (geometric optics), ``po`` (physical optics); ``po+ptd`` where it exists.
+    method : ``go`` (geometric optics), ``po`` (physical optics) or ``po+ptd`` (PO plus the
+        fringe field of the edges, :mod:`raysim.ptd`).
     device : ``cpu`` or ``cuda`` (Warp device).
     progress : optional callback (stage name, fraction done in 0..1).
     total : PO only: intensity of the total field (scattered plus incident) at the probe,
@@ -40,16 +41,22 @@ def simulate(scene: Scene, method: str = "go", device: str | None = "cpu",
     save_field : PO only: also store the complex field components (V/m per V/m incident).
     samples_per_wavelength : PO only: Gauss points per wavelength along the mesh faces'
         edges (default :data:`raysim.po.DEFAULT_SAMPLES_PER_WAVELENGTH`).
+    edges : ``po+ptd`` only: ``rim`` (the outer rim, the paper's PTD; the default) or ``all``
+        (the rim and every panel edge beside a gap).
     """
     if method not in METHODS:
         raise RaysimError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
     report = progress or (lambda stage, fraction: None)
-    if method == "po":
-        return _simulate_po(scene, device, report, total, save_field, samples_per_wavelength)
-    if method != "go":
-        raise RaysimError(f"method {method!r} is not available yet in this version")
+    if edges is not None and method != "po+ptd":
+        raise RaysimError("--edges applies to --method po+ptd only")
+    if edges is not None and edges not in ("rim", "all"):
+        raise RaysimError(f"unknown edge set {edges!r}: use rim or all")
+    if method in ("po", "po+ptd"):
+        return _simulate_po(scene, device, report, total, save_field, samples_per_wavelength,
+                            edges=(edges or "rim") if method == "po+ptd" else None)
     if total or save_field or samples_per_wavelength is not None:
-        raise RaysimError("--total, --save-field and --samples-per-wavelength apply to --method po only")
+        raise RaysimError("--total, --save-field and --samples-per-wavelength apply to --method po "
+                          "and po+ptd only")
     start = time.perf_counter()
     report("mesh", 0.0)
     ideal, deformed = reflectors_for(scene)
@@ -95,10 +102,12 @@ def simulate(scene: Scene, method: str = "go", device: str | None = "cpu",
 
 
 def _simulate_po(scene: Scene, device: str | None, report: Progress, total: bool, save_field: bool,
-                 samples_per_wavelength: float | None) -> xr.Dataset:
+                 samples_per_wavelength: float | None, edges: str | None = None) -> xr.Dataset:
     """The PO branch of :func:`simulate`: both reflectors through :func:`raysim.po.sphere_field`,
-    intensities at the cell centres (``sampling = centre``)."""
-    from raysim import po
+    intensities at the cell centres (``sampling = centre``). With ``edges`` (``rim`` or
+    ``all``) the fringe field of those edges (:func:`raysim.ptd.sphere_edge_field`) is added:
+    method ``po+ptd``."""
+    from raysim import po, ptd
 
     spw = po.DEFAULT_SAMPLES_PER_WAVELENGTH if samples_per_wavelength is None else samples_per_wavelength
     if not spw > 0:
@@ -116,6 +125,12 @@ def _simulate_po(scene: Scene, device: str | None, report: Progress, total: bool
     result_def = po.sphere_field(deformed, scene.sphere, wave, spw, device,
                                  progress=stage(0.525, "deformed"))
     E_ideal, E_def = result_ideal.E, result_def.E
+    fringe = {}
+    if edges is not None:
+        for name, reflector in (("ideal", ideal), ("deformed", deformed)):
+            fringe[name] = ptd.sphere_edge_field(reflector, scene.sphere, wave, edges, device=device,
+                                                 progress=lambda s, f, n=name: report(f"{n}: {s}", 1.0))
+        E_ideal, E_def = E_ideal + fringe["ideal"].E, E_def + fringe["deformed"].E
     if total:
         E_inc = po.incident_field(scene.sphere.points(deformed.F), wave.k, wave.k_hat, wave.e_hat)
         E_inc = E_inc.reshape(E_def.shape)
@@ -144,18 +159,37 @@ def _simulate_po(scene: Scene, device: str | None, report: Progress, total: bool
         "seconds_mesh": mesh_seconds,
         "seconds_total": seconds,
     }
+    if edges is not None:
+        attrs.update({
+            "edges": edges,
+            "edge_theory": "Michaeli fringe equivalent edge currents of a half-plane (raysim.ptd)",
+            "edge_points_per_wavelength": float(ptd.DEFAULT_POINTS_PER_WAVELENGTH),
+            "edge_points": int(fringe["deformed"].n_points),
+            "edge_points_lit": int(fringe["deformed"].n_lit),
+            "seconds_edges": fringe["ideal"].seconds + fringe["deformed"].seconds,
+        })
+        layout = deformed.layout
+        if edges == "all" and layout is not None and layout.gap > 0:
+            attrs["edge_gap_wavelengths"] = layout.gap / wave.wavelength
+            attrs["edge_note"] = ("each panel edge is an isolated half-plane: the fringe currents of a "
+                                  "gap's two edges add whatever the gap's width, which holds for gaps "
+                                  "wider than about a wavelength only")
     extra = {}
     if save_field:
         dims = ("theta", "phi", "component")
         unit = {"units": "1", "reference": "incident plane-wave E amplitude",
                 "component": "x, y, z in the reflector frame", "field": attrs["field"]}
-        for name, E in (("E", E_def), ("E_ideal", E_ideal)):
+        fields = [("E", E_def), ("E_ideal", E_ideal)]
+        if edges is not None:  # the edges' share, so that PO alone is E - E_edges
+            fields += [("E_edges", fringe["deformed"].E), ("E_edges_ideal", fringe["ideal"].E)]
+        for name, E in fields:
             extra[f"{name}_re"] = (dims, E.real, {**unit, "long_name": f"real part of {name}"})
             extra[f"{name}_im"] = (dims, E.imag, {**unit, "long_name": f"imaginary part of {name}"})
     ds = fieldmap(
         scene.sphere, np.sum(np.abs(E_def) ** 2, axis=-1), np.sum(np.abs(E_ideal) ** 2, axis=-1),
         focal_length=deformed.F, diameter=deformed.D, frequency_hz=scene.source.frequency_hz,
-        method="po", sampling="centre", scene=scene.text, attrs=attrs, extra=extra,
+        method="po" if edges is None else "po+ptd", sampling="centre", scene=scene.text, attrs=attrs,
+        extra=extra,
     )
     if save_field:
         ds = ds.assign_coords(component=("component", ["x", "y", "z"]))
@@ -171,8 +205,10 @@ def summary(ds: xr.Dataset) -> str:
     """One line: points, rays, time and power balance of a simulated FieldMap."""
     n = ds.sizes["theta"] * ds.sizes["phi"]
     lit = np.isfinite(ds["intensity"].values) & (ds["intensity"].values > 0)
-    if ds.attrs.get("method") == "po":
-        return (f"{n} points, {ds.attrs.get('samples', 0):,} samples per reflector, "
+    if ds.attrs.get("method") in ("po", "po+ptd"):
+        edges = (f"{ds.attrs['edges']} edges ({ds.attrs.get('edge_points', 0):,} points), "
+                 if "edges" in ds.attrs else "")
+        return (f"{n} points, {ds.attrs.get('samples', 0):,} samples per reflector, {edges}"
                 f"{ds.attrs.get('pairs', 0):,} pairs at {ds.attrs.get('pair_rate', 0.0) / 1e6:.0f} M/s, "
                 f"{ds.attrs.get('seconds_total', float('nan')):.1f} s")
     return (f"{n} points ({int(lit.sum())} lit), {ds.attrs.get('rays', 0):,} rays, "

@@ -24,7 +24,7 @@ import numpy as np
 import xarray as xr
 
 from raysim import __version__
-from raysim.netcdf import write_atomic
+from raysim.netcdf import read, write_atomic
 from solver.aperture import ApertureGrid
 from solver.errors import SurfaceMapError
 
@@ -116,13 +116,4 @@ def save(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
 
 def load(path: str | os.PathLike[str]) -> xr.Dataset:
     """Read and check a SurfaceMap; raise :class:`SurfaceMapError` with one line if unusable."""
-    path = Path(path)
-    if not path.is_file():
-        raise SurfaceMapError(f"{path}: no such file")
-    try:
-        with xr.open_dataset(path) as ds:
-            loaded = ds.load()
-    except (OSError, ValueError) as exc:
-        raise SurfaceMapError(f"{path}: not a readable NetCDF file ({exc.__class__.__name__})") \
-            from exc
-    return validate(loaded, source=str(path))
+    return validate(read(path, SurfaceMapError), source=str(path))

@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
 from raysim.errors import FieldMapError
+from raysim.netcdf import read
 from raysim.render.backend import RenderError
 from raysim.sphere import ideal_go_cell_mean, ideal_go_intensity, theta_rim
 
@@ -42,14 +42,7 @@ def open_map(path: str | os.PathLike[str]) -> tuple[str, xr.Dataset]:
 
     Raises :class:`RenderError` (one line) for a missing, unreadable or unknown file.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise RenderError(f"{path}: no such file")
-    try:
-        with xr.open_dataset(path) as ds:
-            loaded = ds.load()
-    except Exception as exc:  # every backend failure means "not a NetCDF file we read"
-        raise RenderError(f"{path}: not a readable NetCDF file ({exc.__class__.__name__})") from exc
+    loaded = read(path, RenderError)
     return kind_of(loaded, str(path)), loaded
 
 

@@ -1,0 +1,132 @@
+"""Receiver drift from the reference readings: whether there is any, and the gain to remove.
+
+Every K lines the probe returns to a fixed reference position; the mean of its readings
+there, relative to the first reference, is the receiver's gain at that moment. Removing it
+helps only when the drift exceeds the noise of the references: the scan's intensities must
+be right to about 5e-5 in the ratio, and a noisy gain estimate applied line by line is a
+phi-dependent error the inversion turns into surface error. Hence ``auto``: the gains are
+tested against their own reading noise (reduced chi-square of the reference means about
+their weighted mean) and removed only when the drift is significant; then the smoothing
+that best predicts each reference from the others (leave-one-out) is used, from plain
+interpolation (a drift fast against the reference spacing) to line fits over
+``drift_window`` references (a slow drift under noisy references).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from hardware.journal import Record
+
+#: auto: none unless the references show significant drift, then linear or smooth with the
+#: window chosen by leave-one-out prediction; none: record the references only; linear:
+#: interpolate their gains; smooth: local straight-line fits over ``window`` references.
+DRIFT_MODES = ("auto", "none", "linear", "smooth")
+
+
+@dataclass(frozen=True)
+class Drift:
+    """The references of a scan and the gain taken from them.
+
+    ``index``: step indices; ``power``: mean readings (W); ``gains``: the gain removed at
+    each reference, relative to the first; ``applied``: the mode used (``auto`` resolved);
+    ``window``: the smoothing window used (1 without smoothing); ``chi2``: reduced
+    chi-square of the reference means (NaN when it cannot be formed).
+    """
+
+    index: np.ndarray
+    power: np.ndarray
+    gains: np.ndarray
+    applied: str
+    window: int
+    chi2: float
+
+    def at(self, n: float) -> float:
+        """Gain at step ``n``: linear between the references, held beyond them."""
+        return float(np.interp(n, self.index, self.gains)) if self.index.size else 1.0
+
+
+def drift(references: Sequence[Record], mode: str, window: int) -> Drift:
+    """The drift of a scan from its reference records, corrected per ``mode``."""
+    index = np.array([r.n for r in references], dtype=np.float64)
+    power = np.array([np.mean(r.power) for r in references])
+    sem = np.array([np.std(r.power, ddof=1) / math.sqrt(len(r.power)) if len(r.power) > 1
+                    else np.nan for r in references])
+    chi2 = reduced_chi2(power, sem)
+    applied = mode
+    if mode == "auto":
+        applied = "none"
+        if not math.isfinite(chi2) or chi2 > chi2_limit(index.size):
+            window = best_window(index, power, window)
+            applied = "linear" if window == 1 else "smooth"
+    if applied != "smooth":
+        window = 1
+    gains = reference_gains(index, power, applied, window)
+    return Drift(index, power, gains, applied, window, chi2)
+
+
+def best_window(index: np.ndarray, power: np.ndarray, largest: int) -> int:
+    """The smoothing window (1: none) whose fits best predict each reference from the others.
+
+    Window w >= 3 fits a line to the w - 1 nearest other references; window 1 draws it
+    through the 2 nearest (interpolation between the neighbours). Mean squared prediction
+    error over all references; the smallest wins, ties to the smaller window.
+    """
+    if index.size < 4:
+        return 1
+    best, best_error = 1, math.inf
+    for window in [1, *range(3, min(largest, index.size) + 1)]:
+        others = 2 if window == 1 else window - 1
+        error = 0.0
+        for m in range(index.size):
+            rest = np.delete(np.arange(index.size), m)
+            near = rest[np.argsort(np.abs(index[rest] - index[m]), kind="stable")[:others]]
+            x, y = index[near], power[near]
+            slope, offset = np.polyfit(x - x.mean(), y, 1)
+            error += (offset + slope * (index[m] - x.mean()) - power[m]) ** 2
+        if error < best_error * (1.0 - 1e-12):
+            best, best_error = window, error
+    return best
+
+
+def reduced_chi2(power: np.ndarray, sem: np.ndarray) -> float:
+    """Scatter of the reference means about their weighted mean, in units of their noise."""
+    if power.size < 2 or not np.all(np.isfinite(sem)) or np.any(sem <= 0):
+        return math.nan
+    weight = 1.0 / sem**2
+    mean = np.sum(weight * power) / np.sum(weight)
+    return float(np.sum(weight * (power - mean) ** 2) / (power.size - 1))
+
+
+def chi2_limit(count: int) -> float:
+    """Reduced chi-square above which drift counts as real: 3 sigma above the noise's 1."""
+    return 1.0 + 3.0 * math.sqrt(2.0 / max(count - 1, 1))
+
+
+def reference_gains(index: np.ndarray, power: np.ndarray, mode: str,
+                    window: int) -> np.ndarray:
+    """Receiver gain at each reference reading relative to the first (1 = as calibrated).
+
+    ``index``: step indices of the references; ``power``: their mean readings (W). ``mode``
+    ``linear`` takes the readings as they are; ``smooth`` replaces each by a straight-line
+    least-squares fit over the ``window`` references around it (fewer at the ends), which
+    keeps a linear drift exactly and divides the reading noise by about sqrt(window);
+    ``none`` returns ones.
+    """
+    if mode == "none" or index.size == 0:
+        return np.ones(index.size)
+    gains = power / power[0]
+    if mode == "smooth" and index.size > 2:
+        fitted = np.empty_like(gains)
+        width = min(window, index.size)
+        for m in range(index.size):
+            lo = min(max(m - width // 2, 0), index.size - width)
+            x, y = index[lo:lo + width], gains[lo:lo + width]
+            slope, offset = np.polyfit(x - x.mean(), y, 1)
+            fitted[m] = offset + slope * (index[m] - x.mean())
+        gains = fitted / fitted[0]
+    return gains

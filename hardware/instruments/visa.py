@@ -1,0 +1,172 @@
+"""One instrument connection through PyVISA: bounded reads, one-line errors, a transcript.
+
+The default backend is pyvisa-py (``@py``), which reaches ``TCPIP::HOST::PORT::SOCKET``
+resources over plain TCP; tests may pass a pyvisa-sim resource manager instead. Every read
+has a timeout; a read that times out leaves the connection in an unknown state (a late answer
+could be taken for the next one), so the link refuses further use until it is reopened.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+from collections import deque
+
+import pyvisa
+import pyvisa.constants
+import pyvisa.errors
+
+from raysim.errors import InstrumentError
+
+_rm_lock = threading.Lock()
+_default_rm: pyvisa.ResourceManager | None = None
+
+
+def resource_manager() -> pyvisa.ResourceManager:
+    """The shared pyvisa-py resource manager (``@py``), created on first use."""
+    global _default_rm
+    with _rm_lock:
+        if _default_rm is None:
+            _default_rm = pyvisa.ResourceManager("@py")
+        return _default_rm
+
+
+class VisaLink:
+    """A message-based connection to one instrument.
+
+    Parameters
+    ----------
+    resource : VISA resource name, e.g. ``TCPIP::127.0.0.1::5025::SOCKET``.
+    name : what the instrument is, for messages ("power meter").
+    timeout_s : limit on every read (s).
+    read_termination, write_termination : line terminators of the dialect.
+    rm : resource manager; the shared ``@py`` one by default.
+    transcript : keep the last this many (direction, text) pairs for inspection.
+    """
+
+    def __init__(self, resource: str, *, name: str, timeout_s: float,
+                 read_termination: str = "\n", write_termination: str = "\n",
+                 rm: pyvisa.ResourceManager | None = None, transcript: int = 256) -> None:
+        self.resource = resource
+        self.name = name
+        self.timeout_s = timeout_s
+        self.transcript: deque[tuple[str, str]] = deque(maxlen=transcript)
+        self._broken: str | None = None
+        try:
+            self._inst = (rm or resource_manager()).open_resource(
+                resource, read_termination=read_termination,
+                write_termination=write_termination, timeout=max(1, round(timeout_s * 1000)))
+        except (pyvisa.errors.Error, OSError, ValueError) as exc:
+            raise self._error("cannot be opened", exc) from exc
+        _no_delay(self._inst)
+
+    def write(self, command: str) -> None:
+        """Send one command (no answer expected)."""
+        self._usable()
+        self.transcript.append((">", command))
+        try:
+            self._inst.write(command)
+        except (pyvisa.errors.Error, OSError) as exc:
+            self._broken = "write failed"
+            raise self._error(f"did not take '{command}'", exc) from exc
+
+    def query(self, command: str) -> str:
+        """Send one query and return its answer, stripped; raise if none comes in time."""
+        self.write(command)
+        try:
+            answer = self._inst.read().strip()
+        except pyvisa.errors.VisaIOError as exc:
+            self._broken = "a read timed out"
+            if exc.error_code == pyvisa.constants.StatusCode.error_timeout:
+                raise InstrumentError(f"{self.name} at {self.resource} is silent: no answer to "
+                                      f"'{command}' within {self.timeout_s:g} s") from exc
+            raise self._error(f"gave no answer to '{command}'", exc) from exc
+        except (pyvisa.errors.Error, OSError, UnicodeDecodeError) as exc:
+            self._broken = "a read failed"
+            raise self._error(f"gave no answer to '{command}'", exc) from exc
+        self.transcript.append(("<", answer))
+        return answer
+
+    def close(self) -> None:
+        """Close the connection (idempotent, never raises)."""
+        try:
+            self._inst.close()
+        except Exception:  # closing a dead link must not mask the first error
+            pass
+
+    def _usable(self) -> None:
+        if self._broken is not None:
+            raise InstrumentError(f"{self.name} at {self.resource}: link unusable after "
+                                  f"{self._broken}; reconnect")
+
+    def _error(self, what: str, exc: BaseException) -> InstrumentError:
+        if isinstance(exc, ConnectionRefusedError | ConnectionResetError | BrokenPipeError):
+            return InstrumentError(f"{self.name} at {self.resource} is unreachable "
+                                   f"({exc.strerror or exc.__class__.__name__})")
+        if isinstance(exc, OSError):
+            return InstrumentError(f"{self.name} at {self.resource} is unreachable ({exc})")
+        detail = getattr(exc, "description", None) or str(exc) or exc.__class__.__name__
+        return InstrumentError(f"{self.name} at {self.resource} {what} ({detail})")
+
+
+def _no_delay(inst: pyvisa.resources.Resource) -> None:
+    """Send each command at once (TCP_NODELAY) on a TCP socket resource.
+
+    Without it, a command with no answer followed by the error-queue query waits for the
+    instrument's delayed ACK (Nagle's algorithm), about 40 ms per command on Linux. pyvisa-py
+    does not accept ``VI_ATTR_TCPIP_NODELAY`` on SOCKET sessions, so the option goes on its
+    socket directly; other backends take the attribute or keep their default.
+    """
+    try:
+        inst.set_visa_attribute(pyvisa.constants.VI_ATTR_TCPIP_NODELAY, pyvisa.constants.VI_TRUE)
+        return
+    except Exception:  # pyvisa-py raises its own UnknownAttribute here
+        pass
+    session = getattr(getattr(inst, "visalib", None), "sessions", {}).get(
+        getattr(inst, "session", None))
+    sock = getattr(session, "interface", None)
+    if isinstance(sock, socket.socket):
+        try:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        except OSError:
+            pass
+
+
+class CheckedInstrument:
+    """An instrument on one :class:`VisaLink` whose every command and query is followed by a
+    read of its error queue. Drivers supply ``identify()`` and ``check_errors(after)``."""
+
+    def __init__(self, link: VisaLink) -> None:
+        self.link = link
+
+    @classmethod
+    def _connect(cls, link: VisaLink, **kwargs):
+        """Wrap ``link``, check the instrument's identity, and close the link if that fails."""
+        instrument = cls(link, **kwargs)
+        try:
+            instrument.identify()
+        except BaseException:
+            instrument.close()
+            raise
+        return instrument
+
+    def identify(self) -> str:  # pragma: no cover - every driver overrides it
+        raise NotImplementedError
+
+    def check_errors(self, after: str = "") -> None:  # pragma: no cover - every driver overrides it
+        raise NotImplementedError
+
+    def command(self, command: str) -> None:
+        """Send a command, then check the error queue."""
+        self.link.write(command)
+        self.check_errors(after=command)
+
+    def query(self, command: str) -> str:
+        """Send a query, read its answer, then check the error queue."""
+        answer = self.link.query(command)
+        self.check_errors(after=command)
+        return answer
+
+    def close(self) -> None:
+        """Close the link (never raises)."""
+        self.link.close()

@@ -1,0 +1,178 @@
+"""The scan journal: an append-only JSON Lines file, one record per completed step.
+
+The first line is a header naming the plan's fingerprint and the number of steps; each later
+line is one completed step (its index, kind, cell, commanded and read-back axes in rad, the
+individual readings in W, the time in s since the epoch) with a CRC-32 of its content. A
+record is written with one ``write`` and synced to disk (``fsync``) before the scan moves on.
+
+Reading stops at the first line that is not a complete, intact record: a torn last line (a
+kill during the write) is ignored and cut off before the journal is appended to again; a bad
+record followed by good ones is corruption and an error. Records must carry the indices 0, 1,
+2, ... in order, so a resumed scan continues after the last complete one with no duplicate,
+no gap and no reordering.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import zlib
+from dataclasses import asdict, dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from hardware.errors import JournalError
+
+FORMAT = "raysim-scan-journal"
+VERSION = 1
+
+
+@dataclass(frozen=True)
+class Record:
+    """One completed step. Angles in rad, power in W, time in s since 1970-01-01 UTC."""
+
+    n: int
+    kind: str
+    i: int
+    j: int
+    command: tuple[float, float]
+    readback: tuple[float, float]
+    power: tuple[float, ...]
+    time: float
+
+    def line(self) -> bytes:
+        """The record as one JSON line with its CRC (floats written exactly)."""
+        body = asdict(self)
+        return _with_crc(body)
+
+
+def _with_crc(body: dict[str, Any]) -> bytes:
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"))
+    crc = zlib.crc32(text.encode())
+    return (text[:-1] + f',"crc":{crc}}}\n').encode()
+
+
+def _parse(line: bytes) -> dict[str, Any] | None:
+    """A line's content if it is complete and intact, else None."""
+    if not line.endswith(b"\n"):
+        return None
+    try:
+        body = json.loads(line)
+    except (ValueError, UnicodeDecodeError):
+        return None
+    if not isinstance(body, dict) or "crc" not in body:
+        return None
+    crc = body.pop("crc")
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"))
+    return body if zlib.crc32(text.encode()) == crc else None
+
+
+def read_journal(path: str | Path) -> tuple[dict[str, Any], list[Record], int]:
+    """Read a journal: (header, complete records, byte length of the intact part)."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise JournalError(f"{path}: cannot read the journal ({exc.strerror})") from exc
+    lines = data.splitlines(keepends=True)
+    if not lines or (header := _parse(lines[0])) is None or header.get("format") != FORMAT:
+        raise JournalError(f"{path}: not a raysim scan journal (bad or missing header)")
+    if header.get("version") != VERSION:
+        raise JournalError(f"{path}: journal version {header.get('version')} is not {VERSION}")
+    records: list[Record] = []
+    good = len(lines[0])
+    for number, line in enumerate(lines[1:], start=2):
+        body = _parse(line)
+        if body is None:
+            if number == len(lines):
+                break  # a torn last line: the step it described was not completed
+            raise JournalError(f"{path}: line {number} is damaged and complete records follow it")
+        try:
+            record = Record(n=body["n"], kind=body["kind"], i=body["i"], j=body["j"],
+                            command=tuple(body["command"]), readback=tuple(body["readback"]),
+                            power=tuple(body["power"]), time=body["time"])
+        except (KeyError, TypeError) as exc:
+            raise JournalError(f"{path}: line {number} is not a step record") from exc
+        if record.n != len(records):
+            raise JournalError(f"{path}: line {number} holds step {record.n}, expected "
+                               f"{len(records)} (records out of order or duplicated)")
+        records.append(record)
+        good += len(line)
+    return header, records, good
+
+
+class Journal:
+    """An open journal to append completed steps to. Use :meth:`create` or :meth:`resume`."""
+
+    def __init__(self, path: Path, fd: int, records: list[Record]) -> None:
+        self.path = path
+        self._fd = fd
+        self.records = records
+
+    @classmethod
+    def create(cls, path: str | Path, fingerprint: str, steps: int) -> Journal:
+        """Start a new journal; refuse to overwrite one that holds records."""
+        path = Path(path)
+        if path.exists() and path.stat().st_size > 0:
+            raise JournalError(f"{path}: a journal of an earlier scan exists; pass --resume to "
+                               "continue it, or move it away to start afresh")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        header = {"format": FORMAT, "version": VERSION, "fingerprint": fingerprint,
+                  "steps": steps, "created": datetime.now(UTC).isoformat(timespec="seconds")}
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+        journal = cls(path, fd, [])
+        journal._write(_with_crc(header))
+        _sync_dir(path.parent)
+        return journal
+
+    @classmethod
+    def resume(cls, path: str | Path, fingerprint: str, steps: int) -> Journal:
+        """Open an existing journal for appending, after checking it belongs to this plan.
+
+        A torn last line is cut off first, so the next record starts on a fresh line.
+        """
+        path = Path(path)
+        header, records, good = read_journal(path)
+        if header.get("fingerprint") != fingerprint or header.get("steps") != steps:
+            raise JournalError(f"{path}: the journal belongs to another plan or other settings "
+                               "(fingerprints differ); resume with the same plan and options")
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND)
+        if os.fstat(fd).st_size != good:
+            os.ftruncate(fd, good)
+            os.fsync(fd)
+        return cls(path, fd, records)
+
+    def append(self, record: Record) -> None:
+        """Write one completed step and sync it to disk before returning."""
+        if record.n != len(self.records):
+            raise JournalError(f"{self.path}: step {record.n} appended after "
+                               f"{len(self.records)} records")
+        self._write(record.line())
+        self.records.append(record)
+
+    def _write(self, blob: bytes) -> None:
+        written = os.write(self._fd, blob)
+        if written != len(blob):
+            raise JournalError(f"{self.path}: short write to the journal (disk full?)")
+        os.fsync(self._fd)
+
+    def close(self) -> None:
+        """Close the file (idempotent)."""
+        if self._fd >= 0:
+            os.close(self._fd)
+            self._fd = -1
+
+    def __enter__(self) -> Journal:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _sync_dir(folder: Path) -> None:
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)

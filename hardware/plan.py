@@ -1,0 +1,204 @@
+"""Scan plans from TOML: the sphere grid to measure, the order, averaging and drift references.
+
+A plan names the reflector (F, D in m; frequency in Hz), the grid of cell centres (theta and phi
+ranges and steps, degrees in the file, radians here), the acquisition settings and the rig file
+(whose track radius is the sphere radius R). The order is fixed: one track sweep in theta per
+phi line, phi ascending, the sweep direction alternating from line to line, and a reading at a
+fixed reference position before the first line, after every K lines and after the last line
+(to follow slow source and receiver drift). Every step has a global index; the journal and the
+simulator's noise and drift are keyed by it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from hardware.config import Table, read_toml
+from hardware.drift import DRIFT_MODES
+from hardware.errors import PlanError
+from hardware.rig import Rig, load_rig, rig_from_table
+from hardware.sim_settings import SimSettings, sim_settings_from_table
+from raysim.sphere import SphereGrid
+
+SAMPLE = "sample"
+REFERENCE = "reference"
+
+
+@dataclass(frozen=True)
+class Step:
+    """One acquisition step: a grid cell (i along theta, j along phi) or a reference reading.
+
+    ``theta``, ``phi`` are the commanded angles (rad); a reference step has i = j = -1.
+    """
+
+    index: int
+    kind: str
+    i: int
+    j: int
+    theta: float
+    phi: float
+
+
+@dataclass(frozen=True)
+class ScanPlan:
+    """A scan plan. Lengths in m, angles in rad, power in W, times in s.
+
+    ``simulator`` holds the settings a simulated run starts from (the plan's
+    ``[simulator]`` table). Each reference reading averages ``reference_samples`` readings;
+    ``drift_correction`` (see :data:`DRIFT_MODES`) says how the reference readings correct
+    the samples, ``drift_window`` how many references a ``smooth`` fit spans.
+    ``power_unit`` is the power the receiver reads when the intensity is 1 (the incident
+    plane wave's), so intensity = power / power_unit.
+    ``refer_to_sphere`` scales each reading by (r / R)^2, r the probe's distance from the
+    focus per the rig's calibration, to refer it to the sphere of radius R (the rays of a
+    focusing reflector converge on the focus).
+    """
+
+    focal_length: float
+    diameter: float
+    frequency_hz: float
+    grid: SphereGrid
+    rig: Rig
+    settle_s: float = 0.0
+    samples_per_point: int = 4
+    reference_every: int = 4
+    reference: tuple[float, float] = (0.0, 0.0)
+    reference_samples: int = 64
+    drift_correction: str = "auto"
+    drift_window: int = 9
+    power_unit: float = 1e-5
+    refer_to_sphere: bool = True
+    simulator: SimSettings = field(default_factory=SimSettings)
+    text: str = ""
+    rig_text: str = ""
+
+    def steps(self) -> list[Step]:
+        """Every step of the scan in acquisition order (see the module docstring)."""
+        theta, phi = self.grid.theta, self.grid.phi
+        out: list[Step] = []
+
+        def reference() -> None:
+            out.append(Step(len(out), REFERENCE, -1, -1, *self.reference))
+
+        reference()
+        for j in range(self.grid.n_phi):
+            order = range(self.grid.n_theta) if j % 2 == 0 else range(self.grid.n_theta - 1, -1, -1)
+            for i in order:
+                out.append(Step(len(out), SAMPLE, i, j, float(theta[i]), float(phi[j])))
+            last_line = j == self.grid.n_phi - 1
+            if (j + 1) % self.reference_every == 0 or last_line:
+                reference()
+        return out
+
+    def fingerprint(self, extra: dict[str, Any] | None = None) -> str:
+        """A hash of everything that decides the samples (plan, rig, ``extra`` settings).
+
+        The drift correction is left out: it only decides how the journal's readings are
+        turned into intensities, so it may change between a scan and its resumption.
+        """
+        rig = asdict(self.rig)
+        rig.pop("resources")
+        skip = ("text", "rig_text", "rig", "simulator", "drift_correction", "drift_window")
+        content = {k: v for k, v in asdict(self).items() if k not in skip}
+        content["rig"] = rig
+        content["extra"] = extra or {}
+        blob = json.dumps(content, sort_keys=True, default=str).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+    def check_reach(self) -> None:
+        """Raise :class:`PlanError` if a step lies outside the rig's reach."""
+        for step in self.steps():
+            self.rig.axes(step.theta, step.phi)
+
+
+def load_plan(path: str | Path, rig: str | Path | None = None) -> ScanPlan:
+    """Read a scan plan; ``rig`` (a rig.toml) overrides the plan's own ``rig`` entry."""
+    path = Path(path)
+    data, text = read_toml(path, "scan plan")
+    return plan_from_table(Table(data, str(path)), text, path.parent, rig)
+
+
+def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
+                    rig_path: str | Path | None = None) -> ScanPlan:
+    """Build a :class:`ScanPlan` from a parsed plan table; relative paths start at ``base``."""
+    rig_entry = top.data.get("rig")
+    top.used.add("rig")
+    if rig_path is not None:
+        rig, rig_text = load_rig(rig_path)
+    elif isinstance(rig_entry, str):
+        rig, rig_text = load_rig(base / rig_entry)
+    elif isinstance(rig_entry, dict):
+        rig, rig_text = rig_from_table(Table(rig_entry, f"{top.where} [rig]")), ""
+    else:
+        raise PlanError(f"{top.where}: 'rig' must name a rig file or be a [rig] table")
+
+    refl = top.sub("reflector")
+    F = refl.number("focal_length_m", low=0.0, strict_low=True)
+    D = refl.number("diameter_m", low=0.0, strict_low=True)
+    frequency_hz = refl.number("frequency_hz", low=0.0, strict_low=True)
+    refl.done()
+    if rig.radius >= F:
+        raise PlanError(f"{top.where}: the track radius {rig.radius:g} m must be below F = {F:g} m")
+
+    g = top.sub("grid")
+    theta_lo, theta_hi = g.angle("theta_min_deg", 0.0, low=0.0), g.angle("theta_max_deg", high=90.0)
+    phi_lo = g.angle("phi_min_deg", 0.0, low=-360.0, high=360.0)
+    phi_hi = g.angle("phi_max_deg", 360.0, low=-360.0, high=720.0)
+    n_theta = _cells(g, "theta", theta_lo, theta_hi)
+    n_phi = _cells(g, "phi", phi_lo, phi_hi)
+    g.done()
+    if phi_hi - phi_lo > 2 * math.pi + 1e-9:
+        raise PlanError(f"{g.where}: the phi range exceeds 360 deg")
+    grid = SphereGrid(rig.radius, n_theta, n_phi, theta_lo, theta_hi, phi_lo, phi_hi)
+
+    acq = top.sub("acquisition", required=False)
+    settle_s = acq.number("settle_s", 0.0, low=0.0, high=3600.0)
+    samples = acq.integer("samples_per_point", 4, low=1)
+    every = acq.integer("reference_every_lines", 4, low=1)
+    reference = (acq.angle("reference_theta_deg", 0.0, low=0.0, high=90.0),
+                 acq.angle("reference_phi_deg", 0.0, low=-360.0, high=360.0))
+    power_unit_dbm = acq.number("power_unit_dbm", -20.0, low=-150.0, high=60.0)
+    reference_samples = acq.integer("reference_samples", 64, low=1)
+    drift = acq.string("drift_correction", "auto")
+    if drift not in DRIFT_MODES:
+        raise PlanError(f"{acq.where}: 'drift_correction' must be one of "
+                        f"{', '.join(DRIFT_MODES)}, got {drift!r}")
+    window = acq.integer("drift_window", 9, low=2)
+    refer = acq.boolean("refer_to_sphere", True)
+    acq.done()
+
+    simulator = sim_settings_from_table(top.sub("simulator", required=False))
+    top.done()
+
+    plan = ScanPlan(F, D, frequency_hz, grid, rig, settle_s, samples, every, reference,
+                    reference_samples, drift, window, dbm_to_w(power_unit_dbm), refer,
+                    simulator, text, rig_text)
+    plan.check_reach()
+    return plan
+
+
+def dbm_to_w(p_dbm: float) -> float:
+    """Power in W from dBm (the instrument's unit)."""
+    return 1e-3 * 10.0 ** (p_dbm / 10.0)
+
+
+def w_to_dbm(p_w: float) -> float:
+    """Power in dBm from W."""
+    return 10.0 * math.log10(p_w / 1e-3)
+
+
+def _cells(g: Table, name: str, lo: float, hi: float) -> int:
+    """Number of cells from ``<name>_step_deg``; the range must hold a whole number of them."""
+    step = g.angle(f"{name}_step_deg", low=0.0, strict_low=True)
+    if hi <= lo:
+        raise PlanError(f"{g.where}: {name}_max_deg must be above {name}_min_deg")
+    n = (hi - lo) / step
+    if abs(n - round(n)) > 1e-6 or round(n) < 1:
+        raise PlanError(f"{g.where}: the {name} range must hold a whole number of "
+                        f"{math.degrees(step):g} deg steps")
+    return round(n)

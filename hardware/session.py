@@ -1,0 +1,193 @@
+"""The rig's top-level operations: ``scan`` (plan -> journal -> FieldMap) and ``park``.
+
+Both run against the real instruments (VISA resource names by role: ``meter``, ``motion``) or
+against a simulated rig started on loopback sockets for the duration of the call. The FieldMap
+is always assembled from the journal as it stands on disk and written atomically, so an
+interrupted and resumed scan gives the same file as an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyvisa
+import xarray as xr
+
+from hardware.acquire import Instruments, Progress, acquire, move_to
+from hardware.assemble import build_fieldmap
+from hardware.errors import JournalError, PlanError
+from hardware.instruments.motion import MotionController
+from hardware.instruments.power_meter import PowerMeter
+from hardware.interp import SphereField
+from hardware.journal import Journal, read_journal
+from hardware.plan import ScanPlan, w_to_dbm
+from hardware.rig import Rig
+from hardware.sim_settings import SimSettings
+from hardware.simulated import Faults, SimulatedRig
+from raysim import field as fieldmaps
+
+ROLES = ("meter", "motion")
+
+
+@dataclass(frozen=True)
+class ScanResult:
+    """What :func:`scan` did: the FieldMap, its path, the journal, steps taken this call."""
+
+    fieldmap: xr.Dataset
+    output: Path
+    journal: Path
+    steps_total: int
+    steps_taken: int
+
+
+def journal_path(output: str | os.PathLike[str]) -> Path:
+    """The journal next to a scan's output: ``SCAN.nc`` -> ``SCAN.nc.journal``."""
+    output = Path(output)
+    return output.with_name(output.name + ".journal")
+
+
+def parse_resources(items: list[str] | None) -> dict[str, str]:
+    """``ROLE=VISA`` strings (roles ``meter``, ``motion``) to a dict; one-line errors."""
+    out: dict[str, str] = {}
+    for item in items or []:
+        role, sep, resource = item.partition("=")
+        if not sep or role.strip() not in ROLES or not resource.strip():
+            raise PlanError(f"--resource '{item}': write ROLE=VISA with ROLE one of "
+                            f"{', '.join(ROLES)}, e.g. meter=TCPIP::10.0.0.5::5025::SOCKET")
+        out[role.strip()] = resource.strip()
+    return out
+
+
+def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
+         resources: Mapping[str, str] | None = None, simulate: str | os.PathLike[str] | None = None,
+         sim: SimSettings | None = None, faults: Faults = Faults(), resume: bool = False,
+         journal: str | os.PathLike[str] | None = None, progress: Progress | None = None,
+         rm: pyvisa.ResourceManager | None = None) -> ScanResult:
+    """Run ``plan`` and write the measured FieldMap to ``output`` (NetCDF, atomically).
+
+    Parameters
+    ----------
+    plan : the scan plan (its rig gives R and the default instrument addresses).
+    output : the FieldMap file; the journal defaults to ``output`` + ``.journal``.
+    resources : VISA addresses by role (``meter``, ``motion``), over the rig file's.
+    simulate : a FieldMap to scan with a simulated rig instead of instruments.
+    sim : simulator settings (default: the plan's ``[simulator]`` table).
+    faults : faults the simulated instruments inject (tests).
+    resume : continue the journal after its last complete step; without it an existing
+        journal with records is an error.
+    progress : called with (steps done, steps total).
+    rm : PyVISA resource manager (default: pyvisa-py).
+    """
+    output = Path(output)
+    jpath = Path(journal) if journal is not None else journal_path(output)
+    settings = sim if sim is not None else plan.simulator
+    steps = plan.steps()
+    with _instrument_addresses(plan, resources, simulate, settings, faults) as (addr, sim_rig,
+                                                                                 extra):
+        fingerprint = plan.fingerprint({k: v for k, v in extra.items() if k != "sim_field"})
+        if resume and jpath.exists() and jpath.stat().st_size > 0:
+            jr = Journal.resume(jpath, fingerprint, len(steps))
+        else:
+            jr = Journal.create(jpath, fingerprint, len(steps))
+        with jr:
+            start = len(jr.records)
+            attrs: dict[str, object] = {"journal_fingerprint": fingerprint, **extra}
+            if start < len(steps):
+                inst = open_instruments(addr, plan.rig, rm)
+                try:
+                    attrs["meter_idn"] = inst.meter.idn
+                    attrs["motion_version"] = inst.motion.version
+                    acquire(plan, inst, jr, progress=progress,
+                            before_step=sim_rig.set_sample if sim_rig else None)
+                finally:
+                    inst.close()
+            elif progress is not None:
+                progress(start, len(steps))
+    ds = fieldmap_from_journal(plan, jpath, attrs)
+    fieldmaps.save(ds, output)
+    return ScanResult(ds, output, jpath, len(steps), len(steps) - start)
+
+
+def fieldmap_from_journal(plan: ScanPlan, path: str | os.PathLike[str],
+                          attrs: Mapping[str, object] | None = None) -> xr.Dataset:
+    """The FieldMap of ``plan`` from a journal file alone (cells not yet measured are NaN)."""
+    header, records, _ = read_journal(path)
+    if header.get("steps") != len(plan.steps()):
+        raise JournalError(f"{path}: the journal has {header.get('steps')} steps, "
+                           f"the plan {len(plan.steps())}")
+    return build_fieldmap(plan, records, {"journal_fingerprint": header.get("fingerprint", ""),
+                                          **(attrs or {})})
+
+
+def park(rig: Rig, *, resources: Mapping[str, str] | None = None, simulate: bool = False,
+         rm: pyvisa.ResourceManager | None = None) -> tuple[float, float]:
+    """Move the rig to its park position; return the read-back (slider, rotation) in rad."""
+    if simulate:
+        with SimulatedRig(rig, SimSettings(time_scale=0.0)) as sim_rig:
+            return _park(rig, sim_rig.resources["motion"], rm)
+    address = {**rig.resources, **(resources or {})}.get("motion")
+    if address is None:
+        raise PlanError("no motion controller address: give --resource motion=VISA, "
+                        "[instruments] motion in the rig file, or --simulate")
+    return _park(rig, address, rm)
+
+
+def _park(rig: Rig, address: str, rm: pyvisa.ResourceManager | None) -> tuple[float, float]:
+    motion = MotionController.open(address, timeout_s=rig.visa_timeout_s, rm=rm)
+    try:
+        motion.setup((rig.slider_axis, rig.rotation_axis), rig.speed)
+        return move_to(motion, rig, *rig.park)
+    finally:
+        motion.close()
+
+
+def open_instruments(addresses: Mapping[str, str], rig: Rig,
+                     rm: pyvisa.ResourceManager | None = None) -> Instruments:
+    """Open and identify both instruments (the meter first)."""
+    meter = PowerMeter.open(addresses["meter"], timeout_s=rig.visa_timeout_s, rm=rm)
+    try:
+        motion = MotionController.open(addresses["motion"], timeout_s=rig.visa_timeout_s, rm=rm)
+    except BaseException:
+        meter.close()
+        raise
+    return Instruments(meter, motion)
+
+
+@contextmanager
+def _instrument_addresses(plan: ScanPlan, resources: Mapping[str, str] | None,
+                          simulate: str | os.PathLike[str] | None, settings: SimSettings,
+                          faults: Faults) -> Iterator[tuple[dict[str, str],
+                                                            SimulatedRig | None, dict]]:
+    """Addresses of the instruments (starting a simulated rig if asked), the simulator, and
+    the settings that decide the samples (for the journal's fingerprint)."""
+    if simulate is None:
+        addr = {**plan.rig.resources, **(resources or {})}
+        missing = [role for role in ROLES if role not in addr]
+        if missing:
+            raise PlanError(f"no address for the {missing[0]}: give --resource "
+                            f"{missing[0]}=VISA, [instruments] in the rig file, or --simulate")
+        yield addr, None, {"simulated": 0}
+        return
+    if resources:
+        raise PlanError("give either --resource or --simulate, not both")
+    ds = fieldmaps.load(simulate)
+    for name, ours in (("focal_length", plan.focal_length), ("diameter", plan.diameter)):
+        if not math.isclose(float(ds.attrs[name]), ours, rel_tol=1e-9):
+            raise PlanError(f"{simulate}: {name} {float(ds.attrs[name]):g} m differs from the "
+                            f"plan's {ours:g} m")
+    field = SphereField.from_fieldmap(ds)
+    digest = hashlib.sha256(np.ascontiguousarray(field.ratio.values).tobytes()).hexdigest()[:16]
+    extra = {"simulated": 1, "sim_field": str(simulate), "sim_field_sha256": digest,
+             **settings.record()}
+    sim_rig = SimulatedRig(plan.rig, settings, field,
+                           power_unit_dbm=w_to_dbm(plan.power_unit), faults=faults)
+    with sim_rig:
+        yield sim_rig.resources, sim_rig, extra
+

@@ -1,0 +1,89 @@
+"""Settings of the simulated rig (the ``[simulator]`` table of a plan, CLI options on top).
+
+The simulator's truth may differ from what the rig file believes: its track centre offset and
+axis zeros are the *true* ones (``None``: the rig file's values, i.e. a perfectly calibrated
+rig). Noise and drift are deterministic functions of ``seed`` and the sample index, never of
+wall time, so a killed and resumed scan reproduces an uninterrupted one exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from hardware.config import Table
+from hardware.rig import Calibration, Rig
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    """Simulated rig settings. Angles in rad, lengths in m, times in s, noise and drift in dB.
+
+    ``noise_db``: standard deviation of each power-meter reading (dB). ``drift_db``: amplitude
+    of the slow receiver/source gain drift (dB) since the scan's start, a sinusoid of
+    ``drift_period`` samples whose phase follows from ``seed``. The axes move at the
+    velocity the driver sets (the rig file's ``speed_deg_s``); ``time_scale`` multiplies
+    every move's duration (0: moves are instantaneous, 0.01: a hundred times faster).
+    """
+
+    seed: int = 0
+    noise_db: float = 0.0
+    drift_db: float = 0.0
+    drift_period: float = 2000.0
+    centre_offset: tuple[float, float, float] | None = None
+    slider_zero: float | None = None
+    rotation_zero: float | None = None
+    time_scale: float = 1.0
+
+    def true_rig(self, rig: Rig) -> Rig:
+        """The rig as it really is: the file's rig with this simulator's true calibration."""
+        cal = rig.calibration
+        return rig.with_calibration(Calibration(
+            centre_offset=cal.centre_offset if self.centre_offset is None else self.centre_offset,
+            slider_zero=cal.slider_zero if self.slider_zero is None else self.slider_zero,
+            rotation_zero=cal.rotation_zero if self.rotation_zero is None else self.rotation_zero,
+        ))
+
+    def record(self) -> dict[str, Any]:
+        """The settings as a flat dict (for journals and FieldMap attributes; None -> 'rig')."""
+        out: dict[str, Any] = {}
+        for key, value in asdict(self).items():
+            if value is None:
+                out[f"sim_{key}"] = "rig"
+            elif isinstance(value, tuple):
+                for axis, v in zip("xyz", value, strict=True):
+                    out[f"sim_{key}_{axis}"] = float(v)
+            else:
+                out[f"sim_{key}"] = value
+        return out
+
+
+def sim_settings_from_table(t: Table) -> SimSettings:
+    """Parse a ``[simulator]`` table (degrees in ``*_deg`` keys, see ``scenes/scan_demo.toml``)."""
+    offset = t.vector3("centre_offset_m", (0.0, 0.0, 0.0)) if t.has("centre_offset_m") else None
+    settings = SimSettings(
+        seed=t.integer("seed", 0, low=0),
+        noise_db=t.number("noise_db", 0.0, low=0.0, high=10.0),
+        drift_db=t.number("drift_db", 0.0, low=0.0, high=10.0),
+        drift_period=t.number("drift_period_samples", 2000.0, low=1.0),
+        centre_offset=offset,
+        slider_zero=t.angle("slider_zero_deg") if t.has("slider_zero_deg") else None,
+        rotation_zero=t.angle("rotation_zero_deg") if t.has("rotation_zero_deg") else None,
+        time_scale=t.number("time_scale", 1.0, low=0.0, high=1e3),
+    )
+    t.done()
+    return settings
+
+
+def drift_db(settings: SimSettings, index: int) -> float:
+    """Receiver gain drift (dB) at sample ``index`` since the start of the scan (0 at index 0).
+
+    A slow sinusoid of amplitude ``drift_db`` and period ``drift_period`` samples whose phase
+    follows from the seed: A (sin(2 pi n / P + p) - sin(p)).
+    """
+    if settings.drift_db == 0.0:
+        return 0.0
+    phase = (settings.seed * 0.6180339887498949 % 1.0) * 2.0 * math.pi
+    wave = math.sin(2.0 * math.pi * index / settings.drift_period + phase) - math.sin(phase)
+    return settings.drift_db * wave

@@ -1,0 +1,227 @@
+"""The client side of a dataset run: store set-up, the Dask cluster, tasks and progress.
+
+The client creates (or checks) the store, finds what is missing (samples whose completion
+marker is not set, the ideal intensity of each frequency), submits one task per missing item
+and counts the outcomes as they arrive; the workers write the data. The client itself writes
+only the store's skeleton and, when a task killed its worker every time Dask retried it, the
+failure record of that sample.
+
+The cluster is a local one by default (worker processes with one thread each, bound to
+127.0.0.1, no dashboard), or any running scheduler (``scheduler="tcp://host:port"``) whose
+workers can import raysim and reach the store's path.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import time
+import uuid
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from raysim.dataset import store as zstore
+from raysim.dataset.spec import DatasetError, DatasetSpec, load_spec
+from raysim.dataset.worker import DatasetWorkerPlugin, run_ideal, run_sample
+
+Progress = Callable[[int, int, int], None]  # (samples done in the store, failed this run, total)
+WORKER_WAIT_S = 120.0
+
+
+@dataclass(frozen=True)
+class RunReport:
+    """Outcome of :func:`generate`. Counts are samples; ``seconds`` wall-clock time."""
+
+    store: str
+    samples: int
+    done: int  # complete in the store after this run
+    failed: int  # recorded as failed in the store after this run
+    computed: int  # finished (done or failed) by this run
+    skipped: int  # already complete before this run
+    workers: int
+    seconds: float
+    failures: tuple[tuple[int, str], ...]  # (sample, reason) of this run's failures, first 20
+    ideal_failures: tuple[tuple[int, str], ...]  # (frequency index, reason)
+
+    @property
+    def samples_per_second(self) -> float:
+        return self.computed / self.seconds if self.seconds > 0 else float("nan")
+
+    def summary(self) -> str:
+        """One line for the user."""
+        if not self.computed:
+            return f"{self.store}: {self.done}/{self.samples} samples done, nothing left to compute"
+        line = (f"{self.store}: {self.done}/{self.samples} samples done ({self.skipped} already "
+                f"there, {self.computed} computed on {self.workers} workers in {self.seconds:.1f} s, "
+                f"{self.samples_per_second:.3g} samples/s)")
+        if self.failed:
+            index, reason = self.failures[0] if self.failures else (-1, "see the store's 'error'")
+            line += f"; {self.failed} failed (sample {index}: {reason})"
+        if self.ideal_failures:
+            line += f"; the ideal intensity failed ({self.ideal_failures[0][1]})"
+        return line
+
+
+def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int | None = None,
+             scheduler: str | None = None, resume: bool = False, device: str = "cpu",
+             threads: int = 1, progress: Progress | None = None) -> RunReport:
+    """Simulate every sample of ``spec`` into the Zarr store ``store`` on Dask.
+
+    Parameters
+    ----------
+    spec : a :class:`DatasetSpec` or the path of a spec TOML file.
+    store : the store's path (a folder ``*.zarr``; every worker must reach it).
+    workers : local worker processes (default: the usable cores divided by ``threads``).
+    scheduler : address of a running Dask scheduler (``tcp://host:port``) instead of a
+        local cluster; ``workers`` is then ignored.
+    resume : complete an existing store made by the same spec (done samples are kept,
+        pending and failed ones are computed); without it an existing path is refused.
+    device : Warp device of the traces (``cpu``; ``cuda`` on workers with a GPU).
+    threads : CPU threads of each Warp launch in every worker (``RAYSIM_THREADS``). The
+        result of a trace depends on it at round-off level, not on anything else, so a
+        store is bit-identical for one value whatever the number of workers.
+    progress : optional callback (samples done in the store, failed this run, total).
+    """
+    start = time.perf_counter()
+    spec = spec if isinstance(spec, DatasetSpec) else load_spec(spec)
+    if threads < 1:
+        raise DatasetError(f"threads must be >= 1, got {threads}")
+    if workers is not None and workers < 1:
+        raise DatasetError(f"workers must be >= 1, got {workers}")
+    if scheduler is None and device != "cpu":  # local workers see this machine's devices
+        from raysim import warp_runtime
+
+        warp_runtime.resolve_device(device)
+    path = _store_path(store)
+    if zstore.exists(path):
+        if not resume:
+            raise DatasetError(f"{path}: already exists; add --resume to complete it, or give a new path")
+        group = zstore.open_checked(path, spec)
+    else:
+        group = zstore.create(path, spec)
+    pending = np.flatnonzero(zstore.status(group) != zstore.DONE)
+    ideal_pending = np.flatnonzero(zstore.ideal_status(group) != zstore.DONE)
+    skipped = spec.samples - len(pending)
+    report = progress or (lambda done, failed, total: None)
+    report(skipped, 0, spec.samples)
+    failures: list[tuple[int, str]] = []
+    ideal_failures: list[tuple[int, str]] = []
+    n_workers = 0
+    if len(pending) or len(ideal_pending):
+        writer = zstore.Writer(group)
+        with _client(scheduler, workers, threads, len(pending) + len(ideal_pending)) as (client, n_workers):
+            try:
+                client.register_plugin(DatasetWorkerPlugin(threads, device))
+            except Exception as exc:  # e.g. a device the workers lack, Warp failing to load
+                raise DatasetError(f"the Dask workers could not be prepared "
+                                   f"({type(exc).__name__}: {' '.join(str(exc).split())})") from exc
+            _run(client, path, spec, device, pending, ideal_pending, writer, report, skipped,
+                 failures, ideal_failures)
+    final = zstore.status(group)
+    return RunReport(
+        store=path, samples=spec.samples, done=int(np.sum(final == zstore.DONE)),
+        failed=int(np.sum(final == zstore.FAILED)), computed=len(pending), skipped=skipped,
+        workers=n_workers, seconds=time.perf_counter() - start, failures=tuple(failures[:20]),
+        ideal_failures=tuple(ideal_failures))
+
+
+def _run(client, path: str, spec: DatasetSpec, device: str, pending: np.ndarray,
+         ideal_pending: np.ndarray, writer: zstore.Writer, report: Progress, skipped: int,
+         failures: list, ideal_failures: list) -> None:
+    """Submit the tasks and count their outcomes as they complete."""
+    from distributed import KilledWorker, as_completed
+
+    token = uuid.uuid4().hex[:10]
+    fp = spec.fingerprint
+    jobs: dict[str, tuple[str, int]] = {}
+    futures = []
+    for f in ideal_pending.tolist():
+        key = f"raysim-ideal-{token}-{f}"
+        futures.append(client.submit(run_ideal, path, fp, f, device, key=key, priority=10))
+        jobs[key] = ("ideal", f)
+    indices = pending.tolist()
+    if indices:
+        keys = [f"raysim-sample-{token}-{i}" for i in indices]
+        n = len(indices)
+        futures += client.map(run_sample, [path] * n, [fp] * n, indices, [device] * n, key=keys)
+        jobs.update({k: ("sample", i) for k, i in zip(keys, indices, strict=True)})
+    done = skipped
+    for future in as_completed(futures):
+        kind, index = jobs[future.key]
+        try:
+            out = future.result()
+        except Exception as exc:  # raised outside the task's own guard
+            if isinstance(exc, KilledWorker):
+                reason = f"its worker died each time it ran it ({type(exc).__name__})"
+            else:
+                reason = f"the task could not run ({type(exc).__name__}: {' '.join(str(exc).split())})"
+            if kind == "sample":
+                writer.failed(index, reason)
+            else:
+                writer.ideal(index, None, reason)
+            out = {"ok": False, "error": reason}
+        future.release()
+        if kind == "ideal":
+            if not out["ok"]:
+                ideal_failures.append((index, out["error"]))
+            continue
+        if out["ok"]:
+            done += 1
+        else:
+            failures.append((index, out["error"]))
+        report(done, len(failures), spec.samples)
+
+
+@contextlib.contextmanager
+def _client(scheduler: str | None, workers: int | None, threads: int, tasks: int) -> Iterator[tuple]:
+    """A Dask client (and its local cluster, unless ``scheduler`` is given); closed on exit."""
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError) as exc:
+            raise DatasetError(f"cannot reach the Dask scheduler at {scheduler} ({exc})") from exc
+        try:
+            try:
+                client.wait_for_workers(1, timeout=WORKER_WAIT_S)
+            except TimeoutError as exc:
+                raise DatasetError(f"no worker joined the Dask scheduler at {scheduler} within "
+                                   f"{WORKER_WAIT_S:g} s") from exc
+            yield client, len(client.scheduler_info()["workers"])
+        finally:
+            client.close()
+        return
+    n = workers or max(1, usable_cores() // threads)
+    n = max(1, min(n, tasks))
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, silence_logs=logging.ERROR,
+                               env={"RAYSIM_THREADS": str(threads)})
+    except (RuntimeError, OSError) as exc:
+        raise DatasetError(f"could not start a local Dask cluster of {n} workers ({exc})") from exc
+    try:
+        client = Client(cluster)
+        try:
+            yield client, n
+        finally:
+            client.close()
+    finally:
+        cluster.close()
+
+
+def usable_cores() -> int:
+    """CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - non-Linux
+        return os.cpu_count() or 1
+
+
+def _store_path(store: str | Path) -> str:
+    text = str(store)
+    return text if "://" in text else str(Path(text).expanduser().resolve())

@@ -1,0 +1,203 @@
+"""What runs in a Dask worker: the set-up plugin, the per-process context, the two tasks.
+
+A task gets only the store path, the spec's fingerprint and an index; it reads the spec from
+the store (once per process), draws the sample, simulates it and writes its region of the
+store itself, returning a few numbers. Any exception inside a sample is caught and the sample
+is recorded as failed with its reason, so the worker goes on with the next one.
+
+The plugin runs once per worker process: it fixes the CPU threads of each Warp launch
+(``RAYSIM_THREADS``), initialises Warp and loads every kernel module of ``raysim.kernels``
+under a file lock in the kernel cache, so one process compiles and the others load. It also
+lets glibc keep freed memory for reuse: Dask starts workers with ``MALLOC_TRIM_THRESHOLD_``
+set, which makes every array over 128 KiB a fresh ``mmap`` and doubled the CPU time of a
+paper-grid sample (page faults on each of the trace's many large temporaries).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import ctypes.util
+import fcntl
+import importlib
+import os
+import pkgutil
+import threading
+import time
+from dataclasses import dataclass, replace
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from distributed.diagnostics.plugin import WorkerPlugin
+
+from raysim import warp_runtime
+from raysim.dataset.memo import Memo
+from raysim.dataset.sampling import draw_sample
+from raysim.dataset.spec import DatasetError, DatasetSpec, parse_spec
+from raysim.dataset.store import Writer, open_readonly
+from raysim.deformation import Deformation, NoDeformation
+from raysim.geometry import Reflector, paraboloid
+from raysim.panels import PanelLayout
+
+_lock = threading.Lock()
+
+
+class DatasetWorkerPlugin(WorkerPlugin):
+    """Prepare a worker process for dataset samples (threads per launch, Warp kernels)."""
+
+    name = "raysim-dataset"
+
+    def __init__(self, threads: int = 1, device: str = "cpu") -> None:
+        self.threads = int(threads)
+        self.device = device
+
+    def setup(self, worker: Any = None) -> None:
+        prepare_process(self.threads, self.device)
+
+
+def prepare_process(threads: int, device: str = "cpu") -> None:
+    """Set ``RAYSIM_THREADS``, tune malloc, and compile or load every Warp kernel module once."""
+    os.environ["RAYSIM_THREADS"] = str(int(threads))
+    tune_malloc()
+    wp = warp_runtime.init()
+    dev = warp_runtime.resolve_device(device)
+    import raysim.kernels as kernels
+
+    cache = Path(str(wp.config.kernel_cache_dir))
+    cache.mkdir(parents=True, exist_ok=True)
+    with _file_lock(cache / ".raysim-dataset-compile.lock"):
+        for info in pkgutil.iter_modules(kernels.__path__, prefix="raysim.kernels."):
+            module = importlib.import_module(info.name)
+            with contextlib.suppress(RuntimeError):  # a module without Warp code
+                wp.load_module(module, device=dev)
+
+
+M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters
+MMAP_THRESHOLD = 32 << 20  # bytes: glibc's largest; smaller arrays come from the heap
+TRIM_THRESHOLD = 256 << 20  # bytes of free heap kept before returning memory to the OS
+
+
+def tune_malloc() -> bool:
+    """Serve arrays below 32 MiB from glibc's heap and keep up to 256 MiB of it when freed.
+
+    Returns False (and changes nothing) where the C library has no ``mallopt``.
+    """
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):  # pragma: no cover - not glibc
+        return False
+    return bool(mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and bool(mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD))
+
+
+@contextlib.contextmanager
+def _file_lock(path: Path):
+    with open(path, "a+") as fh:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+
+
+@dataclass(frozen=True)
+class Context:
+    """One process's view of a store: the spec it was made from and a writer."""
+
+    spec: DatasetSpec
+    writer: Writer
+
+
+@lru_cache(maxsize=4)
+def context(store: str, fingerprint: str) -> Context:
+    """The spec (from the store's attributes) and an open writer, once per process."""
+    group = open_readonly(store)
+    attrs = group.attrs
+    spec = parse_spec(str(attrs["spec"]), source=str(attrs["spec_source"]),
+                      base=Path(str(attrs["spec_base"])))
+    if spec.fingerprint != fingerprint:
+        raise DatasetError(f"{store}: the store's spec changed under a running dataset")
+    import zarr
+
+    return Context(spec, Writer(zarr.open_group(store, mode="r+")))
+
+
+@lru_cache(maxsize=2)
+def _ideal_reflector(D: float, F: float, resolution: float, layout: PanelLayout | None) -> Reflector:
+    """The ideal generated reflector (D, F, resolution in m; panel layout), kept per process."""
+    return paraboloid(D, F, resolution, layout)
+
+
+def intensity(spec: DatasetSpec, deformation: Deformation | None, f_index: int,
+              device: str = "cpu") -> np.ndarray:
+    """Intensity on the spec's sphere grid, (n_theta, n_phi), relative to the incident wave.
+
+    ``deformation`` None gives the ideal paraboloid. GO traces the per-process ideal mesh
+    displaced by the deformation (one shared triangulation); other methods go through
+    :func:`raysim.simulate.simulate`.
+    """
+    scene = spec.scene.with_overrides(frequency_hz=spec.frequencies[f_index])
+    if spec.method == "go":
+        from raysim import go
+
+        dish = spec.scene.dish
+        ideal = _ideal_reflector(dish.diameter, dish.focal_length, dish.resolution, spec.scene.panels)
+        reflector = ideal if deformation is None else ideal.deformed(Memo(deformation))
+        result = go.trace(reflector, scene.sphere, scene.source.direction, scene.subdivisions, device)
+        return result.intensity
+    from raysim.simulate import simulate
+
+    ds = simulate(replace(scene, deformation=deformation or NoDeformation()), spec.method, device)
+    return np.asarray(ds["intensity_ideal" if deformation is None else "intensity"].values)
+
+
+def run_ideal(store: str, fingerprint: str, f_index: int, device: str = "cpu") -> dict[str, Any]:
+    """Task: the ideal intensity of frequency ``f_index``, written into the store."""
+    ctx = context(store, fingerprint)
+    start = time.perf_counter()
+    try:
+        ctx.writer.ideal(f_index, intensity(ctx.spec, None, f_index, device))
+        return {"frequency": f_index, "ok": True, "error": "", "seconds": time.perf_counter() - start}
+    except Exception as exc:  # recorded, never raised: the samples still go on
+        reason = _reason(exc)
+        ctx.writer.ideal(f_index, None, reason)
+        return {"frequency": f_index, "ok": False, "error": reason, "seconds": time.perf_counter() - start}
+
+
+def run_sample(store: str, fingerprint: str, index: int, device: str = "cpu") -> dict[str, Any]:
+    """Task: draw, simulate and write sample ``index``; a failure is recorded, not raised."""
+    ctx = context(store, fingerprint)
+    spec, writer = ctx.spec, ctx.writer
+    start = time.perf_counter()
+    cpu_start = time.process_time()
+    try:
+        draw = draw_sample(spec, index)
+        writer.params(index, draw.params, spec.frequencies[draw.frequency_index],
+                      spec.grid.evaluate(draw.deformation))
+        values = simulate_sample(spec, draw.deformation, draw.frequency_index, device)
+        seconds = time.perf_counter() - start
+        writer.done(index, values, seconds, time.process_time() - cpu_start)
+        return {"index": index, "ok": True, "error": "", "seconds": seconds}
+    except Exception as exc:
+        reason = _reason(exc)
+        seconds = time.perf_counter() - start
+        writer.failed(index, reason, seconds)
+        return {"index": index, "ok": False, "error": reason, "seconds": seconds}
+
+
+def simulate_sample(spec: DatasetSpec, deformation: Deformation, f_index: int,
+                    device: str = "cpu") -> np.ndarray:
+    """The deformed reflector's intensity of one sample, checked to be finite and lit."""
+    values = intensity(spec, deformation, f_index, device)
+    if not np.all(np.isfinite(values)):
+        raise ValueError("the simulated intensity holds non-finite values")
+    if not np.any(values > 0):
+        raise ValueError("no power reached the sphere")
+    return values
+
+
+def _reason(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__

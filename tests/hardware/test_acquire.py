@@ -1,0 +1,196 @@
+"""Whole scans through the API against the simulated rig: values, drift, calibration, resume."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hardware.errors import JournalError, PlanError
+from hardware.journal import read_journal
+from hardware.plan import REFERENCE, load_plan
+from hardware.rig import Calibration, Rig
+from hardware.session import fieldmap_from_journal, park, scan
+from hardware.sim_settings import drift_db
+from hardware.simulated import Faults
+from raysim import field as fieldmaps
+from raysim.errors import InstrumentError
+from raysim.sphere import SphereGrid, ideal_go_intensity
+
+from .conftest import D, F, R, pattern, write_field, write_plan
+
+# the plans' grid: 3 x 6 cells of 20 x 60 deg
+PLAN_GRID = SphereGrid(R, 3, 6, 0.0, math.radians(60.0), 0.0, 2 * math.pi)
+
+
+def aligned_field(tmp_path: Path) -> Path:
+    """The pattern on the plan's own grid: every probe position is a stored cell centre."""
+    return write_field(tmp_path / "aligned.nc", PLAN_GRID)
+
+
+def expected_pattern() -> np.ndarray:
+    t, p = np.meshgrid(PLAN_GRID.theta, PLAN_GRID.phi, indexing="ij")
+    return pattern(t, p)
+
+
+def test_scan_measures_the_field(tmp_path: Path) -> None:
+    plan = load_plan(write_plan(tmp_path))
+    result = scan(plan, tmp_path / "scan.nc", simulate=aligned_field(tmp_path))
+    ds = fieldmaps.load(result.output)
+    assert ds.attrs["method"] == "measured" and ds.attrs["sampling"] == "centre"
+    assert ds.attrs["sphere_radius"] == R and ds.attrs["focal_length"] == F
+    assert np.allclose(ds["intensity"].values, expected_pattern(), rtol=1e-9, atol=0)
+    ideal = ideal_go_intensity(PLAN_GRID.theta, F, R, D)
+    assert np.array_equal(ds["intensity_ideal"].values, np.repeat(ideal[:, None], 6, axis=1))
+    assert np.allclose(ds["intensity_std"].values, 0.0, atol=1e-12)
+    assert np.allclose(ds["slider_readback"], ds["slider_command"], atol=1e-7)
+    assert np.allclose(ds["r_probe"], R, atol=1e-12)
+    assert ds.sizes["reference"] == 4
+    assert sorted(ds["sample_index"].values.ravel()) == [n for n in range(22)
+                                                         if n not in (0, 7, 14, 21)]
+    assert result.steps_taken == result.steps_total == 22
+
+
+def test_references_remove_the_drift(tmp_path: Path) -> None:
+    """With drift and no noise, what remains is the drift's departure from its linear
+    interpolation between the reference readings."""
+    plan = load_plan(write_plan(tmp_path, drift=0.2, drift_correction="linear"))
+    ds = scan(plan, tmp_path / "scan.nc", simulate=aligned_field(tmp_path)).fieldmap
+    settings = plan.simulator
+    refs = [s.index for s in plan.steps() if s.kind == REFERENCE]
+    gains = [10 ** (drift_db(settings, n) / 10) for n in refs]
+    n = ds["sample_index"].values
+    true_gain = 10 ** (np.vectorize(lambda k: drift_db(settings, k))(n) / 10)
+    estimate = np.interp(n, refs, gains)
+    expected = expected_pattern() * true_gain / estimate
+    assert np.allclose(ds["intensity"].values, expected, rtol=1e-9, atol=0)
+    # the drift was large and is mostly gone
+    raw = np.abs(true_gain - 1).max()
+    left = np.abs(ds["intensity"].values / expected_pattern() - 1).max()
+    assert raw > 0.02 and left < raw / 5
+
+
+def test_auto_drift_correction_follows_the_references(tmp_path: Path) -> None:
+    field = aligned_field(tmp_path)
+    quiet = load_plan(write_plan(tmp_path / "a", noise=0.01, reference_samples=16,
+                                 drift_correction="auto"))
+    ds = scan(quiet, tmp_path / "a.nc", simulate=field).fieldmap
+    assert ds.attrs["drift_correction_applied"] == "none"
+    assert ds.attrs["drift_chi2"] < ds.attrs["drift_chi2_limit"]
+    assert np.all(ds["drift_db"].values == 0.0)
+    drifting = load_plan(write_plan(tmp_path / "b", noise=0.01, drift=0.3, reference_samples=16,
+                                    drift_correction="auto"))
+    ds = scan(drifting, tmp_path / "b.nc", simulate=field).fieldmap
+    assert ds.attrs["drift_correction_applied"] == "smooth"
+    assert ds.attrs["drift_chi2"] > 100 * ds.attrs["drift_chi2_limit"]
+
+
+def bilinear(theta, phi):
+    """A ratio to the ideal that bilinear interpolation reproduces exactly (rad in)."""
+    return 1.0 + 0.3 * theta + 0.02 * phi + 0.01 * theta * phi
+
+
+def test_unknown_centre_offset_biases_a_known_one_does_not(tmp_path: Path) -> None:
+    """The track centre is really 2 mm off the focus (axially and sideways)."""
+    plan = load_plan(write_plan(tmp_path))
+    truth = (0.0015, 0.0, 0.002)
+    sim = dataclasses.replace(plan.simulator, centre_offset=truth)
+    # 4 x 12 deg cells: the plan's centres are among theirs, bilinear values everywhere
+    grid = SphereGrid(R, 22, 30, 0.0, math.radians(88.0), 0.0, 2 * math.pi)
+    t, p = np.meshgrid(grid.theta, grid.phi, indexing="ij")
+    ideal = ideal_go_intensity(t, F, R, D)
+    field = write_field(tmp_path / "bilinear.nc", grid, bilinear(t, p) * ideal)
+    unknown = scan(plan, tmp_path / "a.nc", simulate=field, sim=sim).fieldmap
+    # the probe at axes (s, a) really sits at c + R u: the field there times (R / r)^2
+    expected = np.empty((3, 6))
+    for i, theta in enumerate(PLAN_GRID.theta):
+        for j, phi in enumerate(PLAN_GRID.phi):
+            # the controller positions to 1e-6 deg
+            s, a = (math.radians(round(math.degrees(v), 6)) for v in plan.rig.axes(theta, phi))
+            q = np.array(truth) + R * np.array([math.sin(s) * math.cos(a),
+                                                math.sin(s) * math.sin(a), -math.cos(s)])
+            r = np.linalg.norm(q)
+            t_true = math.atan2(math.hypot(q[0], q[1]), -q[2])
+            p_true = math.atan2(q[1], q[0]) % (2 * math.pi)
+            ideal = (2 * F / (1 + math.cos(t_true)) / R) ** 2
+            expected[i, j] = bilinear(t_true, p_true) * ideal * (R / r) ** 2
+    # the meter answers with 10 digits (1e-8 dB): 2.3e-9 relative
+    assert np.allclose(unknown["intensity"].values, expected, rtol=5e-9, atol=0)
+    t, p = np.meshgrid(PLAN_GRID.theta, PLAN_GRID.phi, indexing="ij")
+    commanded = bilinear(t, p) * ideal_go_intensity(t, F, R, D)
+    assert np.abs(unknown["intensity"].values / commanded - 1).max() > 2e-4
+
+    known_rig = plan.rig.with_calibration(Calibration(centre_offset=truth))
+    known_plan = dataclasses.replace(plan, rig=known_rig)
+    known = scan(known_plan, tmp_path / "b.nc", simulate=field, sim=sim).fieldmap
+    # commanded along the ray from the focus and referred back to the sphere: no bias
+    # (beyond the controller's 1e-6 deg resolution)
+    assert np.allclose(known["intensity"].values, commanded, rtol=1e-7, atol=0)
+    assert not np.allclose(known["r_probe"].values, R, atol=1e-4)
+
+
+def test_fault_then_resume_equals_uninterrupted(tmp_path: Path) -> None:
+    plan = load_plan(write_plan(tmp_path, noise=0.02, drift=0.1))
+    field = aligned_field(tmp_path)
+    whole = scan(plan, tmp_path / "whole.nc", simulate=field).fieldmap
+    out = tmp_path / "parts.nc"
+    journal = tmp_path / "parts.nc.journal"
+    # two moves a step; move 10 turns the track for step 4, the first of line 1:
+    # steps 0-3 complete
+    with pytest.raises(InstrumentError, match="axis 2 stopped at"):
+        scan(plan, out, simulate=field, faults=Faults(stall_at_move=10))
+    assert [r.n for r in read_journal(journal)[1]] == [0, 1, 2, 3]
+    partial = fieldmap_from_journal(plan, journal)
+    assert int(np.isfinite(partial["intensity"].values).sum()) == 3
+    # the meter fails at its 5th reading (two a step): steps 0 and 1 of this run complete
+    with pytest.raises(InstrumentError, match="-241"):
+        scan(plan, out, simulate=field, resume=True, faults=Faults(meter_error_at_reading=5))
+    assert len(read_journal(journal)[1]) == 6
+    result = scan(plan, out, simulate=field, resume=True)
+    assert result.steps_taken == 22 - 6
+    for name in whole.data_vars:
+        if name in ("time", "reference_time"):
+            continue
+        assert np.array_equal(whole[name].values, result.fieldmap[name].values,
+                              equal_nan=True), name
+    assert np.isfinite(whole["intensity"].values).all()
+
+
+def test_journal_guards(tmp_path: Path) -> None:
+    plan = load_plan(write_plan(tmp_path, noise=0.01))
+    field = aligned_field(tmp_path)
+    out = tmp_path / "scan.nc"
+    scan(plan, out, simulate=field)
+    journal = tmp_path / "scan.nc.journal"
+    before = journal.read_bytes()
+    with pytest.raises(JournalError, match="pass --resume"):
+        scan(plan, out, simulate=field)
+    noisier = dataclasses.replace(plan.simulator, noise_db=0.02)
+    with pytest.raises(JournalError, match="belongs to another plan"):
+        scan(plan, out, simulate=field, sim=noisier, resume=True)
+    assert journal.read_bytes() == before
+    # resuming a complete journal only rewrites the FieldMap
+    again = scan(plan, out, simulate=field, resume=True)
+    assert again.steps_taken == 0
+
+
+def test_simulated_field_must_match_the_plan(tmp_path: Path) -> None:
+    plan = load_plan(write_plan(tmp_path))
+    other = dataclasses.replace(plan, focal_length=40.0)
+    with pytest.raises(PlanError, match="focal_length 33 m differs"):
+        scan(other, tmp_path / "scan.nc", simulate=aligned_field(tmp_path))
+    with pytest.raises(PlanError, match="either --resource or --simulate"):
+        scan(plan, tmp_path / "scan.nc", simulate=aligned_field(tmp_path),
+             resources={"meter": "TCPIP::127.0.0.1::1::SOCKET"})
+    with pytest.raises(PlanError, match="no address for the meter"):
+        scan(plan, tmp_path / "scan.nc")
+
+
+def test_park_simulated() -> None:
+    rig = Rig(radius=R, park=(math.radians(93.0), math.radians(10.0)))
+    slider, rotation = park(rig, simulate=True)
+    assert math.degrees(slider) == pytest.approx(93.0, abs=1e-6)
+    assert math.degrees(rotation) == pytest.approx(10.0, abs=1e-6)

@@ -1,0 +1,162 @@
+"""``raysim scan`` and ``raysim rig park`` as a user runs them.
+
+Real subprocesses for a full scan, a fault followed by a resume and the park command; the
+other error paths run ``raysim.cli.main`` in this process (same code, faster).
+"""
+
+from __future__ import annotations
+
+import re
+import socket
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hardware.journal import read_journal
+from hardware.plan import load_plan
+from hardware.sim_settings import SimSettings
+from hardware.simulated import Faults, SimulatedRig
+from raysim import field as fieldmaps
+
+from .conftest import ROOT, error_line, run_cli, write_plan
+
+
+@pytest.mark.slow
+def test_demo_plan_scans_a_field(tmp_path: Path, fine_field: Path, raysim_main) -> None:
+    out = tmp_path / "demo.nc"
+    done = run_cli("scan", str(ROOT / "scenes" / "scan_demo.toml"), "--simulate",
+                   str(fine_field), "-o", str(out), "--time-scale", "0")
+    assert done.returncode == 0, done.stderr
+    assert "wrote" in done.stdout
+    ds = fieldmaps.load(out)
+    assert ds.attrs["samples_measured"] == 96 and ds.attrs["sim_noise_db"] == 0.01
+    ratio = ds["intensity"].values / ds["intensity_ideal"].values
+    # the pattern departs from the ideal by < 0.6 %, noise and drift add < 0.5 %
+    assert np.all(np.abs(ratio - 1) < 0.011)
+    assert len(read_journal(Path(str(out) + ".journal"))[1]) == 101
+    # the same FieldMap follows from the journal alone
+    again = tmp_path / "again.nc"
+    code, _, err = raysim_main("scan", str(ROOT / "scenes" / "scan_demo.toml"), "-o", str(again),
+                               "--journal", str(out) + ".journal", "--from-journal")
+    assert code == 0, err
+    assert np.array_equal(fieldmaps.load(again)["intensity"].values, ds["intensity"].values)
+
+
+def closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+FAULTS = [
+    (Faults(meter_silent=True), 0, r"power meter at TCPIP::127\.0\.0\.1::\d+::SOCKET is silent"),
+    (Faults(motion_silent=True), 0, r"motion controller at .* is silent: no answer to 'VE\?'"),
+    (Faults(meter_idn="Keysight Technologies,N9020A,1,1"), 0, "expected a Keysight N1913A"),
+    # two readings a step: the 7th reading belongs to step 3
+    (Faults(meter_error_at_reading=7), 3, r"reports error -241,\"Hardware missing"),
+]
+
+
+def resource_args(sim: SimulatedRig) -> list[str]:
+    return [f"--resource=meter={sim.resources['meter']}",
+            f"--resource=motion={sim.resources['motion']}"]
+
+
+def check_journal(out: Path, complete: int) -> None:
+    """The journal holds exactly the steps completed before the fault, nothing torn."""
+    path = Path(str(out) + ".journal")
+    _, records, good = read_journal(path)
+    assert [r.n for r in records] == list(range(complete))
+    assert good == path.stat().st_size
+
+
+@pytest.mark.parametrize(("faults", "complete", "message"), FAULTS)
+def test_instrument_faults_end_in_one_line(tmp_path: Path, raysim_main, faults: Faults,
+                                           complete: int, message: str) -> None:
+    plan_path = write_plan(tmp_path, visa_timeout=0.3)
+    plan = load_plan(plan_path)
+    out = tmp_path / "scan.nc"
+    with SimulatedRig(plan.rig, SimSettings(time_scale=0.0), faults=faults) as sim:
+        code, _, err = raysim_main("scan", str(plan_path), "-o", str(out), *resource_args(sim))
+    assert code == 2, err
+    assert error_line(err).startswith("error: ")
+    assert re.search(message, err), err
+    assert not out.exists()
+    check_journal(out, complete)
+
+
+@pytest.mark.slow
+def test_stalled_move_then_resume(tmp_path: Path) -> None:
+    """The real command: a move that stops short ends the scan with one line and status 2;
+    the same command with --resume on a healthy rig finishes it."""
+    plan_path = write_plan(tmp_path, visa_timeout=0.3)
+    plan = load_plan(plan_path)
+    out = tmp_path / "scan.nc"
+    # two moves a step: move 10 turns the track for step 4
+    with SimulatedRig(plan.rig, SimSettings(time_scale=0.0),
+                      faults=Faults(stall_at_move=10)) as sim:
+        done = run_cli("scan", str(plan_path), "-o", str(out), *resource_args(sim))
+    assert done.returncode == 2, done.stderr
+    assert re.search(r"axis 2 stopped at \d+\.\d+ deg, target 90\.0000 deg",
+                     error_line(done.stderr))
+    check_journal(out, 4)
+    with SimulatedRig(plan.rig, SimSettings(time_scale=0.0)) as sim:
+        done = run_cli("scan", str(plan_path), "-o", str(out), "--resume", *resource_args(sim))
+    assert done.returncode == 0, done.stderr
+    assert "18 of 22 steps taken now" in done.stdout.replace("\n", " ")
+    assert fieldmaps.load(out).attrs["samples_measured"] == 18
+
+
+def test_unreachable_instrument(tmp_path: Path, raysim_main) -> None:
+    plan_path = write_plan(tmp_path)
+    port = closed_port()
+    code, _, err = raysim_main("scan", str(plan_path), "-o", str(tmp_path / "s.nc"),
+                               f"--resource=meter=TCPIP::127.0.0.1::{port}::SOCKET",
+                               f"--resource=motion=TCPIP::127.0.0.1::{port}::SOCKET")
+    assert code == 2
+    assert "power meter at" in error_line(err) and "unreachable" in err
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--resource", "scope=TCPIP::1.2.3.4::5::SOCKET"], "write ROLE=VISA"),
+    (["--simulate", "missing.nc"], "missing.nc: no such file"),
+    (["--noise-db", "-1", "--simulate", "x.nc"], "--noise-db must be >= 0"),
+    (["--centre-offset", "0,0", "--simulate", "x.nc"], "three numbers X,Y,Z"),
+])
+def test_bad_options(tmp_path: Path, raysim_main, args: list[str], message: str) -> None:
+    plan_path = write_plan(tmp_path)
+    code, _, err = raysim_main("scan", str(plan_path), "-o", str(tmp_path / "s.nc"), *args)
+    assert code == 2
+    assert message in error_line(err)
+
+
+def test_bad_plan_and_existing_journal(tmp_path: Path, raysim_main, fine_field: Path) -> None:
+    plan_path = write_plan(tmp_path)
+    bad = tmp_path / "bad.toml"
+    bad.write_text(plan_path.read_text().replace("theta_step_deg = 20.0", "theta_step_deg = 0"))
+    code, _, err = raysim_main("scan", str(bad), "-o", str(tmp_path / "s.nc"), "--simulate",
+                               str(fine_field))
+    assert code == 2
+    assert "'theta_step_deg' must be > 0" in error_line(err)
+    out = tmp_path / "s.nc"
+    code, _, err = raysim_main("scan", str(plan_path), "-o", str(out), "--simulate",
+                               str(fine_field))
+    assert code == 0, err
+    journal = Path(str(out) + ".journal").read_bytes()
+    code, _, err = raysim_main("scan", str(plan_path), "-o", str(out), "--simulate",
+                               str(fine_field))
+    assert code == 2
+    assert "pass --resume" in error_line(err)
+    assert Path(str(out) + ".journal").read_bytes() == journal
+
+
+@pytest.mark.slow
+def test_rig_park(tmp_path: Path, raysim_main) -> None:
+    done = run_cli("rig", "park", str(ROOT / "scenes" / "rig.toml"), "--simulate")
+    assert done.returncode == 0, done.stderr
+    assert "parked: slider 95.0000 deg, rotation 0.0000 deg" in done.stdout
+    code, _, err = raysim_main("rig", "park", str(ROOT / "scenes" / "rig.toml"),
+                               f"--resource=motion=TCPIP::127.0.0.1::{closed_port()}::SOCKET")
+    assert code == 2
+    assert "motion controller at" in error_line(err) and "unreachable" in err

@@ -1,0 +1,71 @@
+"""Drift from the reference readings: the gain models and the test for real drift."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hardware.drift import best_window, chi2_limit, drift, reduced_chi2, reference_gains
+from hardware.journal import Record
+
+
+def test_reference_gains_modes() -> None:
+    index = np.arange(0.0, 4000.0, 100.0)
+    linear = 1.0 + 2e-6 * index                      # a linear drift
+    assert np.array_equal(reference_gains(index, 3e-5 * linear, "none", 5), np.ones(40))
+    assert np.allclose(reference_gains(index, 3e-5 * linear, "linear", 5), linear, rtol=1e-14)
+    # a straight-line fit keeps a linear drift exactly
+    assert np.allclose(reference_gains(index, 3e-5 * linear, "smooth", 5), linear, rtol=1e-12)
+    # and divides the reading noise by about sqrt(5) inside the series
+    rng = np.random.default_rng(8)
+    index = np.arange(0.0, 4e5, 100.0)
+    noisy = 1.0 + 1e-3 * rng.standard_normal(index.size)
+    smooth = reference_gains(index, noisy, "smooth", 5) * noisy[0]
+    assert np.std(smooth[10:-10] - 1.0) == pytest.approx(1e-3 / math.sqrt(5), rel=0.1)
+
+
+def test_reduced_chi2_of_noise_is_one() -> None:
+    rng = np.random.default_rng(9)
+    sem = np.full(2000, 2e-4)
+    power = 1.0 + sem * rng.standard_normal(2000)
+    assert reduced_chi2(power, sem) == pytest.approx(1.0, abs=0.1)
+    assert math.isnan(reduced_chi2(power[:1], sem[:1]))
+    assert math.isnan(reduced_chi2(power, np.zeros(2000)))
+    assert chi2_limit(19) == pytest.approx(1.0 + 3.0 / 3.0)
+
+
+def records(gains: np.ndarray, noise: float, count: int, seed: int) -> list[Record]:
+    rng = np.random.default_rng(seed)
+    return [Record(100 * m, "reference", -1, -1, (0.0, 0.0), (0.0, 0.0),
+                   tuple(1e-5 * g * (1.0 + noise * rng.standard_normal(count))), 0.0)
+            for m, g in enumerate(gains)]
+
+
+def test_auto_removes_drift_only_when_the_references_show_it() -> None:
+    flat = drift(records(np.ones(30), 2e-3, 16, seed=1), "auto", 9)
+    assert flat.applied == "none" and np.all(flat.gains == 1.0)
+    assert flat.chi2 < chi2_limit(30)
+    ramp = 1.0 + 0.01 * np.linspace(0.0, 1.0, 30)      # 1 % over the scan, 20x the noise
+    moving = drift(records(ramp, 2e-3, 16, seed=1), "auto", 9)
+    assert moving.applied == "smooth" and moving.window == 9
+    assert np.allclose(moving.gains, ramp, atol=1.5e-3)
+    assert moving.at(50.0) == pytest.approx(0.5 * (moving.gains[0] + moving.gains[1]))
+    # quiet references (one reading, or no scatter) cannot rule drift out
+    assert drift(records(ramp, 0.0, 1, seed=1), "auto", 9).applied == "smooth"
+    assert drift(records(np.ones(3), 0.0, 4, seed=1), "linear", 9).applied == "linear"
+
+
+def test_window_follows_drift_speed_and_noise() -> None:
+    """Leave-one-out picks no smoothing for a drift fast against the reference spacing and
+    quiet references, and a wide window for a slow drift under noisy references."""
+    index = np.arange(0.0, 3600.0 * 40, 3600.0)
+    rng = np.random.default_rng(4)
+    fast = 1.0 + 0.01 * np.sin(2 * np.pi * index / 40000.0) + 1e-5 * rng.standard_normal(40)
+    assert best_window(index, fast, 9) == 1
+    slow = 1.0 + 1e-7 * index / 3600.0 + 3e-4 * rng.standard_normal(40)
+    assert best_window(index, slow, 9) >= 5
+    fast_drift = drift(records(fast, 1e-4, 16, seed=2), "auto", 9)
+    assert fast_drift.applied == "linear" and fast_drift.window == 1
+    assert np.allclose(fast_drift.gains, fast / fast[0], atol=1e-4)
