@@ -187,17 +187,9 @@ def _paraboloid(D: float, F: float, face_m: float):
 
 def _ptd_field(reflector, sphere: SphereGrid, wave, device) -> NDArray[np.complex128]:
     """The PTD fringe field (n_theta, n_phi, 3) of the reflector's rim, from :mod:`raysim.ptd`."""
-    try:
-        from raysim import ptd
-    except ImportError as exc:
-        raise SolverError("model po+ptd needs raysim.ptd, which this installation lacks; "
-                          "use model po") from exc
-    fringe = getattr(ptd, "sphere_field", None)
-    if fringe is None:
-        raise SolverError("raysim.ptd has no sphere_field(reflector, grid, wave, device=...); "
-                          "use model po")
-    result = fringe(reflector, sphere, wave, device=device)
-    return np.asarray(getattr(result, "E", result))
+    from raysim import ptd
+
+    return ptd.sphere_edge_field(reflector, sphere, wave, "rim", device=device).E
 
 
 def forward_for(model: str, attrs: dict, device: str | None = "cpu",

@@ -94,3 +94,34 @@ def test_panels_csv_from_a_fieldmap_whose_scene_has_panels(monkeypatch, capsys, 
     lines = table.read_text().splitlines()
     assert lines[0].startswith("panel_id,ring,centre_x_m,centre_y_m,piston_um")
     assert len(lines) == 1 + 216
+
+
+def test_paper_po_sweep_reproduces_table3_at_0p1_ghz_and_keeps_its_fieldmap(monkeypatch, capsys,
+                                                                          tmp_path):
+    """`raysim paper --po` at 0.1 GHz (the cheapest Table 3 row): the paper's setting on the
+    project's PO + PTD data lands near the paper's 22.07 %; the FieldMap is kept and reused."""
+    from raysim.field import load
+
+    fields = tmp_path / "fields"
+    code, stdout, _ = run(monkeypatch, capsys, "paper", "--po", "--frequencies", "0.1e9",
+                          "--grid", "64", "--refine", "1", "--fields", str(fields))
+    assert code in (0, None)
+    row = next(line.split() for line in stdout.splitlines() if line.strip().startswith("0.1 "))
+    # f, 90 x 360, paper RMS, paper RRMS %, RMS, RRMS %, GO RMS, GO RRMS %, wave RMS, wave RRMS %
+    assert row[5:7] == ["22.07", "%"]
+    rrms = float(row[8])
+    assert abs(rrms - 22.07) / 22.07 < 0.25
+    assert np.isfinite(float(row[10])) and np.isfinite(float(row[13]))
+    kept = load(fields / "paper_poptd_0.1GHz_90x360.nc")
+    assert kept.attrs["method"] == "po+ptd"
+
+    code, stdout, err = run(monkeypatch, capsys, "paper", "--po", "--frequencies", "0.1e9",
+                            "--grid", "32", "--refine", "0", "--fields", str(fields))
+    assert code in (0, None) and "read" in err + stdout
+    row = next(line.split() for line in stdout.splitlines() if line.strip().startswith("0.1 "))
+    assert row[-3] == "-"                         # no wave row without refinement
+
+
+def test_paper_po_rejects_bad_frequencies(monkeypatch, capsys):
+    code, _, err = run(monkeypatch, capsys, "paper", "--po", "--frequencies", "0.1e9,abc")
+    assert code == 2 and err.count("\n") == 1 and "--frequencies" in err

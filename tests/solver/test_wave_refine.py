@@ -155,13 +155,11 @@ def test_model_choice_follows_the_data_and_checks_names():
 
 
 def test_po_ptd_adds_the_fringe_field_of_raysim_ptd(monkeypatch, sphere):
-    """The po+ptd model adds what raysim.ptd.sphere_field returns (here a known stand-in)."""
+    """The po+ptd model adds what raysim.ptd.sphere_edge_field returns (here a known stand-in)."""
     shift = np.zeros((sphere.n_theta, sphere.n_phi, 3), dtype=complex)
     shift[..., 0] = 0.01
-    stand_in = types.ModuleType("raysim.ptd")
-    stand_in.sphere_field = lambda reflector, grid, wave, device=None: shift
-    monkeypatch.setitem(sys.modules, "raysim.ptd", stand_in)
-    monkeypatch.setattr("raysim.ptd", stand_in, raising=False)
+    stand_in = lambda reflector, grid, wave, edges, device=None: types.SimpleNamespace(E=shift)  # noqa: E731
+    monkeypatch.setattr("raysim.ptd.sphere_edge_field", stand_in)
     plain = WaveForward(FREQUENCY).ideal_field(sphere, F, D)
     with_fringe = WaveForward(FREQUENCY, ptd=True).ideal_field(sphere, F, D)
     np.testing.assert_allclose(with_fringe - plain, shift, atol=1e-12)
