@@ -198,28 +198,10 @@ def convergence() -> None:
 
 
 def po_field(reflector, points, wave, spw: float = 1.5):
-    """PO field (n, 3) with every sample lit and its lit side taken from the surface normal.
-
-    Stands in for :func:`raysim.po.scatter` on panelled dishes until two PO issues are fixed
-    (reported with issue 6): ``po_kernels.po_currents`` turns a sample whose vector area
-    points away from the wave, so the negative weights of the circular segments removed at a
-    panel's inner ring edge add instead; and the BVH test marks samples beside a panel edge as
-    shadowed where the neighbouring panel's facet overlaps its own by their sag. On axis the
-    dish's front is all lit. The smooth surface's area vectors are (-h_x, -h_y, 1) w, so
-    a / a_z is the front normal whatever the sign of the weight w.
-    """
+    """PO field (n, 3) of ``reflector`` at ``points`` (the engine of raysim.po)."""
     from raysim import po
-    from raysim.quadrature import plan
 
-    radiator = po.Radiator(points, wave.k)
-    h_hat = np.cross(wave.k_hat, wave.e_hat)
-    for s in plan(reflector, wave.wavelength, spw).chunks():
-        a = s.area
-        facing = ((a / a[:, 2:3]) @ wave.k_hat) < 0  # the front faces the wave
-        a_lit = np.where(facing[:, None], a, -a)
-        phase = np.exp(-1j * wave.k * (s.points @ wave.k_hat))
-        radiator.add(po.CurrentElements(s.points, 2.0 * np.cross(a_lit, h_hat) / po.ETA0 * phase[:, None]))
-    return radiator.field()
+    return po.scatter(reflector, points, wave, spw).E
 
 
 def gap_fields(gapped, smooth, thin, P, wave) -> dict[str, np.ndarray]:

@@ -209,7 +209,10 @@ def po_elements(reflector: Reflector, wave: Illumination, quadrature: FaceQuadra
 
     Yields Warp (9, N) float64 arrays on ``device`` in the :class:`Radiator` layout (electric
     elements J dA, A m). Samples the BVH finds shadowed carry no current and are left out;
-    ``taper(x, y)`` (optional, dimensionless) multiplies each sample's current.
+    ``taper(x, y)`` (optional, dimensionless) multiplies each sample's current. The lit side
+    of each sample is its face's side towards the wave: the samples' vector areas point to the
+    dish's front times a quadrature weight that can be negative (the circular segments cut
+    from a panel at a concave ring edge), so their own direction does not tell it.
     """
     from raysim.kernels import po_kernels
 
@@ -219,16 +222,19 @@ def po_elements(reflector: Reflector, wave: Illumination, quadrature: FaceQuadra
     mesh = wp.Mesh(points=wp.array(reflector.vertices.astype(np.float32), dtype=wp.vec3, device=dev),
                    indices=wp.array(reflector.faces.astype(np.int32).ravel(), dtype=wp.int32, device=dev))
     standoff = float(np.ptp(reflector.vertices, axis=0).max() + 10.0)
+    tolerance = shadow_tolerance(reflector)
     h_hat = np.cross(wave.k_hat, wave.e_hat)
+    v = reflector.vertices[reflector.faces]
+    back_lit = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]) @ wave.k_hat > 0.0  # wave meets the back
     for samples in quadrature.chunks(chunk):
         n = len(samples)
         lit = wp.zeros(n, dtype=wp.int32, device=dev)
         warp_runtime.launch(po_kernels.lit_samples, n,
                             [mesh.id, wp.array(samples.facet, dtype=wp.vec3d, device=dev),
                              wp.array(samples.face.astype(np.int32), dtype=wp.int32, device=dev),
-                             wp.vec3d(*wave.k_hat), standoff, 1e-3, lit], dev)
+                             wp.vec3d(*wave.k_hat), standoff, tolerance, lit], dev)
         keep = lit.numpy().astype(bool)
-        area = samples.area[keep]
+        area = np.where(back_lit[samples.face[keep]][:, None], -samples.area[keep], samples.area[keep])
         points = samples.points[keep]
         if taper is not None:
             area = area * np.asarray(taper(points[:, 0], points[:, 1]), dtype=np.float64)[:, None]
@@ -243,6 +249,23 @@ def po_elements(reflector: Reflector, wave: Illumination, quadrature: FaceQuadra
                              wp.array(area, dtype=wp.vec3d, device=dev),
                              wp.vec3d(*wave.k_hat), wp.vec3d(*h_hat), wave.k, ETA0, src], dev)
         yield src
+
+
+def facet_sag(reflector: Reflector) -> float:
+    """Largest distance (m) along z between a face's flat facet and the smooth surface, at the
+    face centroids (0 for a mesh without a smooth surface)."""
+    if reflector.surface is None or len(reflector.faces) == 0:
+        return 0.0
+    c = reflector.vertices[reflector.faces].mean(axis=1)
+    panel = reflector.face_panel if reflector.layout is not None else None
+    return float(np.abs(reflector.surface.height(c[:, 0], c[:, 1], panel) - c[:, 2]).max())
+
+
+def shadow_tolerance(reflector: Reflector) -> float:
+    """How far (m) before a point another face may meet its ray without shadowing it: 1 mm
+    plus twice the facets' sag. At a panel's edge the neighbouring panel's facet, a chord of
+    the surface like its own, can overlap it in projection by that much without hiding it."""
+    return 1e-3 + 2.0 * facet_sag(reflector)
 
 
 @dataclass(frozen=True)

@@ -65,7 +65,7 @@ from raysim import warp_runtime
 from raysim.edges import Edges, edge_quadrature
 from raysim.errors import RaysimError
 from raysim.geometry import Reflector
-from raysim.po import ETA0, Illumination, Progress, Taper
+from raysim.po import ETA0, Illumination, Progress, Taper, shadow_tolerance
 from raysim.sphere import SphereGrid
 
 DEFAULT_POINTS_PER_WAVELENGTH = 4.0
@@ -129,22 +129,11 @@ def fringe_elements(edges: Edges, wave: Illumination, lit: NDArray[np.bool_] | N
     return out
 
 
-def facet_sag(reflector: Reflector) -> float:
-    """Largest distance (m) along z between a face's flat facet and the smooth surface, at the
-    face centroids (0 for a mesh without a smooth surface)."""
-    if reflector.surface is None or len(reflector.faces) == 0:
-        return 0.0
-    c = reflector.vertices[reflector.faces].mean(axis=1)
-    panel = reflector.face_panel if reflector.layout is not None else None
-    return float(np.abs(reflector.surface.height(c[:, 0], c[:, 1], panel) - c[:, 2]).max())
-
-
 def lit_points(reflector: Reflector, edges: Edges, wave: Illumination, device: str = "cpu") -> NDArray:
     """(N,) bool: the edge points the plane wave reaches (Warp's BVH, as PO's samples).
 
-    A point counts as shadowed when the ray meets another face more than 1 mm plus twice the
-    facets' sag before it: at a panel's edge the neighbouring panel's facet, a chord of the
-    surface like its own, can overlap it in projection by that much without hiding it.
+    A point counts as shadowed when the ray meets another face more than
+    :func:`raysim.po.shadow_tolerance` before it.
     """
     from raysim.kernels import po_kernels
 
@@ -159,7 +148,7 @@ def lit_points(reflector: Reflector, edges: Edges, wave: Illumination, device: s
     warp_runtime.launch(po_kernels.lit_samples, len(edges),
                         [mesh.id, wp.array(edges.facet, dtype=wp.vec3d, device=device),
                          wp.array(edges.face.astype(np.int32), dtype=wp.int32, device=device),
-                         wp.vec3d(*wave.k_hat), standoff, 1e-3 + 2.0 * facet_sag(reflector), lit], device)
+                         wp.vec3d(*wave.k_hat), standoff, shadow_tolerance(reflector), lit], device)
     return lit.numpy().astype(bool)
 
 

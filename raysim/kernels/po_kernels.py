@@ -262,14 +262,13 @@ def po_currents(
     """PO current elements J dA = 2 n dA x H_inc at lit samples (A m), into ``src``.
 
     H_inc = h_hat / eta * exp(-j k k_hat . r) with h_hat = k_hat x e_hat (unit incident E);
-    n dA is the sample's vector area turned towards the side the wave comes from.
+    ``area`` is n dA with n already on the side the wave comes from (the caller turns it by
+    the face's normal: a quadrature weight may be negative, so the sign of n dA . k_hat alone
+    does not tell the lit side).
     """
     i = wp.tid() + offset
     r = points[i]
-    a = area[i]
-    if wp.dot(a, k_hat) > F64_ZERO:
-        a = -a
-    v = wp.cross(a, h_hat) * (F64_TWO / eta)
+    v = wp.cross(area[i], h_hat) * (F64_TWO / eta)
     phase = k * wp.dot(k_hat, r)
     c = wp.cos(phase)
     s = -wp.sin(phase)

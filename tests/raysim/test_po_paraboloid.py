@@ -119,7 +119,7 @@ def test_simulate_po_fieldmap(small_scene):
 
 
 def test_po_only_options_and_bad_values(small_scene):
-    with pytest.raises(RaysimError, match="po only"):
+    with pytest.raises(RaysimError, match=r"apply to --method po and po\+ptd only"):
         simulate(small_scene, method="go", total=True)
     with pytest.raises(RaysimError, match="must be > 0"):
         simulate(small_scene, method="po", samples_per_wavelength=0.0)
