@@ -75,7 +75,9 @@ def output_path(path: Path) -> Path:
 def simulate(
     scene: Path = typer.Argument(..., help="Scene TOML file (see scenes/)."),
     output: Path = typer.Option(..., "-o", "--output", help="FieldMap NetCDF file to write."),
-    method: str = typer.Option("go", "--method", help="go (geometric optics), po, or po+ptd."),
+    method: str | None = typer.Option(None, "--method",
+                                      help="go (geometric optics), po, or po+ptd (default: the "
+                                           "scene's method key, else go)."),
     frequency: float | None = typer.Option(None, "--frequency", help="Override the scene's frequency (Hz)."),
     n_theta: int | None = typer.Option(None, "--n-theta", help="Cells in theta (polar angle from -z)."),
     n_phi: int | None = typer.Option(None, "--n-phi", help="Cells in phi (azimuth)."),
@@ -104,6 +106,7 @@ def simulate(
     from raysim.simulate import summary
 
     loaded = load_scene(scene).with_overrides(frequency, n_theta, n_phi)
+    method = method or loaded.method
     output_path(output)
     with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
                   console=console, transient=True) as bar:
@@ -271,7 +274,9 @@ def render(
 def report(
     source: Path = typer.Argument(..., help="Scene TOML file, or a FieldMap (.nc) simulated or measured."),
     output: Path = typer.Option(..., "-o", "--output", help="Folder for report.html, its figures and data."),
-    method: str = typer.Option("go", "--method", help="Simulation method: go, po or po+ptd."),
+    method: str | None = typer.Option(None, "--method",
+                                      help="Simulation method: go, po or po+ptd (default: the "
+                                           "scene's method key, else go)."),
     device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
     solver: str | None = typer.Option(None, "--solver", help="Poisson solver (default: the solver's)."),
     grid: int | None = typer.Option(None, "--grid",

@@ -86,6 +86,7 @@ class Scene:
     subdivisions: int = 1
     text: str = ""
     path: Path | None = None
+    method: str = "go"
 
     @property
     def F(self) -> float:
@@ -116,9 +117,12 @@ class Scene:
         return scene
 
 
+# the simulation a scene is made for (``raysim simulate`` uses it unless --method says otherwise)
+SCENE_METHODS = ("go", "po", "po+ptd")
+
 # --- the schema: section -> key -> expected kind ------------------------------------------
 _SCHEMA: dict[str, dict[str, str]] = {
-    "": {"name": STR, "description": STR, "dish": TABLE, "panels": TABLE,
+    "": {"name": STR, "description": STR, "method": STR, "dish": TABLE, "panels": TABLE,
          "deformation": TABLES, "source": TABLE, "sphere": TABLE, "go": TABLE},
     "dish": {"diameter_m": NUM, "focal_length_m": NUM, "resolution_m": NUM, "mesh": STR,
              "ideal_mesh": STR, "mesh_unit_m": NUM},
@@ -156,9 +160,12 @@ def parse_scene(text: str, source: str = "scene", base: Path | None = None) -> S
     subdivisions = ctx.integer(go, "go", "subdivisions", 1, lo=1, hi=16)
     deformation = deformation_of(ctx, raw.get("deformation", []), dish, panels, base)
     name = raw.get("name") or (Path(source).stem if source != "scene" else "scene")
+    method = raw.get("method", "go")
+    if method not in SCENE_METHODS:
+        raise ctx.fail("", f"'method' must be one of {', '.join(SCENE_METHODS)}, got {method!r}")
     return Scene(name=str(name), dish=dish, panels=panels, deformation=deformation,
                  source=source_, sphere=sphere, subdivisions=subdivisions, text=text,
-                 path=Path(source) if source != "scene" else None)
+                 path=Path(source) if source != "scene" else None, method=method)
 
 
 def _dish(ctx: KeyChecker, table: dict, base: Path) -> Dish:

@@ -24,7 +24,7 @@ METHODS = ("go", "po", "po+ptd")
 Progress = Callable[[str, float], None]
 
 
-def simulate(scene: Scene, method: str = "go", device: str | None = "cpu",
+def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu",
              progress: Progress | None = None, *, total: bool = False, save_field: bool = False,
              samples_per_wavelength: float | None = None, edges: str | None = None) -> xr.Dataset:
     """Simulate ``scene`` and return its FieldMap (an ``xarray.Dataset``; see raysim.field).
@@ -33,7 +33,7 @@ def simulate(scene: Scene, method: str = "go", device: str | None = "cpu",
     ----------
     scene : a validated scene (``raysim.load_scene``).
     method : ``go`` (geometric optics), ``po`` (physical optics) or ``po+ptd`` (PO plus the
-        fringe field of the edges, :mod:`raysim.ptd`).
+        fringe field of the edges, :mod:`raysim.ptd`); None takes the scene's ``method``.
     device : ``cpu`` or ``cuda`` (Warp device).
     progress : optional callback (stage name, fraction done in 0..1).
     total : PO only: intensity of the total field (scattered plus incident) at the probe,
@@ -44,6 +44,7 @@ def simulate(scene: Scene, method: str = "go", device: str | None = "cpu",
     edges : ``po+ptd`` only: ``rim`` (the outer rim, the paper's PTD; the default) or ``all``
         (the rim and every panel edge beside a gap).
     """
+    method = scene.method if method is None else method
     if method not in METHODS:
         raise RaysimError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
     report = progress or (lambda stage, fraction: None)

@@ -37,7 +37,7 @@ PAPER_GO = ("paper, GO data: FDM (Gauss-Seidel, N = 256, 1000 iterations) RRMS 4
             "FFT RRMS 7.47 %")
 
 
-def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, method: str = "go",
+def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, method: str | None = None,
            device: str = "cpu", solver: str | None = None, grid: int | None = None,
            refine: int | None = None, invert: bool = True,
            progress: Callable[[str], None] | None = None) -> Path:
@@ -47,7 +47,7 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
     ----------
     source : scene TOML file, or a FieldMap NetCDF (``.nc``) already simulated or measured.
     out_dir : folder for ``report.html``, ``field.nc``, ``surface.nc`` and ``figures/``.
-    method : simulation method (``go``; ``po``, ``po+ptd`` where available).
+    method : simulation method (``go``, ``po``, ``po+ptd``); None takes the scene's ``method``.
     device : Warp device, ``cpu`` or ``cuda``.
     solver, grid, refine : the inversion's Poisson solver, aperture grid points N and GO
         refinement iterations (0: the paper's linear answer); None: the solver's defaults.
@@ -69,7 +69,7 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
 
         loaded = load_scene(source)
         out = _folder(out_dir)
-        say(f"simulating {loaded.name} ({method})")
+        say(f"simulating {loaded.name} ({method or loaded.method})")
         start = time.perf_counter()
         field = simulate(loaded, method=method, device=device)
         timings["simulate"] = time.perf_counter() - start

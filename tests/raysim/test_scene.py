@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from raysim.deformation import GaussianBumps, GriddedMap, PanelRigid, PaperDeformation, Sum, Zernike
-from raysim.errors import SceneError
+from raysim.errors import RaysimError, SceneError
 from raysim.scene import load_scene, parse_scene
 
 BASE = """
@@ -77,6 +77,7 @@ def test_source_direction_and_polarisation_off_axis():
         ({"radius_m = 10.0": "radius_m = 10.0\ntheta_min_deg = 85.0"}, "beyond the rim image at 79.61 deg"),
         ({"radius_m = 10.0": "radius_m = 10.0\nn_theta = 0"}, "'sphere.n_theta' must be >= 1"),
         ({"[sphere]": "[spheres]"}, "unknown key 'spheres'"),
+        ({"[dish]": 'method = "fdtd"\n[dish]'}, "'method' must be one of go, po, po+ptd, got 'fdtd'"),
     ],
 )
 def test_bad_values_name_the_key(change, message):
@@ -85,6 +86,19 @@ def test_bad_values_name_the_key(change, message):
     text = str(info.value)
     assert message in text
     assert "\n" not in text and text.startswith("test.toml: ")
+
+
+def test_scene_method_is_simulates_default():
+    from raysim.simulate import simulate
+
+    assert parse_scene(BASE).method == "go"
+    scene = parse_scene('method = "po"\n' + BASE)
+    assert scene.method == "po"
+    # the scene's method runs unless the call names another; po's checks then apply
+    with pytest.raises(RaysimError, match="must be > 0"):
+        simulate(scene, samples_per_wavelength=0.0)
+    with pytest.raises(RaysimError, match="apply to --method po"):
+        simulate(scene, method="go", samples_per_wavelength=2.0)
 
 
 def test_missing_required_key_is_named():
