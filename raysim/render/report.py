@@ -68,8 +68,9 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
         from raysim.simulate import simulate
 
         loaded = load_scene(source)
+        method = method or loaded.method
         out = _folder(out_dir)
-        say(f"simulating {loaded.name} ({method or loaded.method})")
+        say(f"simulating {loaded.name} ({method})")
         start = time.perf_counter()
         field = simulate(loaded, method=method, device=device)
         timings["simulate"] = time.perf_counter() - start
