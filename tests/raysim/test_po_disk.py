@@ -19,24 +19,10 @@ import pytest
 from raysim import po
 from raysim.geometry import paraboloid
 from raysim.quadrature import FaceQuadrature
+from tests.flat import FlatSurface
 
 A = 5.0  # disk radius (m)
 Z = np.linspace(2.0, 50.0, 25)  # axis points (m)
-
-
-class FlatSurface:
-    """The plane z = 0 as a smooth surface (height, slopes and normal of a Reflector surface)."""
-
-    def height(self, x, y, panel=None):
-        return np.zeros(np.shape(x))
-
-    def slope(self, x, y, panel=None):
-        return np.zeros(np.shape(x)), np.zeros(np.shape(x))
-
-    def normal(self, x, y, panel=None):
-        n = np.zeros((*np.shape(x), 3))
-        n[..., 2] = 1.0
-        return n
 
 
 def flat_disk(a: float, h: float):

@@ -28,6 +28,7 @@ from scipy.special import fresnel
 from raysim import po, ptd
 from raysim.geometry import Reflector
 from raysim.quadrature import FaceQuadrature
+from tests.flat import FlatSurface
 
 LAMBDA = 1.0  # m
 RHO = np.array([2.0, 4.0, 8.0, 16.0])  # distances from the edge (m): k rho = 12.6 .. 100.5
@@ -86,19 +87,6 @@ def exact_total(P, r0, x, y, t, k, k_hat, e_hat):
 
 
 # --- the plate --------------------------------------------------------------------------
-class FlatSurface:
-    """The plane z = 0 as a smooth surface (height, slopes, normal +z)."""
-
-    def height(self, x, y, panel=None):
-        return np.zeros(np.shape(x))
-
-    def slope(self, x, y, panel=None):
-        return np.zeros(np.shape(x)), np.zeros(np.shape(x))
-
-    def normal(self, x, y, panel=None):
-        n = np.zeros((*np.shape(x), 3))
-        n[..., 2] = 1.0
-        return n
 
 
 def plate(core: float, ramp: float, h: float = 2.5):

@@ -19,22 +19,10 @@ from raysim import po, ptd
 from raysim.edges import edge_quadrature
 from raysim.geometry import Reflector, paraboloid
 from raysim.quadrature import FaceQuadrature
+from tests.flat import FlatSurface
 
 LAMBDA = 1.0
 FAR = 2.0e4  # m, beyond 2 D^2 / lambda = 512 m
-
-
-class FlatSurface:
-    def height(self, x, y, panel=None):
-        return np.zeros(np.shape(x))
-
-    def slope(self, x, y, panel=None):
-        return np.zeros(np.shape(x)), np.zeros(np.shape(x))
-
-    def normal(self, x, y, panel=None):
-        n = np.zeros((*np.shape(x), 3))
-        n[..., 2] = 1.0
-        return n
 
 
 def flat_disk(a: float, h: float) -> Reflector:

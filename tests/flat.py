@@ -1,0 +1,18 @@
+"""The plane z = 0 as a reflector's smooth surface, for plates and disks in the PO and PTD tests."""
+
+import numpy as np
+
+
+class FlatSurface:
+    """Height, slopes and normal (+z) of the plane z = 0, in the interface of a Reflector's surface."""
+
+    def height(self, x, y, panel=None):
+        return np.zeros(np.shape(x))
+
+    def slope(self, x, y, panel=None):
+        return np.zeros(np.shape(x)), np.zeros(np.shape(x))
+
+    def normal(self, x, y, panel=None):
+        n = np.zeros((*np.shape(x), 3))
+        n[..., 2] = 1.0
+        return n
