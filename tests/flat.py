@@ -16,3 +16,17 @@ class FlatSurface:
         n = np.zeros((*np.shape(x), 3))
         n[..., 2] = 1.0
         return n
+
+
+def flat_disk(a: float, h: float):
+    """A triangulated disk of radius a (m) in z = 0, triangles about h (m), normals +z."""
+    import dataclasses
+
+    from raysim.geometry import paraboloid
+
+    dish = paraboloid(2.0 * a, 1.0, h)  # only its aperture triangulation is used
+    vertices = dish.vertices.copy()
+    vertices[:, 2] = 0.0
+    normals = np.zeros_like(vertices)
+    normals[:, 2] = 1.0
+    return dataclasses.replace(dish, vertices=vertices, vertex_normals=normals, surface=FlatSurface())

@@ -10,29 +10,17 @@ hardest case for a polygonal rim, which the quadrature replaces by the true circ
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 
 import numpy as np
 import pytest
 
 from raysim import po
-from raysim.geometry import paraboloid
 from raysim.quadrature import FaceQuadrature
-from tests.flat import FlatSurface
+from tests.flat import flat_disk
 
 A = 5.0  # disk radius (m)
 Z = np.linspace(2.0, 50.0, 25)  # axis points (m)
-
-
-def flat_disk(a: float, h: float):
-    """A triangulated disk of radius a (m) in z = 0, triangles about h (m), normals +z."""
-    dish = paraboloid(2.0 * a, 1.0, h)  # only its aperture triangulation is used
-    vertices = dish.vertices.copy()
-    vertices[:, 2] = 0.0
-    normals = np.zeros_like(vertices)
-    normals[:, 2] = 1.0
-    return dataclasses.replace(dish, vertices=vertices, vertex_normals=normals, surface=FlatSurface())
 
 
 def closed_form(z, a, k):

@@ -10,28 +10,17 @@ geometries and polarisations, PO + PTD should be far closer to reciprocal than P
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
 from raysim import po, ptd
 from raysim.edges import edge_quadrature
-from raysim.geometry import Reflector, paraboloid
+from raysim.geometry import Reflector
 from raysim.quadrature import FaceQuadrature
-from tests.flat import FlatSurface
+from tests.flat import flat_disk
 
 LAMBDA = 1.0
 FAR = 2.0e4  # m, beyond 2 D^2 / lambda = 512 m
-
-
-def flat_disk(a: float, h: float) -> Reflector:
-    dish = paraboloid(2.0 * a, 1.0, h)
-    vertices = dish.vertices.copy()
-    vertices[:, 2] = 0.0
-    normals = np.zeros_like(vertices)
-    normals[:, 2] = 1.0
-    return dataclasses.replace(dish, vertices=vertices, vertex_normals=normals, surface=FlatSurface())
 
 
 def far_amplitudes(disk, k_hat, e_hat, s_hat):
