@@ -21,29 +21,19 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_po import Clock  # noqa: E402  (wall and CPU time of a block, shared with the PO benchmark)
 
 D, F, R = 110.0, 33.0, 10.0
 RINGS = (0.0, 6.875, 13.75, 20.625, 27.5, 34.375, 41.25, 48.125, 55.0)
 PANELS = (6, 12, 18, 24, 30, 36, 42, 48)
-
-
-class Clock:
-    """Wall and process CPU time of a block."""
-
-    def __enter__(self):
-        self.wall, self.cpu = time.perf_counter(), time.process_time()
-        return self
-
-    def __exit__(self, *exc):
-        self.wall = time.perf_counter() - self.wall
-        self.cpu = time.process_time() - self.cpu
 
 
 def kernel_rates(threads: int) -> None:
