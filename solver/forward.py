@@ -17,8 +17,8 @@ or the total field (attribute ``field``).
   carries the wave effects GO lacks: edge-diffraction rings, the smoothing of the response to
   features of a few wavelengths. Its cost grows with f^2 (about 45 s per call at 0.3 GHz on
   the paper grid on two idle cores).
-- ``po+ptd``: PO plus the edge-diffraction correction of :mod:`raysim.ptd` where that engine
-  exists (it adds the fringe field of the rim to PO's).
+- ``po+ptd``: PO plus the fringe field of the rim from :mod:`raysim.ptd` (a few per cent of
+  PO's cost).
 
 The ideal reflector's field is computed once per (model, scan geometry) and kept for the
 session. A model object reports its progress through ``progress(stage, fraction)`` when the
@@ -92,7 +92,7 @@ class WaveForward:
     frequency_hz : frequency of the incident plane wave (Hz), on axis (travelling along -z).
     polarization : angle of E from x about the axis (rad): E = (cos, sin, 0).
     total : True when the probe saw the scattered plus the incident field, else scattered.
-    ptd : add the rim's PTD fringe field (needs :mod:`raysim.ptd`).
+    ptd : add the rim's PTD fringe field (:mod:`raysim.ptd`).
     samples_per_wavelength : PO quadrature (None: the engine's default).
     face_m : quadrature face size (m).
     device : Warp device.
