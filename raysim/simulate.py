@@ -17,11 +17,25 @@ import xarray as xr
 from raysim import go
 from raysim.errors import RaysimError
 from raysim.field import fieldmap
-from raysim.geometry import reflectors_for
+from raysim.geometry import Reflector, reflectors_for
 from raysim.scene import Scene
 
 METHODS = ("go", "po", "po+ptd")
 Progress = Callable[[str, float], None]
+
+
+def scene_attrs(scene: Scene, deformed: Reflector) -> dict:
+    """The FieldMap attributes that describe the scene and its mesh, whatever the method."""
+    return {
+        "scene_name": scene.name,
+        "deformation": scene.deformation.describe(),
+        "incidence_theta": scene.source.incidence_theta,
+        "incidence_phi": scene.source.incidence_phi,
+        "polarization": scene.source.polarization,
+        "mesh_resolution": ideal_resolution(scene),
+        "mesh_faces": len(deformed.faces),
+        "panels": int(deformed.n_panels),
+    }
 
 
 def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu",
@@ -74,14 +88,7 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
     report("done", 1.0)
     seconds = time.perf_counter() - start
     attrs = {
-        "scene_name": scene.name,
-        "deformation": scene.deformation.describe(),
-        "incidence_theta": scene.source.incidence_theta,
-        "incidence_phi": scene.source.incidence_phi,
-        "polarization": scene.source.polarization,
-        "mesh_resolution": ideal_resolution(scene),
-        "mesh_faces": len(deformed.faces),
-        "panels": int(deformed.n_panels),
+        **scene_attrs(scene, deformed),
         "subdivisions": int(scene.subdivisions),
         "rays": int(result_def.n_rays + result_ideal.n_rays),
         "lit_area": result_def.power_lit,
@@ -141,14 +148,7 @@ def _simulate_po(scene: Scene, device: str | None, report: Progress, total: bool
     pairs = result_ideal.pairs + result_def.pairs
     radiate_seconds = result_ideal.seconds_radiate + result_def.seconds_radiate
     attrs = {
-        "scene_name": scene.name,
-        "deformation": scene.deformation.describe(),
-        "incidence_theta": scene.source.incidence_theta,
-        "incidence_phi": scene.source.incidence_phi,
-        "polarization": scene.source.polarization,
-        "mesh_resolution": ideal_resolution(scene),
-        "mesh_faces": len(deformed.faces),
-        "panels": int(deformed.n_panels),
+        **scene_attrs(scene, deformed),
         "field": "total" if total else "scattered",
         "samples_per_wavelength": float(spw),
         "samples": int(result_def.n_samples),
