@@ -74,10 +74,15 @@ def best_window(index: np.ndarray, power: np.ndarray, largest: int) -> int:
 
     Window w >= 3 fits a line to the w - 1 nearest other references; window 1 draws it
     through the 2 nearest (interpolation between the neighbours). Mean squared prediction
-    error over all references; the smallest wins, ties to the smaller window.
+    error over all references; the smallest wins. A window must beat the best so far by more
+    than a part in 1e6, and errors below the round-off floor of the readings (1e-10 of their
+    mean, squared) count as that floor: references that every window predicts exactly (a
+    noise-free linear drift) are a tie, and a tie goes to the smaller window by construction,
+    not by the last bits of the arithmetic.
     """
     if index.size < 4:
         return 1
+    floor = index.size * (1e-10 * float(np.mean(np.abs(power)))) ** 2
     best, best_error = 1, math.inf
     for window in [1, *range(3, min(largest, index.size) + 1)]:
         others = 2 if window == 1 else window - 1
@@ -88,7 +93,8 @@ def best_window(index: np.ndarray, power: np.ndarray, largest: int) -> int:
             x, y = index[near], power[near]
             slope, offset = np.polyfit(x - x.mean(), y, 1)
             error += (offset + slope * (index[m] - x.mean()) - power[m]) ** 2
-        if error < best_error * (1.0 - 1e-12):
+        error = max(error, floor)
+        if error < best_error * (1.0 - 1e-6):
             best, best_error = window, error
     return best
 

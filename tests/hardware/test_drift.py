@@ -52,8 +52,12 @@ def test_auto_removes_drift_only_when_the_references_show_it() -> None:
     assert moving.applied == "smooth" and moving.window == 9
     assert np.allclose(moving.gains, ramp, atol=1.5e-3)
     assert moving.at(50.0) == pytest.approx(0.5 * (moving.gains[0] + moving.gains[1]))
-    # quiet references (one reading, or no scatter) cannot rule drift out
-    assert drift(records(ramp, 0.0, 1, seed=1), "auto", 9).applied == "smooth"
+    # quiet references (one reading, or no scatter) cannot rule drift out; an exactly
+    # linear drift is predicted perfectly by every window, so either correction is right,
+    # and both must give the drift itself
+    quiet = drift(records(ramp, 0.0, 1, seed=1), "auto", 9)
+    assert quiet.applied in ("linear", "smooth")
+    assert np.allclose(quiet.gains, ramp / ramp[0], rtol=1e-12)
     assert drift(records(np.ones(3), 0.0, 4, seed=1), "linear", 9).applied == "linear"
 
 
@@ -69,3 +73,18 @@ def test_window_follows_drift_speed_and_noise() -> None:
     fast_drift = drift(records(fast, 1e-4, 16, seed=2), "auto", 9)
     assert fast_drift.applied == "linear" and fast_drift.window == 1
     assert np.allclose(fast_drift.gains, fast / fast[0], atol=1e-4)
+
+
+def test_exact_predictions_tie_to_the_smallest_window() -> None:
+    """Noise-free linear references: every window predicts each one to round-off, so the
+    choice is a tie by construction; it goes to no smoothing whatever the last bits say,
+    here over drifts of several sizes and slopes of both signs."""
+    index = np.arange(0.0, 3000.0, 100.0)
+    for slope in (-3e-6, 1e-9, 2e-7, 5e-6):
+        for scale in (1e-9, 1e-5, 1.0):
+            power = scale * (1.0 + slope * index)
+            assert best_window(index, power, 9) == 1
+    # and a real preference is still seen past the floor: slow drift under noise
+    rng = np.random.default_rng(12)
+    noisy = 1e-5 * (1.0 + 1e-8 * index + 1e-4 * rng.standard_normal(index.size))
+    assert best_window(index, noisy, 9) > 1
