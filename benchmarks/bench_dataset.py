@@ -71,10 +71,10 @@ rms_um = {{ uniform = [40.0, 150.0] }}
 def one_sample(spec, threads: int, repeats: int = 3) -> dict[str, float]:
     """Median stage times (s) of one sample in this process, with ``threads`` per launch."""
     os.environ["RAYSIM_THREADS"] = str(threads)
-    from raysim import go
     from raysim.dataset import draw_sample
     from raysim.dataset.memo import Memo
     from raysim.dataset.worker import _ideal_reflector, prepare_process
+    from raysim.optics import go
 
     prepare_process(threads)
     dish, scene = spec.scene.dish, spec.scene

@@ -26,11 +26,11 @@ def main() -> None:
     if args.threads:
         os.environ["RAYSIM_THREADS"] = str(args.threads)
 
-    from raysim import go
-    from raysim.geometry import paraboloid, reflectors_for
-    from raysim.scene import load_scene
-    from raysim.sphere import SphereGrid
-    from raysim.warp_runtime import cpu_threads
+    from raysim.maps.sphere import SphereGrid
+    from raysim.optics import go
+    from raysim.optics.runtime import cpu_threads
+    from raysim.scene.scene import load_scene
+    from raysim.surface.mesh import paraboloid, reflectors_for
 
     scene = load_scene(args.scene)
     go.trace(paraboloid(20.0, 8.0, 1.0), SphereGrid(3.0, 9, 36))  # compile or load the kernels

@@ -37,10 +37,10 @@ class Clock:
 
 def kernel_rate(threads: int, n_elements: int = 16384) -> None:
     """Radiator alone: 32 400 sphere points x ``n_elements`` PO elements of the paper dish."""
-    from raysim import po
-    from raysim.geometry import paraboloid
-    from raysim.quadrature import plan
-    from raysim.sphere import SphereGrid
+    from raysim.maps.sphere import SphereGrid
+    from raysim.optics import po
+    from raysim.surface.mesh import paraboloid
+    from raysim.surface.quadrature import plan
 
     wave = po.Illumination.plane_wave(0.3e9, (0, 0, -1), (1, 0, 0))
     dish = paraboloid(110.0, 33.0, 5.0)
@@ -59,7 +59,7 @@ def kernel_rate(threads: int, n_elements: int = 16384) -> None:
 
 
 def paper_case(threads: int, spw: float | None) -> None:
-    from raysim.scene import load_scene
+    from raysim.scene.scene import load_scene
     from raysim.simulate import simulate
 
     scene = load_scene(ROOT / "scenes" / "paper_po.toml")
@@ -80,7 +80,7 @@ def refinement_check() -> None:
     """Paper case, every theta and every tenth phi: default sampling against spw 2.5."""
     from dataclasses import replace
 
-    from raysim.scene import load_scene
+    from raysim.scene.scene import load_scene
     from raysim.simulate import simulate
 
     scene = load_scene(ROOT / "scenes" / "paper_po.toml").with_overrides(None, 90, 36)
@@ -99,9 +99,9 @@ def refinement_check() -> None:
 
 def go_check() -> None:
     """Paper's dish at 3 GHz, current tapered smoothly to 0 at the rim, theta <= 40 deg."""
-    from raysim import po
-    from raysim.geometry import paraboloid
-    from raysim.sphere import SphereGrid, ideal_go_intensity
+    from raysim.maps.sphere import SphereGrid, ideal_go_intensity
+    from raysim.optics import po
+    from raysim.surface.mesh import paraboloid
 
     def f(u):
         return np.where(u > 0, np.exp(-1.0 / np.maximum(u, 1e-300)), 0.0)
@@ -130,7 +130,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.threads:
         os.environ["RAYSIM_THREADS"] = str(args.threads)
-    from raysim.warp_runtime import cpu_threads
+    from raysim.optics.runtime import cpu_threads
 
     threads = cpu_threads()
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())} "

@@ -38,11 +38,11 @@ PANELS = (6, 12, 18, 24, 30, 36, 42, 48)
 
 def kernel_rates(threads: int) -> None:
     """Fringe kernel and PO kernel on 32 400 sphere points, the paper dish's rim at 0.3 GHz."""
-    from raysim import po, ptd
-    from raysim.edges import edge_quadrature
-    from raysim.geometry import paraboloid
-    from raysim.quadrature import plan
-    from raysim.sphere import SphereGrid
+    from raysim.maps.sphere import SphereGrid
+    from raysim.optics import po, ptd
+    from raysim.surface.edges import edge_quadrature
+    from raysim.surface.mesh import paraboloid
+    from raysim.surface.quadrature import plan
 
     wave = po.Illumination.plane_wave(0.3e9, (0, 0, -1), (1, 0, 0))
     dish = paraboloid(D, F, 5.0)
@@ -66,11 +66,11 @@ def kernel_rates(threads: int) -> None:
 def paper_case(threads: int, out: Path) -> None:
     """PO of both reflectors, then the rim's fringe field of both: what PTD adds, in time and
     on the sphere (``paper_po_ptd.png``)."""
-    from raysim import po, ptd
-    from raysim.geometry import reflectors_for
-    from raysim.scene import load_scene
+    from raysim.maps.sphere import ideal_go_intensity
+    from raysim.optics import po, ptd
+    from raysim.scene.scene import load_scene
     from raysim.simulate import simulate
-    from raysim.sphere import ideal_go_intensity
+    from raysim.surface.mesh import reflectors_for
 
     scene = load_scene(ROOT / "scenes" / "paper_po.toml")
     with Clock() as c_po:
@@ -173,9 +173,9 @@ def halfplane(out: Path) -> None:
 
 def convergence() -> None:
     """The paper dish's rim field on 90 x 36 points for 2 .. 8 edge points per wavelength."""
-    from raysim import po, ptd
-    from raysim.geometry import paraboloid
-    from raysim.sphere import SphereGrid
+    from raysim.maps.sphere import SphereGrid
+    from raysim.optics import po, ptd
+    from raysim.surface.mesh import paraboloid
 
     dish, grid = paraboloid(D, F, 5.0), SphereGrid(R, 90, 36)
     wave = po.Illumination.plane_wave(0.3e9, (0, 0, -1), (1, 0, 0))
@@ -188,8 +188,8 @@ def convergence() -> None:
 
 
 def po_field(reflector, points, wave, spw: float = 1.5):
-    """PO field (n, 3) of ``reflector`` at ``points`` (the engine of raysim.po)."""
-    from raysim import po
+    """PO field (n, 3) of ``reflector`` at ``points`` (the engine of raysim.optics.po)."""
+    from raysim.optics import po
 
     return po.scatter(reflector, points, wave, spw).E
 
@@ -197,7 +197,7 @@ def po_field(reflector, points, wave, spw: float = 1.5):
 def gap_fields(gapped, smooth, thin, P, wave) -> dict[str, np.ndarray]:
     """I / I(no gaps) - 1 at points P for PO, PO + PTD (all edges, rim only) and PO + PTD for
     1 mm gaps (PO's missing strip, linear in its width, scaled from 10 mm)."""
-    from raysim import ptd
+    from raysim.optics import ptd
 
     E_gap, E_ref = po_field(gapped, P, wave), po_field(smooth, P, wave)
     edge_all = ptd.edge_field(gapped, P, wave, "all").E
@@ -219,9 +219,9 @@ def gap_fields(gapped, smooth, thin, P, wave) -> dict[str, np.ndarray]:
 
 def go_signature(layout, grid):
     """GO cell means of the panelled dish over the ideal law's cell means, minus 1."""
-    from raysim import go
-    from raysim.geometry import paraboloid
-    from raysim.sphere import ideal_go_cell_mean
+    from raysim.maps.sphere import ideal_go_cell_mean
+    from raysim.optics import go
+    from raysim.surface.mesh import paraboloid
 
     cell = go.trace(paraboloid(D, F, 0.5, layout), grid, subdivisions=2).intensity
     e = grid.theta_edges
@@ -240,10 +240,10 @@ def gaps(out: Path, frequencies=(0.3e9, 3e9)) -> None:
     (theta 40 deg) across radial gaps and a theta cut (phi 4 deg) across ring gaps."""
     import matplotlib.pyplot as plt
 
-    from raysim import po
-    from raysim.geometry import paraboloid
-    from raysim.panels import PanelLayout
-    from raysim.sphere import SphereGrid, theta_rim
+    from raysim.maps.sphere import SphereGrid, theta_rim
+    from raysim.optics import po
+    from raysim.surface.mesh import paraboloid
+    from raysim.surface.panels import PanelLayout
 
     layout, thin = PanelLayout(RINGS, PANELS, 0.010), PanelLayout(RINGS, PANELS, 0.001)
     gapped, smooth, thin_dish = (paraboloid(D, F, 2.5, layout), paraboloid(D, F, 5.0),
@@ -326,7 +326,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.threads:
         os.environ["RAYSIM_THREADS"] = str(args.threads)
-    from raysim.warp_runtime import cpu_threads
+    from raysim.optics.runtime import cpu_threads
 
     threads = cpu_threads()
     args.out.mkdir(parents=True, exist_ok=True)

@@ -40,8 +40,8 @@ def main(argv: list[str] | None = None) -> dict[str, dict[str, float]]:
 
         _, ds = open_map(args.field)
     else:
-        from raysim.deformation import PaperDeformation
         from raysim.render.samples import equation_fieldmap
+        from raysim.surface.deformation import PaperDeformation
 
         ds = equation_fieldmap(PaperDeformation(110.0, 33.0), 110.0, 33.0, 10.0, 90, 360)
     print(f"import and map: {time.perf_counter() - start:.2f} s; map {ds.sizes['theta']} x "

@@ -24,10 +24,10 @@ import numpy as np
 from hardware.config import Table
 from hardware.plan import plan_from_table
 from hardware.session import open_instruments, scan
-from hardware.sim_settings import SimSettings
-from hardware.simulated import SimulatedRig
-from raysim.field import fieldmap, save
-from raysim.sphere import SphereGrid, ideal_go_intensity
+from hardware.sim.rig import SimulatedRig
+from hardware.sim.settings import SimSettings
+from raysim.maps.fieldmap import fieldmap, save
+from raysim.maps.sphere import SphereGrid, ideal_go_intensity
 
 F, D, R = 33.0, 110.0, 10.0
 

@@ -51,11 +51,11 @@ def main() -> None:
     parser.add_argument("--noise-seeds", type=int, default=4, help="seeds per noise level (0: skip)")
     args = parser.parse_args()
 
-    from raysim.field import grid_of, save
+    from raysim.maps.fieldmap import grid_of, save
+    from raysim.pipeline.paper import paper_fieldmap
     from solver.aperture import ApertureGrid
     from solver.equation import G
     from solver.invert import invert
-    from solver.paper import paper_fieldmap
     from solver.poisson import disk_laplacian, solve_poisson
     from solver.resample import sphere_to_aperture
 
@@ -87,7 +87,7 @@ def main() -> None:
         path = save(field, Path(tmp) / "paper.nc")
 
         def linear_file_to_file() -> None:
-            from raysim.field import load
+            from raysim.maps.fieldmap import load
             from solver import surface
 
             surface.save(invert(load(path), N=N, refine_iterations=0, truth=None),
@@ -103,7 +103,7 @@ def main() -> None:
               f"{time.perf_counter() - start:8.3f} s")
 
     if args.refine > 0:
-        from raysim.deformation import PaperDeformation
+        from raysim.surface.deformation import PaperDeformation
 
         truth = PaperDeformation(110.0, 33.0)
         start = time.perf_counter()
@@ -122,7 +122,7 @@ def main() -> None:
 
 def noise_section(field, N: int, seeds: int, device: str) -> None:
     """Error of the default inversion against power-meter noise (dB, one reading per cell)."""
-    from raysim.deformation import PaperDeformation
+    from raysim.surface.deformation import PaperDeformation
     from solver.invert import invert
 
     truth = PaperDeformation(110.0, 33.0)

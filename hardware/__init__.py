@@ -20,9 +20,9 @@ assemble       journal records -> measured FieldMap (drift removal, standard err
 drift          receiver gain from the reference readings; removed only when significant.
 session        top-level ``scan`` and ``park``, against instruments or the simulator.
 interp         bilinear, phi-periodic sampling of a FieldMap between cell centres.
-loopback       line-based TCP servers on 127.0.0.1 for the simulated instruments.
-sim_instruments  protocol models of the N1913A and the ESP301 (error queues, motion).
-simulated      the simulated rig: both instruments answering from a FieldMap.
-sim_settings   the simulator's noise, drift, seed, time scale and true calibration.
+sim/           the simulated rig: ``loopback`` (line-based TCP servers on 127.0.0.1),
+               ``instruments`` (protocol models of the N1913A and the ESP301), ``settings``
+               (noise, drift, seed, time scale, true calibration), ``rig`` (both instruments
+               answering from a FieldMap).
 errors         ``PlanError``, ``JournalError`` (and ``InstrumentError`` from raysim.errors).
 """

@@ -23,8 +23,8 @@ from hardware.drift import chi2_limit, drift
 from hardware.journal import Record
 from hardware.plan import REFERENCE, SAMPLE, ScanPlan
 from hardware.rig import rig_attrs
-from raysim.field import fieldmap
-from raysim.sphere import ideal_go_intensity
+from raysim.maps.fieldmap import fieldmap
+from raysim.maps.sphere import ideal_go_intensity
 
 CELL_VARS = {
     "power": ("W", "mean power-meter reading"),

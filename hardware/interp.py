@@ -16,8 +16,8 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
-from raysim.field import grid_of
-from raysim.sphere import SphereGrid, ideal_go_intensity
+from raysim.maps.fieldmap import grid_of
+from raysim.maps.sphere import SphereGrid, ideal_go_intensity
 
 
 class FieldSampler:

@@ -22,8 +22,8 @@ from hardware.config import Table, read_toml
 from hardware.drift import DRIFT_MODES
 from hardware.errors import PlanError
 from hardware.rig import Rig, load_rig, rig_from_table
-from hardware.sim_settings import SimSettings, sim_settings_from_table
-from raysim.sphere import SphereGrid
+from hardware.sim.settings import SimSettings, sim_settings_from_table
+from raysim.maps.sphere import SphereGrid
 
 SAMPLE = "sample"
 REFERENCE = "reference"

@@ -29,9 +29,9 @@ from hardware.interp import SphereField
 from hardware.journal import Journal, read_journal
 from hardware.plan import ScanPlan, w_to_dbm
 from hardware.rig import Rig
-from hardware.sim_settings import SimSettings
-from hardware.simulated import Faults, SimulatedRig
-from raysim import field as fieldmaps
+from hardware.sim.rig import Faults, SimulatedRig
+from hardware.sim.settings import SimSettings
+from raysim.maps import fieldmap as fieldmaps
 
 ROLES = ("meter", "motion")
 

@@ -1,17 +1,22 @@
 """raysim: reflector surface deformation from one intensity scan on a hemisphere at the focus.
 
-Modules, in the order data flows through them (a module imports only from earlier ones):
+Subpackages, from the ground up (a layer imports only from layers below it; the contracts in
+``pyproject.toml`` enforce it):
 
-- ``scene``: TOML scenes -> validated :class:`~raysim.scene.Scene` (SI units inside).
-- ``deformation``: surface errors delta(x, y) (m along z) with their slopes.
-- ``geometry``: trimesh reflector meshes (ideal, deformed, panels with gaps, loaded files).
-- ``sphere``: the probe hemisphere's (theta, phi) grid and the ideal GO relations.
-- ``go``: geometric-optics ray tubes with Warp -> intensity on the sphere.
-- ``field``: the FieldMap NetCDF contract.
-- ``render``: pictures; ``dataset``: bulk data on Dask; ``cli``: the ``raysim`` command.
+- ``maps``: the probe sphere's grid and the FieldMap contract (NetCDF).
+- ``surface``: reflector meshes, deformations delta(x, y) (m along +z), panels, quadrature, edges.
+- ``scene``: TOML scenes -> a validated :class:`~raysim.scene.Scene` (SI units inside).
+- ``optics``: the engines on Warp: GO ray tubes, PO currents, PTD edge currents.
+- ``simulate``: scene -> FieldMap, both reflectors through one engine.
+- ``dataset``: bulk training data on Dask into Zarr (beside ``solver``, a top-level package).
+- ``render``: pictures only, headless.
+- ``pipeline``: end-to-end runs (``report``, ``paper``).
+- ``cli``: the ``raysim`` command.
+
+Leaves any layer may use: ``errors`` (user errors), ``version``.
 """
 
-__version__ = "0.1.0"
+from raysim.version import __version__
 
 __all__ = ["__version__", "load_fieldmap", "load_scene", "save_fieldmap", "simulate"]
 
@@ -27,7 +32,7 @@ def __getattr__(name: str):
 
         return simulate
     if name in ("save_fieldmap", "load_fieldmap"):
-        from raysim import field
+        from raysim.maps import fieldmap
 
-        return field.save if name == "save_fieldmap" else field.load
+        return fieldmap.save if name == "save_fieldmap" else fieldmap.load
     raise AttributeError(f"module 'raysim' has no attribute {name!r}")

@@ -14,11 +14,11 @@ from collections.abc import Callable
 import numpy as np
 import xarray as xr
 
-from raysim import go
 from raysim.errors import RaysimError
-from raysim.field import fieldmap
-from raysim.geometry import Reflector, reflectors_for
-from raysim.scene import Scene
+from raysim.maps.fieldmap import fieldmap
+from raysim.optics import go
+from raysim.scene.scene import Scene
+from raysim.surface.mesh import Reflector, reflectors_for
 
 METHODS = ("go", "po", "po+ptd")
 Progress = Callable[[str, float], None]
@@ -41,20 +41,20 @@ def scene_attrs(scene: Scene, deformed: Reflector) -> dict:
 def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu",
              progress: Progress | None = None, *, total: bool = False, save_field: bool = False,
              samples_per_wavelength: float | None = None, edges: str | None = None) -> xr.Dataset:
-    """Simulate ``scene`` and return its FieldMap (an ``xarray.Dataset``; see raysim.field).
+    """Simulate ``scene`` and return its FieldMap (an ``xarray.Dataset``; see raysim.maps.fieldmap).
 
     Parameters
     ----------
     scene : a validated scene (``raysim.load_scene``).
     method : ``go`` (geometric optics), ``po`` (physical optics) or ``po+ptd`` (PO plus the
-        fringe field of the edges, :mod:`raysim.ptd`); None takes the scene's ``method``.
+        fringe field of the edges, :mod:`raysim.optics.ptd`); None takes the scene's ``method``.
     device : ``cpu`` or ``cuda`` (Warp device).
     progress : optional callback (stage name, fraction done in 0..1).
     total : PO only: intensity of the total field (scattered plus incident) at the probe,
         instead of the scattered field alone.
     save_field : PO only: also store the complex field components (V/m per V/m incident).
     samples_per_wavelength : PO only: Gauss points per wavelength along the mesh faces'
-        edges (default :data:`raysim.po.DEFAULT_SAMPLES_PER_WAVELENGTH`).
+        edges (default :data:`raysim.optics.po.DEFAULT_SAMPLES_PER_WAVELENGTH`).
     edges : ``po+ptd`` only: ``rim`` (the outer rim, the paper's PTD; the default) or ``all``
         (the rim and every panel edge beside a gap).
     """
@@ -111,11 +111,11 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
 
 def _simulate_po(scene: Scene, device: str | None, report: Progress, total: bool, save_field: bool,
                  samples_per_wavelength: float | None, edges: str | None = None) -> xr.Dataset:
-    """The PO branch of :func:`simulate`: both reflectors through :func:`raysim.po.sphere_field`,
+    """The PO branch of :func:`simulate`: both reflectors through :func:`raysim.optics.po.sphere_field`,
     intensities at the cell centres (``sampling = centre``). With ``edges`` (``rim`` or
-    ``all``) the fringe field of those edges (:func:`raysim.ptd.sphere_edge_field`) is added:
+    ``all``) the fringe field of those edges (:func:`raysim.optics.ptd.sphere_edge_field`) is added:
     method ``po+ptd``."""
-    from raysim import po, ptd
+    from raysim.optics import po, ptd
 
     spw = po.DEFAULT_SAMPLES_PER_WAVELENGTH if samples_per_wavelength is None else samples_per_wavelength
     if not spw > 0:
@@ -163,7 +163,7 @@ def _simulate_po(scene: Scene, device: str | None, report: Progress, total: bool
     if edges is not None:
         attrs.update({
             "edges": edges,
-            "edge_theory": "Michaeli fringe equivalent edge currents of a half-plane (raysim.ptd)",
+            "edge_theory": "Michaeli fringe equivalent edge currents of a half-plane (raysim.optics.ptd)",
             "edge_points_per_wavelength": float(ptd.DEFAULT_POINTS_PER_WAVELENGTH),
             "edge_points": int(fringe["deformed"].n_points),
             "edge_points_lit": int(fringe["deformed"].n_lit),

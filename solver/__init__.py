@@ -17,7 +17,8 @@ Modules, in the order the data flow through them:
 - ``metrics``: the paper's RMS and RRMS over the aperture's grid points.
 - ``surface``: the SurfaceMap NetCDF contract.
 - ``invert``: the pipeline, :func:`invert` (FieldMap dataset -> SurfaceMap dataset).
-- ``run``: file in, file out (what ``raysim invert`` calls); ``paper``: the paper's GO case.
+- ``run``: file in, file out (what ``raysim invert`` calls). The paper's tables, which run the
+  engines and this package end to end, are in :mod:`raysim.pipeline.paper`.
 """
 
 from solver.invert import invert

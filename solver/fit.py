@@ -90,7 +90,7 @@ def remove_terms(grid: ApertureGrid, delta: NDArray[np.float64], terms: Sequence
 def panel_adjustments(grid: ApertureGrid, delta: NDArray[np.float64], layout) -> list[dict]:
     """Per-panel rigid fit (piston at the centroid, tilts) of ``delta`` (m) on the grid.
 
-    ``layout`` is a :class:`raysim.panels.PanelLayout` (``panel_at``, ``centres``, ``ring``,
+    ``layout`` is a :class:`raysim.surface.panels.PanelLayout` (``panel_at``, ``centres``, ``ring``,
     ``n_panels``). Panels with fewer than three grid points get NaN values.
     """
     X, Y = grid.XY

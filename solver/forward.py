@@ -9,15 +9,15 @@ the frequency, the incident polarisation (attribute ``polarization`` in rad; a s
 one was taken with E along x, DESIGN.md) and whether the probe saw the scattered field alone
 or the total field (attribute ``field``).
 
-- ``go``: the project's GO engine (:func:`raysim.go.forward_intensity`): cell means, no
+- ``go``: the project's GO engine (:func:`raysim.optics.go.forward_intensity`): cell means, no
   diffraction. Cheap (a second or two per call on the paper grid).
-- ``po``: the project's PO engine (:func:`raysim.po.sphere_field`): the field of the PO
+- ``po``: the project's PO engine (:func:`raysim.optics.po.sphere_field`): the field of the PO
   currents of the smooth surface z = r^2/(4F) + delta, integrated on large faces (5 m, like
   ``scenes/paper_po.toml``) with the engine's own sampling rule, at the cell centres. It
   carries the wave effects GO lacks: edge-diffraction rings, the smoothing of the response to
   features of a few wavelengths. Its cost grows with f^2 (about 45 s per call at 0.3 GHz on
   the paper grid on two idle cores).
-- ``po+ptd``: PO plus the fringe field of the rim from :mod:`raysim.ptd` (a few per cent of
+- ``po+ptd``: PO plus the fringe field of the rim from :mod:`raysim.optics.ptd` (a few per cent of
   PO's cost).
 
 The ideal reflector's field is computed once per (model, scan geometry) and kept for the
@@ -35,7 +35,7 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import NDArray
 
-from raysim.sphere import SphereGrid
+from raysim.maps.sphere import SphereGrid
 from solver.errors import SolverError
 
 MODELS = ("go", "po", "po+ptd")
@@ -68,8 +68,8 @@ def go_forward(device: str | None = "cpu") -> Forward:
     def forward(sphere, F, D, x, y, delta):
         if delta is None:
             return _ideal_go(sphere, float(F), float(D), device).copy()
-        from raysim.deformation import GriddedMap
-        from raysim.go import forward_intensity
+        from raysim.optics.go import forward_intensity
+        from raysim.surface.deformation import GriddedMap
 
         return forward_intensity(sphere, F, D, GriddedMap(x, y, delta), device=device)
 
@@ -78,7 +78,7 @@ def go_forward(device: str | None = "cpu") -> Forward:
 
 @lru_cache(maxsize=IDEAL_CACHE_SIZE)
 def _ideal_go(sphere: SphereGrid, F: float, D: float, device: str | None) -> NDArray:
-    from raysim.go import forward_intensity
+    from raysim.optics.go import forward_intensity
 
     return forward_intensity(sphere, F, D, None, device=device)
 
@@ -92,7 +92,7 @@ class WaveForward:
     frequency_hz : frequency of the incident plane wave (Hz), on axis (travelling along -z).
     polarization : angle of E from x about the axis (rad): E = (cos, sin, 0).
     total : True when the probe saw the scattered plus the incident field, else scattered.
-    ptd : add the rim's PTD fringe field (:mod:`raysim.ptd`).
+    ptd : add the rim's PTD fringe field (:mod:`raysim.optics.ptd`).
     samples_per_wavelength : PO quadrature (None: the engine's default).
     face_m : quadrature face size (m).
     device : Warp device.
@@ -120,7 +120,7 @@ class WaveForward:
 
     def describe(self) -> str:
         spw = self.samples_per_wavelength
-        return (f"raysim.po {'+ raysim.ptd ' if self.ptd else ''}at "
+        return (f"raysim.optics.po {'+ raysim.optics.ptd ' if self.ptd else ''}at "
                 f"{self.frequency_hz / 1e9:g} GHz, E at {np.degrees(self.polarization):g} deg "
                 f"from x, {'total' if self.total else 'scattered'} field, {self.face_m:g} m faces, "
                 f"{'default' if spw is None else f'{spw:g}'} samples per wavelength")
@@ -129,7 +129,7 @@ class WaveForward:
                  delta: NDArray | None, progress: Progress | None = None) -> NDArray:
         if delta is None:
             return np.sum(np.abs(self.ideal_field(sphere, F, D, progress)) ** 2, axis=-1)
-        from raysim.deformation import GriddedMap
+        from raysim.surface.deformation import GriddedMap
 
         E = self._field(sphere, F, D, GriddedMap(x, y, delta), progress)
         return np.sum(np.abs(E) ** 2, axis=-1)
@@ -146,7 +146,7 @@ class WaveForward:
 
     def wavenumber(self) -> float:
         """k = 2 pi f / c (rad/m)."""
-        from raysim.po import C0
+        from raysim.optics.po import C0
 
         return 2.0 * np.pi * self.frequency_hz / C0
 
@@ -154,7 +154,7 @@ class WaveForward:
                progress: Progress | None) -> NDArray[np.complex128]:
         import time
 
-        from raysim import po
+        from raysim.optics import po
 
         start = time.perf_counter()
         ideal = _paraboloid(float(D), float(F), float(self.face_m))
@@ -180,14 +180,14 @@ _IDEAL_WAVE: OrderedDict[tuple, NDArray[np.complex128]] = OrderedDict()
 
 @lru_cache(maxsize=4)
 def _paraboloid(D: float, F: float, face_m: float):
-    from raysim.geometry import paraboloid
+    from raysim.surface.mesh import paraboloid
 
     return paraboloid(D, F, face_m)
 
 
 def _ptd_field(reflector, sphere: SphereGrid, wave, device) -> NDArray[np.complex128]:
-    """The PTD fringe field (n_theta, n_phi, 3) of the reflector's rim, from :mod:`raysim.ptd`."""
-    from raysim import ptd
+    """The PTD fringe field (n_theta, n_phi, 3) of the reflector's rim, from :mod:`raysim.optics.ptd`."""
+    from raysim.optics import ptd
 
     return ptd.sphere_edge_field(reflector, sphere, wave, "rim", device=device).E
 
@@ -201,7 +201,7 @@ def forward_for(model: str, attrs: dict, device: str | None = "cpu",
     if model not in MODELS:
         raise SolverError(f"unknown model {model!r}: choose one of {', '.join(MODELS)}")
     if model == "go":
-        return go_forward(device), "raysim.go GO engine (cell means, no diffraction)"
+        return go_forward(device), "raysim.optics.go GO engine (cell means, no diffraction)"
     frequency = float(attrs.get("frequency_hz", 0.0))
     if not frequency > 0:
         raise SolverError(f"model {model} needs the scan's frequency_hz (> 0), got {frequency}")

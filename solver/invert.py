@@ -20,9 +20,9 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from raysim.field import grid_of
-from raysim.field import validate as validate_fieldmap
-from raysim.sphere import SphereGrid
+from raysim.maps.fieldmap import grid_of
+from raysim.maps.fieldmap import validate as validate_fieldmap
+from raysim.maps.sphere import SphereGrid
 from solver import boundary, metrics
 from solver.aperture import ApertureGrid
 from solver.equation import (
@@ -147,7 +147,7 @@ def _truth_from_scene(attrs: dict) -> Callable | None:
     if not text:
         return None
     try:
-        from raysim.scene import parse_scene
+        from raysim.scene.scene import parse_scene
 
         return parse_scene(str(text), source="FieldMap scene").deformation
     except Exception:  # a scene that no longer parses just means no truth

@@ -19,7 +19,7 @@ Anal. 49, 1715, 2011; depth ``memory``): the next iterate is the combination of 
 that minimises the linearised update, which removes those directions in one or two steps.
 The model needs only what every FieldMap carries: F, D, R and the grid (and, for the wave
 models, the frequency and polarisation): see :mod:`solver.forward`. The default model is the
-project's own GO engine (:func:`raysim.go.forward_intensity`) on the current estimate as a
+project's own GO engine (:func:`raysim.optics.go.forward_intensity`) on the current estimate as a
 gridded map; the PO engine (``po``, ``po+ptd``) or any callable with the same signature can
 stand in, with the preconditioner of :mod:`solver.wave` in place of the GO inversion (the
 GO inversion alone lets the PO iteration diverge after two steps: PO responds to the smooth
@@ -45,7 +45,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
-from raysim.sphere import SphereGrid
+from raysim.maps.sphere import SphereGrid
 from solver.aperture import ApertureGrid
 from solver.equation import intensity_ratio_fa
 from solver.forward import Forward, Progress, go_forward

@@ -1,7 +1,7 @@
 """Sphere (theta, phi) samples -> the aperture grid (x, y) through the ideal GO mapping.
 
 Frame (DESIGN.md): theta from -z at the focus, phi = atan2(y, x), both in rad, on a regular
-cell-centre grid (:class:`raysim.sphere.SphereGrid`); the aperture point (x, y) (m) sees the
+cell-centre grid (:class:`raysim.maps.sphere.SphereGrid`); the aperture point (x, y) (m) sees the
 sphere at theta = 2 atan(r / 2F), phi = atan2(y, x) (paper Eq. 34).
 
 Steps, each stated in the result so a reader knows what was done to the data:
@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import map_coordinates
 
 from raysim.errors import FieldMapError
-from raysim.sphere import SphereGrid, theta_rim
+from raysim.maps.sphere import SphereGrid, theta_rim
 from solver.aperture import ApertureGrid
 
 PAD = 8             # cells of padding around the spline's array

@@ -13,7 +13,7 @@ from pathlib import Path
 import xarray as xr
 
 from raysim.errors import RaysimError
-from raysim.field import load as load_fieldmap
+from raysim.maps.fieldmap import load as load_fieldmap
 from solver import boundary, surface
 from solver.fit import panel_adjustments, write_panel_csv
 from solver.forward import Progress
@@ -26,7 +26,7 @@ def panel_layout_of(field: xr.Dataset):
     if not text:
         return None
     try:
-        from raysim.scene import parse_scene
+        from raysim.scene.scene import parse_scene
 
         return parse_scene(str(text), source="FieldMap scene").panels
     except Exception:  # an unparsable recorded scene just means no layout

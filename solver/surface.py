@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from raysim import __version__
-from raysim.netcdf import read, write_atomic
+from raysim.maps.netcdf import read, write_atomic
+from raysim.version import __version__
 from solver.aperture import ApertureGrid
 from solver.errors import SurfaceMapError
 

@@ -44,7 +44,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
-from raysim.sphere import SphereGrid, aperture_radius, ideal_go_cell_mean, ideal_go_intensity
+from raysim.maps.sphere import SphereGrid, aperture_radius, ideal_go_cell_mean, ideal_go_intensity
 from solver.aperture import ApertureGrid
 
 C0 = 299_792_458.0  # speed of light in vacuum (m/s)

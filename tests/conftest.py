@@ -19,14 +19,14 @@ def repo_root() -> Path:
 
 @pytest.fixture(scope="session")
 def paper_scene():
-    from raysim.scene import load_scene
+    from raysim.scene.scene import load_scene
 
     return load_scene(ROOT / "scenes" / "paper_go.toml")
 
 
 @pytest.fixture(scope="session")
 def panels_scene():
-    from raysim.scene import load_scene
+    from raysim.scene.scene import load_scene
 
     return load_scene(ROOT / "scenes" / "panels_go.toml")
 
@@ -34,6 +34,6 @@ def panels_scene():
 @pytest.fixture(scope="session")
 def paper_reflectors(paper_scene):
     """(ideal, deformed) reflectors of the paper scene at the default resolution."""
-    from raysim.geometry import reflectors_for
+    from raysim.surface.mesh import reflectors_for
 
     return reflectors_for(paper_scene)

@@ -22,7 +22,7 @@ def flat_disk(a: float, h: float):
     """A triangulated disk of radius a (m) in z = 0, triangles about h (m), normals +z."""
     import dataclasses
 
-    from raysim.geometry import paraboloid
+    from raysim.surface.mesh import paraboloid
 
     dish = paraboloid(2.0 * a, 1.0, h)  # only its aperture triangulation is used
     vertices = dish.vertices.copy()

@@ -4,7 +4,7 @@ Frame (DESIGN.md): vertex at the origin, axis +z, focus C = (0, 0, F); lengths i
 angles in radians. The reflector is the smooth surface z = r^2 / (4F) + delta(x, y), lit by a
 plane wave travelling along -z with unit intensity. The probe sphere has radius R around C.
 
-This module shares no code with ``raysim.go`` or ``solver``: it inverts the ray map point by
+This module shares no code with ``raysim.optics.go`` or ``solver``: it inverts the ray map point by
 point instead of tracing tubes. For every sphere direction (theta, phi) a vectorised Newton
 iteration finds the aperture point (x, y) whose reflected ray reaches that sphere point. Power
 conservation along the ray tube then gives the intensity relative to the incident wave,
@@ -22,8 +22,8 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from raysim.field import fieldmap
-from raysim.sphere import SphereGrid
+from raysim.maps.fieldmap import fieldmap
+from raysim.maps.sphere import SphereGrid
 
 Deformation = Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]]
 

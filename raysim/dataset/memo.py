@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from raysim.deformation import Deformation
+from raysim.surface.deformation import Deformation
 
 
 def _same(a: Any, b: Any) -> bool:

@@ -21,8 +21,8 @@ from numpy.typing import NDArray
 
 from raysim.dataset.distributions import Distribution
 from raysim.dataset.zernike import ZernikeSeries
-from raysim.deformation import Deformation, GaussianBumps, PanelRigid
-from raysim.panels import PanelLayout
+from raysim.surface.deformation import Deformation, GaussianBumps, PanelRigid
+from raysim.surface.panels import PanelLayout
 
 Params = dict[str, Any]
 

@@ -25,8 +25,8 @@ def open_dataset(store: str | Path) -> xr.Dataset:
 
 
 def sample_fieldmap(ds: xr.Dataset, index: int) -> xr.Dataset:
-    """Sample ``index`` of an opened dataset as a FieldMap (see :mod:`raysim.field`)."""
-    from raysim.field import fieldmap, grid_of
+    """Sample ``index`` of an opened dataset as a FieldMap (see :mod:`raysim.maps.fieldmap`)."""
+    from raysim.maps.fieldmap import fieldmap, grid_of
 
     sample = ds.isel(sample=index)
     frequency = float(sample["frequency_hz"].values)

@@ -93,7 +93,7 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
     if workers is not None and workers < 1:
         raise DatasetError(f"workers must be >= 1, got {workers}")
     if scheduler is None and device != "cpu":  # local workers see this machine's devices
-        from raysim import warp_runtime
+        from raysim.optics import runtime as warp_runtime
 
         warp_runtime.resolve_device(device)
     path = _store_path(store)

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from raysim.dataset.spec import DatasetSpec
-from raysim.deformation import Deformation, NoDeformation, Sum
+from raysim.surface.deformation import Deformation, NoDeformation, Sum
 
 # spawn key of the split's generator: sample indices stay below 10**7, so it never meets one
 SPLIT_KEY = 0x53504C54

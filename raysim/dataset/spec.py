@@ -37,7 +37,7 @@ from raysim.dataset.models import (
     ZernikeSpectrum,
 )
 from raysim.errors import RaysimError
-from raysim.scene import Scene, parse_scene
+from raysim.scene.scene import Scene, parse_scene
 from raysim.simulate import METHODS
 
 DTYPES = ("float64", "float32")

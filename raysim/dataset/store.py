@@ -38,9 +38,9 @@ from typing import Any
 import numpy as np
 import zarr
 
-from raysim import __version__
 from raysim.dataset.spec import DatasetError, DatasetSpec
 from raysim.dataset.store_layout import FORMAT, ArraySpec, layout
+from raysim.version import __version__
 
 PENDING, DONE, FAILED = 0, 1, 2
 _PACKAGES = ("numpy", "warp-lang", "dask", "distributed", "zarr", "xarray")

@@ -6,7 +6,7 @@ store itself, returning a few numbers. Any exception inside a sample is caught a
 is recorded as failed with its reason, so the worker goes on with the next one.
 
 The plugin runs once per worker process: it fixes the CPU threads of each Warp launch
-(``RAYSIM_THREADS``), initialises Warp and loads every kernel module of ``raysim.kernels``
+(``RAYSIM_THREADS``), initialises Warp and loads every kernel module of ``raysim.optics.kernels``
 under a file lock in the kernel cache, so one process compiles and the others load. It also
 lets glibc keep freed memory for reuse: Dask starts workers with ``MALLOC_TRIM_THRESHOLD_``
 set, which makes every array over 128 KiB a fresh ``mmap`` and doubled the CPU time of a
@@ -32,14 +32,14 @@ from typing import Any
 import numpy as np
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from raysim import warp_runtime
 from raysim.dataset.memo import Memo
 from raysim.dataset.sampling import draw_sample
 from raysim.dataset.spec import DatasetError, DatasetSpec, parse_spec
 from raysim.dataset.store import Writer, open_readonly
-from raysim.deformation import Deformation, NoDeformation
-from raysim.geometry import Reflector, paraboloid
-from raysim.panels import PanelLayout
+from raysim.optics import runtime as warp_runtime
+from raysim.surface.deformation import Deformation, NoDeformation
+from raysim.surface.mesh import Reflector, paraboloid
+from raysim.surface.panels import PanelLayout
 
 _lock = threading.Lock()
 
@@ -63,12 +63,12 @@ def prepare_process(threads: int, device: str = "cpu") -> None:
     tune_malloc()
     wp = warp_runtime.init()
     dev = warp_runtime.resolve_device(device)
-    import raysim.kernels as kernels
+    import raysim.optics.kernels as kernels
 
     cache = Path(str(wp.config.kernel_cache_dir))
     cache.mkdir(parents=True, exist_ok=True)
     with _file_lock(cache / ".raysim-dataset-compile.lock"):
-        for info in pkgutil.iter_modules(kernels.__path__, prefix="raysim.kernels."):
+        for info in pkgutil.iter_modules(kernels.__path__, prefix="raysim.optics.kernels."):
             module = importlib.import_module(info.name)
             with contextlib.suppress(RuntimeError):  # a module without Warp code
                 wp.load_module(module, device=dev)
@@ -140,7 +140,7 @@ def intensity(spec: DatasetSpec, deformation: Deformation | None, f_index: int,
     """
     scene = spec.scene.with_overrides(frequency_hz=spec.frequencies[f_index])
     if spec.method == "go":
-        from raysim import go
+        from raysim.optics import go
 
         dish = spec.scene.dish
         ideal = _ideal_reflector(dish.diameter, dish.focal_length, dish.resolution, spec.scene.panels)

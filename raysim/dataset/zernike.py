@@ -1,6 +1,6 @@
 """A Zernike series evaluated fast on many points: the dataset's random Zernike spectra.
 
-The same surface as :class:`raysim.deformation.Zernike` (terms (n, m, coefficient in m) over
+The same surface as :class:`raysim.surface.deformation.Zernike` (terms (n, m, coefficient in m) over
 the disk of radius ``radius`` in m; m >= 0 takes cos(m phi), m < 0 sin(|m| phi); Noll
 normalisation, sqrt((2 - delta_m0) (n + 1)), so each term's RMS over the disk is its
 coefficient). Where that class raises rho to each power of each term, this one forms the
@@ -18,7 +18,7 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import NDArray
 
-from raysim.deformation import Deformation
+from raysim.surface.deformation import Deformation
 
 
 @lru_cache(maxsize=512)

@@ -1,5 +1,6 @@
 """Pictures of FieldMaps and SurfaceMaps, headless: pyvista/VTK off-screen through EGL for 3D,
-matplotlib (Agg) for maps and cuts, and the paper's figure set as an HTML report.
+matplotlib (Agg) for maps and cuts, and the paper's figure set (the pictures of ``raysim report``,
+which :mod:`raysim.pipeline.report` assembles).
 
 Modules:
 
@@ -12,7 +13,7 @@ Modules:
 - ``surface3d``: the dish warped by delta (exaggeration stated), truth / recovered / error.
 - ``charts``: (theta, phi) maps and cuts of a FieldMap; x-y maps and cuts of a SurfaceMap.
 - ``api``: ``render(FILE, OUT.png, kind, size, quantity)``, what ``raysim render`` calls.
-- ``report``: ``raysim report``: simulate -> invert -> the paper's Figs. 8-10 in one HTML page.
+- ``figures``: the paper's Figs. 8-10 for one FieldMap and its SurfaceMap.
 - ``samples``: example maps made from the linear equation, for tests and benchmarks.
 
 Nothing else in raysim imports this package; it reads every other module.

@@ -16,9 +16,9 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from raysim.errors import FieldMapError
-from raysim.netcdf import read
+from raysim.maps.netcdf import read
+from raysim.maps.sphere import ideal_go_cell_mean, ideal_go_intensity, theta_rim
 from raysim.render.backend import RenderError
-from raysim.sphere import ideal_go_cell_mean, ideal_go_intensity, theta_rim
 
 FIELD_QUANTITIES = ("fa", "intensity", "normalized")
 UM = 1e6  # micrometres per metre
@@ -49,7 +49,7 @@ def open_map(path: str | os.PathLike[str]) -> tuple[str, xr.Dataset]:
 def kind_of(ds: xr.Dataset, source: str = "dataset") -> str:
     """``field`` for a FieldMap, ``surface`` for a SurfaceMap; RenderError for anything else."""
     if "intensity" in ds.data_vars and "theta" in ds.coords:
-        from raysim.field import validate
+        from raysim.maps.fieldmap import validate
 
         try:
             validate(ds, source)
@@ -97,7 +97,7 @@ def ideal_law(ds: xr.Dataset) -> NDArray[np.float64]:
 
     Cell means for ``sampling = cell_mean``, centre values otherwise; 0 beyond the rim image.
     """
-    from raysim.field import grid_of
+    from raysim.maps.fieldmap import grid_of
 
     grid = grid_of(ds)
     F, R, D = (float(ds.attrs[k]) for k in ("focal_length", "sphere_radius", "diameter"))

@@ -18,7 +18,7 @@ import numpy as np
 import xarray as xr
 
 from raysim.errors import RaysimError
-from raysim.field import grid_of
+from raysim.maps.fieldmap import grid_of
 from raysim.render import backend
 from raysim.render.data import Quantity, field_quantity, field_subtitle, field_title, frequency_text
 
@@ -62,12 +62,12 @@ def reflector(ds: xr.Dataset) -> tuple[Any, Any, str]:
 
 @functools.lru_cache(maxsize=4)
 def _reflector(D: float, F: float, text: str | None) -> tuple[Any, Any, str]:
-    from raysim.geometry import paraboloid
+    from raysim.surface.mesh import paraboloid
 
     layout, what = None, "ideal paraboloid (from the map's attributes)"
     if text:
         try:
-            from raysim.scene import parse_scene
+            from raysim.scene.scene import parse_scene
 
             scene = parse_scene(text, source="FieldMap scene")
             if scene.dish.mesh is None and scene.dish.diameter and scene.dish.focal_length:

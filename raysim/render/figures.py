@@ -55,7 +55,7 @@ def scene_deformation(field: xr.Dataset) -> SceneTruth | None:
     if not text:
         return None
     try:
-        from raysim.scene import parse_scene
+        from raysim.scene.scene import parse_scene
 
         scene = parse_scene(str(text), source="FieldMap scene")
     except RaysimError:
@@ -66,7 +66,7 @@ def scene_deformation(field: xr.Dataset) -> SceneTruth | None:
 def fa_on_aperture(field: xr.Dataset, x: np.ndarray) -> np.ndarray:
     """FA of the FieldMap resampled by the solver onto the aperture grid with cell centres ``x``
     (= y, m, N of them spanning D), indexed [y, x]; NaN outside the aperture."""
-    from raysim.field import grid_of
+    from raysim.maps.fieldmap import grid_of
     from solver.aperture import ApertureGrid
     from solver.resample import sphere_to_aperture
 

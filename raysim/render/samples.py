@@ -15,8 +15,8 @@ from collections.abc import Callable
 import numpy as np
 import xarray as xr
 
-from raysim.field import fieldmap
-from raysim.sphere import SphereGrid, aperture_radius, ideal_go_cell_mean, theta_rim
+from raysim.maps.fieldmap import fieldmap
+from raysim.maps.sphere import SphereGrid, aperture_radius, ideal_go_cell_mean, theta_rim
 from solver.equation import G
 
 Delta = Callable[[np.ndarray, np.ndarray], np.ndarray]

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from raysim.field import fieldmap, save
-from raysim.sphere import SphereGrid, ideal_go_intensity
+from raysim.maps.fieldmap import fieldmap, save
+from raysim.maps.sphere import SphereGrid, ideal_go_intensity
 
 ROOT = Path(__file__).resolve().parents[2]
 F, D, R = 33.0, 110.0, 10.0

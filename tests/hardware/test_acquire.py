@@ -14,11 +14,11 @@ from hardware.journal import read_journal
 from hardware.plan import REFERENCE, load_plan
 from hardware.rig import Calibration, Rig
 from hardware.session import fieldmap_from_journal, park, scan
-from hardware.sim_settings import drift_db
-from hardware.simulated import Faults
-from raysim import field as fieldmaps
+from hardware.sim.rig import Faults
+from hardware.sim.settings import drift_db
 from raysim.errors import InstrumentError
-from raysim.sphere import SphereGrid, ideal_go_intensity
+from raysim.maps import fieldmap as fieldmaps
+from raysim.maps.sphere import SphereGrid, ideal_go_intensity
 
 from .conftest import D, F, R, pattern, write_field, write_plan
 

@@ -15,9 +15,9 @@ import pytest
 
 from hardware.journal import read_journal
 from hardware.plan import load_plan
-from hardware.sim_settings import SimSettings
-from hardware.simulated import Faults, SimulatedRig
-from raysim import field as fieldmaps
+from hardware.sim.rig import Faults, SimulatedRig
+from hardware.sim.settings import SimSettings
+from raysim.maps import fieldmap as fieldmaps
 
 from .conftest import ROOT, error_line, run_cli, write_plan
 

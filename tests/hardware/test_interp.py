@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from hardware.interp import FieldSampler, SphereField
-from raysim.field import fieldmap
-from raysim.sphere import SphereGrid, ideal_go_intensity, theta_rim
+from raysim.maps.fieldmap import fieldmap
+from raysim.maps.sphere import SphereGrid, ideal_go_intensity, theta_rim
 
 GRID = SphereGrid(10.0, 18, 36)          # 5 deg x 10 deg cells over the hemisphere
 
@@ -98,7 +98,7 @@ def test_sphere_field_is_ratio_times_exact_ideal() -> None:
     F, D = 33.0, 110.0
     grid = SphereGrid(10.0, 90, 360)
     lo, hi = grid.theta_edges[:-1], grid.theta_edges[1:]
-    from raysim.sphere import ideal_go_cell_mean
+    from raysim.maps.sphere import ideal_go_cell_mean
     ideal = np.repeat(ideal_go_cell_mean(lo, hi, F, 10.0, D)[:, None], 360, axis=1)
     ds = fieldmap(grid, 1.02 * ideal, ideal, focal_length=F, diameter=D, frequency_hz=3e8,
                   method="go", sampling="cell_mean")

@@ -21,7 +21,7 @@ import pytest
 from hardware.journal import read_journal
 from hardware.plan import load_plan
 from hardware.session import scan
-from raysim import field as fieldmaps
+from raysim.maps import fieldmap as fieldmaps
 
 from .conftest import ROOT, cli_env, run_cli, write_plan
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from raysim.field import load
+from raysim.maps.fieldmap import load
 
 SMALL = """
 name = "small"

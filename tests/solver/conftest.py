@@ -7,7 +7,7 @@ map is traced once per session (a few seconds each).
 import numpy as np
 import pytest
 
-from raysim.sphere import SphereGrid
+from raysim.maps.sphere import SphereGrid
 from tests.reference_go import cell_mean_intensity, go_fieldmap, paper_delta
 
 F, D, R = 33.0, 110.0, 10.0

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from raysim.cli import main
-from raysim.field import save
+from raysim.maps.fieldmap import save
 from solver import surface
 
 
@@ -100,7 +100,7 @@ def test_paper_po_sweep_reproduces_table3_at_0p1_ghz_and_keeps_its_fieldmap(monk
                                                                           tmp_path):
     """`raysim paper --po` at 0.1 GHz (the cheapest Table 3 row): the paper's setting on the
     project's PO + PTD data lands near the paper's 22.07 %; the FieldMap is kept and reused."""
-    from raysim.field import load
+    from raysim.maps.fieldmap import load
 
     fields = tmp_path / "fields"
     code, stdout, _ = run(monkeypatch, capsys, "paper", "--po", "--frequencies", "0.1e9",

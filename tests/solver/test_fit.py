@@ -5,8 +5,8 @@ import csv
 import numpy as np
 import pytest
 
-from raysim.deformation import PanelRigid
-from raysim.panels import PanelLayout
+from raysim.surface.deformation import PanelRigid
+from raysim.surface.panels import PanelLayout
 from solver.aperture import ApertureGrid
 from solver.errors import SolverError
 from solver.fit import panel_adjustments, parse_terms, remove_terms, write_panel_csv

@@ -6,10 +6,10 @@ errs by about 9 % (DESIGN.md).
 
 import pytest
 
-from raysim.deformation import PaperDeformation
-from raysim.field import fieldmap
-from raysim.go import forward_intensity
-from raysim.sphere import SphereGrid
+from raysim.maps.fieldmap import fieldmap
+from raysim.maps.sphere import SphereGrid
+from raysim.optics.go import forward_intensity
+from raysim.surface.deformation import PaperDeformation
 from solver.invert import invert
 from solver.nonlinear import go_forward
 

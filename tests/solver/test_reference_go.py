@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from raysim.sphere import SphereGrid, ideal_go_cell_mean
+from raysim.maps.sphere import SphereGrid, ideal_go_cell_mean
 from tests.reference_go import cell_mean_intensity, intensity_at, paper_delta, preimage, sphere_hit
 
 F, D, R = 33.0, 110.0, 10.0

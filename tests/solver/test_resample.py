@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from raysim.errors import FieldMapError
-from raysim.sphere import SphereGrid
+from raysim.maps.sphere import SphereGrid
 from solver.aperture import ApertureGrid
 from solver.resample import fill_missing, sphere_to_aperture, usable_rows
 

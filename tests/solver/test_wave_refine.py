@@ -13,12 +13,12 @@ import types
 import numpy as np
 import pytest
 
-from raysim import po
 from raysim.cli import main
-from raysim.deformation import GaussianBumps
-from raysim.field import fieldmap, save
-from raysim.geometry import paraboloid
-from raysim.sphere import SphereGrid, ideal_go_cell_mean
+from raysim.maps.fieldmap import fieldmap, save
+from raysim.maps.sphere import SphereGrid, ideal_go_cell_mean
+from raysim.optics import po
+from raysim.surface.deformation import GaussianBumps
+from raysim.surface.mesh import paraboloid
 from solver import surface
 from solver.aperture import ApertureGrid
 from solver.equation import G, intensity_ratio_fa
@@ -155,11 +155,11 @@ def test_model_choice_follows_the_data_and_checks_names():
 
 
 def test_po_ptd_adds_the_fringe_field_of_raysim_ptd(monkeypatch, sphere):
-    """The po+ptd model adds what raysim.ptd.sphere_edge_field returns (here a known stand-in)."""
+    """The po+ptd model adds what raysim.optics.ptd.sphere_edge_field returns (here a known stand-in)."""
     shift = np.zeros((sphere.n_theta, sphere.n_phi, 3), dtype=complex)
     shift[..., 0] = 0.01
     stand_in = lambda reflector, grid, wave, edges, device=None: types.SimpleNamespace(E=shift)  # noqa: E731
-    monkeypatch.setattr("raysim.ptd.sphere_edge_field", stand_in)
+    monkeypatch.setattr("raysim.optics.ptd.sphere_edge_field", stand_in)
     plain = WaveForward(FREQUENCY).ideal_field(sphere, F, D)
     with_fringe = WaveForward(FREQUENCY, ptd=True).ideal_field(sphere, F, D)
     np.testing.assert_allclose(with_fringe - plain, shift, atol=1e-12)

@@ -1,0 +1,5 @@
+"""``python -m raysim.cli``: the console script."""
+
+from raysim.cli import main
+
+main()

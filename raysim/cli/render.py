@@ -1,0 +1,59 @@
+"""``raysim render`` (raysim.render) and ``raysim report`` (raysim.pipeline.report)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from raysim.cli.common import app, console, out, output_path
+
+
+@app.command()
+def render(
+    file: Path = typer.Argument(..., help="FieldMap or SurfaceMap NetCDF file."),
+    output: Path = typer.Option(..., "-o", "--output", help="PNG file to write."),
+    kind: str | None = typer.Option(
+        None, "--kind", help="3d, map or cut (default: 3d for a FieldMap, map for a SurfaceMap)."),
+    size: str | None = typer.Option(None, "--size", help="Width x height in pixels, e.g. 1600x1200."),
+    quantity: str = typer.Option("fa", "--quantity",
+                                 help="FieldMap colour: fa (I_ideal/I_def - 1), intensity, or normalized "
+                                      "(intensity over the ideal GO law)."),
+) -> None:
+    """Draw a FieldMap (hemisphere over the dish) or a SurfaceMap (deformation in um) as PNG.
+
+    Works with no display (EGL off-screen rendering).
+    """
+    from raysim.render import render as run
+
+    written = run(file, output_path(output), kind=kind, size=size, quantity=quantity)
+    out.print(f"{written}", highlight=False)
+
+
+@app.command()
+def report(
+    source: Path = typer.Argument(..., help="Scene TOML file, or a FieldMap (.nc) simulated or measured."),
+    output: Path = typer.Option(..., "-o", "--output", help="Folder for report.html, its figures and data."),
+    method: str | None = typer.Option(None, "--method",
+                                      help="Simulation method: go, po or po+ptd (default: the "
+                                           "scene's method key, else go)."),
+    device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
+    solver: str | None = typer.Option(None, "--solver", help="Poisson solver (default: the solver's)."),
+    grid: int | None = typer.Option(None, "--grid",
+                                    help="Aperture grid points across D (default: the solver's)."),
+    refine: int | None = typer.Option(None, "--refine",
+                                      help="GO refinement iterations (0: the paper's linear answer)."),
+    invert: bool = typer.Option(True, "--invert/--no-invert",
+                                help="--no-invert leaves the inversion out: the field's figures only."),
+) -> None:
+    """Simulate, invert and draw a scene: an HTML report mirroring the paper's Figs. 8-10.
+
+    The page embeds its figures; the PNGs, field.nc and surface.nc are written beside it.
+    Given a FieldMap instead of a scene, the simulation is skipped.
+    """
+    from raysim.pipeline.report import report as run
+
+    page = run(source, output, method=method, device=device, solver=solver, grid=grid, refine=refine,
+               invert=invert,
+               progress=lambda line: console.print(f"report: {line}", highlight=False))
+    out.print(f"{page}", highlight=False)

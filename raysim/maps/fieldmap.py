@@ -1,0 +1,183 @@
+"""FieldMap: intensity on the probe hemisphere as an ``xarray.Dataset`` (NetCDF on disk).
+
+The contract (DESIGN.md) every producer (GO, PO, PTD, the scanning rig) and every reader (the
+solver, the renderer) shares:
+
+- coordinates ``theta``, ``phi``: cell centres in radians (theta from -z, phi = atan2(y, x),
+  both seen from the focus);
+- ``intensity``: |E|^2 of the deformed (or measured) reflector relative to the incident wave;
+  ``intensity_ideal`` on the same grid; optional ``intensity_std``; NaN where no sample exists;
+- attributes ``focal_length``, ``diameter``, ``sphere_radius`` (m), ``frequency_hz`` (Hz),
+  ``method`` (go, po, po+ptd, measured), ``sampling`` (``cell_mean`` or ``centre``), and
+  ``scene`` (the scene's TOML text) when a scene made it. A reader works from the attributes
+  alone, since a measured scan has no scene.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from raysim.errors import FieldMapError
+from raysim.maps.netcdf import read, write_atomic
+from raysim.maps.sphere import SphereGrid
+from raysim.version import __version__
+
+METHODS = ("go", "po", "po+ptd", "measured")
+SAMPLINGS = ("cell_mean", "centre")
+REQUIRED_ATTRS = ("focal_length", "diameter", "sphere_radius", "frequency_hz", "method", "sampling")
+REQUIRED_VARS = ("intensity", "intensity_ideal")
+
+
+def fieldmap(
+    grid: SphereGrid,
+    intensity: np.ndarray,
+    intensity_ideal: np.ndarray,
+    *,
+    focal_length: float,
+    diameter: float,
+    frequency_hz: float,
+    method: str,
+    sampling: str,
+    intensity_std: np.ndarray | None = None,
+    scene: str | None = None,
+    attrs: Mapping[str, Any] | None = None,
+    extra: Mapping[str, tuple[tuple[str, ...], np.ndarray, Mapping[str, Any]]] | None = None,
+) -> xr.Dataset:
+    """Assemble a FieldMap on ``grid``.
+
+    Parameters
+    ----------
+    grid : the sphere grid (radius in m, angles in rad).
+    intensity, intensity_ideal : arrays (n_theta, n_phi), |E|^2 relative to the incident wave.
+    focal_length, diameter : F and D of the reflector (m).
+    frequency_hz : frequency of the plane wave (Hz).
+    method : one of :data:`METHODS`.
+    sampling : ``cell_mean`` (power through the cell over its area) or ``centre``.
+    intensity_std : optional standard deviation of ``intensity`` (same units).
+    scene : the scene's TOML text, when a scene made this map.
+    attrs : further flat attributes (numbers or strings) to record.
+    extra : further variables, name -> (dims, values, attrs).
+    """
+    if method not in METHODS:
+        raise FieldMapError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if sampling not in SAMPLINGS:
+        raise FieldMapError(f"sampling must be one of {', '.join(SAMPLINGS)}, got {sampling!r}")
+    shape = (grid.n_theta, grid.n_phi)
+    dims = ("theta", "phi")
+    unit = {"units": "1", "reference": "incident plane-wave intensity"}
+    data_vars: dict[str, Any] = {
+        "intensity": (dims, _checked(intensity, shape, "intensity"), {**unit,
+                      "long_name": "intensity |E|^2 of the deformed or measured reflector"}),
+        "intensity_ideal": (dims, _checked(intensity_ideal, shape, "intensity_ideal"), {**unit,
+                            "long_name": "intensity |E|^2 of the ideal paraboloid"}),
+    }
+    if intensity_std is not None:
+        data_vars["intensity_std"] = (dims, _checked(intensity_std, shape, "intensity_std"),
+                                      {**unit, "long_name": "standard deviation of intensity"})
+    for name, (vdims, values, vattrs) in (extra or {}).items():
+        data_vars[name] = (vdims, np.asarray(values), dict(vattrs))
+    all_attrs: dict[str, Any] = {
+        "focal_length": float(focal_length),
+        "diameter": float(diameter),
+        "sphere_radius": float(grid.radius),
+        "frequency_hz": float(frequency_hz),
+        "method": method,
+        "sampling": sampling,
+        "theta_min": float(grid.theta_min),
+        "theta_max": float(grid.theta_max),
+        "phi_min": float(grid.phi_min),
+        "phi_max": float(grid.phi_max),
+        "raysim_version": __version__,
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
+        "Conventions": "CF-1.8",
+    }
+    if scene is not None:
+        all_attrs["scene"] = scene
+    for key, value in (attrs or {}).items():
+        all_attrs[key] = value
+    coords = {
+        "theta": ("theta", grid.theta, {"units": "rad", "long_name": "polar angle from -z at the focus"}),
+        "phi": ("phi", grid.phi, {"units": "rad", "long_name": "azimuth atan2(y, x) at the focus"}),
+    }
+    return xr.Dataset(data_vars, coords=coords, attrs=all_attrs)
+
+
+def grid_of(ds: xr.Dataset) -> SphereGrid:
+    """The :class:`SphereGrid` of a FieldMap, from its coordinates and attributes alone."""
+    grid = SphereGrid.from_centres(ds["theta"].values, ds["phi"].values, ds.attrs["sphere_radius"])
+    if all(k in ds.attrs for k in ("theta_min", "theta_max", "phi_min", "phi_max")):
+        # the edges recorded by the producer; they matter for a single row or column
+        grid = SphereGrid(grid.radius, grid.n_theta, grid.n_phi,
+                          float(ds.attrs["theta_min"]), float(ds.attrs["theta_max"]),
+                          float(ds.attrs["phi_min"]), float(ds.attrs["phi_max"]))
+    return grid
+
+
+def validate(ds: xr.Dataset, source: str = "FieldMap") -> xr.Dataset:
+    """Check ``ds`` against the contract; raise :class:`FieldMapError` naming the first defect."""
+    for coord in ("theta", "phi"):
+        if coord not in ds.coords:
+            raise FieldMapError(f"{source}: missing coordinate '{coord}'")
+        if ds[coord].attrs.get("units", "rad") != "rad":
+            raise FieldMapError(f"{source}: coordinate '{coord}' must be in rad, "
+                                f"got {ds[coord].attrs.get('units')!r}")
+        values = np.asarray(ds[coord].values, dtype=np.float64)
+        if values.ndim != 1 or values.size < 1 or not np.all(np.isfinite(values)):
+            raise FieldMapError(f"{source}: coordinate '{coord}' must be a finite 1-D array")
+        if values.size > 1 and not np.allclose(np.diff(values), values[1] - values[0],
+                                               rtol=1e-6, atol=1e-12):
+            raise FieldMapError(f"{source}: coordinate '{coord}' must be regularly spaced")
+    if float(np.max(ds["theta"].values)) > np.pi / 2 + 1e-9:
+        raise FieldMapError(f"{source}: theta beyond 90 deg is off the hemisphere facing the dish")
+    for name in REQUIRED_VARS:
+        if name not in ds.data_vars:
+            raise FieldMapError(f"{source}: missing variable '{name}'")
+        if ds[name].dims != ("theta", "phi"):
+            raise FieldMapError(f"{source}: variable '{name}' must have dims (theta, phi), "
+                                f"got {ds[name].dims}")
+    for name in ("focal_length", "diameter", "sphere_radius"):
+        if name not in ds.attrs:
+            raise FieldMapError(f"{source}: missing attribute '{name}' (m)")
+        value = _float_attr(ds, name, source)
+        if not value > 0:
+            raise FieldMapError(f"{source}: attribute '{name}' must be > 0 m, got {value}")
+    for name in ("frequency_hz", "method", "sampling"):
+        if name not in ds.attrs:
+            raise FieldMapError(f"{source}: missing attribute '{name}'")
+    _float_attr(ds, "frequency_hz", source)
+    if ds.attrs["sampling"] not in SAMPLINGS:
+        raise FieldMapError(f"{source}: attribute 'sampling' must be one of {SAMPLINGS}")
+    if _float_attr(ds, "sphere_radius", source) >= _float_attr(ds, "focal_length", source):
+        raise FieldMapError(f"{source}: sphere_radius must be smaller than focal_length")
+    return ds
+
+
+def save(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
+    """Write a FieldMap atomically (temporary file + rename) as NetCDF-4."""
+    return write_atomic(validate(ds), path)
+
+
+def load(path: str | os.PathLike[str]) -> xr.Dataset:
+    """Read and check a FieldMap; raise :class:`FieldMapError` with one line if it is unusable."""
+    return validate(read(path, FieldMapError), source=str(path))
+
+
+def _checked(values: np.ndarray, shape: tuple[int, int], name: str) -> np.ndarray:
+    arr = np.asarray(values, dtype=np.float64)
+    if arr.shape != shape:
+        raise FieldMapError(f"{name} has shape {arr.shape}, the grid is {shape}")
+    return arr
+
+
+def _float_attr(ds: xr.Dataset, name: str, source: str) -> float:
+    try:
+        return float(ds.attrs[name])
+    except (TypeError, ValueError) as exc:
+        raise FieldMapError(f"{source}: attribute '{name}' must be a number") from exc

@@ -1,0 +1,12 @@
+"""The optics engines: a plane wave on a reflector mesh -> field or intensity on the sphere.
+
+Modules:
+
+- ``runtime``: Warp set-up shared by every engine (kernel cache, device choice, launches
+  split across the CPU's threads).
+- ``go``: geometric-optics ray tubes -> cell-mean intensity (and the GO forward model).
+- ``po``: physical-optics surface currents radiated in float64 through the full dyadic
+  Green's function; the ``Radiator`` every current-based engine shares.
+- ``ptd``: Michaeli's fringe equivalent edge currents on the free edges, added to PO.
+- ``kernels/``: the Warp kernels of these engines, one module per engine.
+"""

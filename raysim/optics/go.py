@@ -1,0 +1,231 @@
+"""Geometric optics: a plane wave, ray tubes off the reflector, intensity on the probe sphere.
+
+Frame and units of DESIGN.md (metres, radians; focus at (0, 0, F)). The incident wave is
+sampled by rays on a lattice of each mesh face (``subdivisions`` per edge; 1 means the rays
+pass through the vertices). For every ray:
+
+1. Warp's BVH (float32) finds the first face the ray meets: a ray whose face lies in front
+   of its own point is shadowed.
+2. The hit is recomputed in float64 on the smooth surface the scene defines (Newton along
+   the ray from the facet point, normal from the surface slopes), or kept on the facet with
+   interpolated vertex normals for a mesh loaded from a file.
+3. The ray is reflected and followed to where it enters the sphere of radius R.
+
+Neighbouring rays form tubes (the lattice's triangles). A tube carries the power that crosses
+its cross-section normal to the incident wave; where it lands on the sphere that power is
+spread over the (theta, phi) cells by the exact area each cell shares with the tube (in the
+sphere's equal-area Lambert chart). So folds add, gaps and shadows give nothing, and the power
+on the sphere equals the lit aperture's power to round-off. Cells hold means: power through
+the cell over its area, relative to the incident intensity.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from numpy.typing import NDArray
+
+from raysim.errors import RaysimError
+from raysim.maps.sphere import SphereGrid
+from raysim.optics import runtime as warp_runtime
+from raysim.surface.deformation import Deformation, NoDeformation
+from raysim.surface.mesh import Reflector, paraboloid
+
+ON_AXIS = (0.0, 0.0, -1.0)
+Progress = Callable[[str, float], None]
+
+
+@dataclass(frozen=True)
+class GOResult:
+    """Outcome of one trace. Powers are in m^2 (units of the incident intensity times area)."""
+
+    intensity: NDArray[np.float64]  # (n_theta, n_phi), cell means relative to incident
+    power_lit: float  # power intercepted by the lit tubes (their cross-section area)
+    power_on_grid: float  # power that reached the grid's cells
+    n_rays: int
+    n_tubes: int
+    n_shadowed: int  # rays with another face in front of them
+    n_missed: int  # lit rays that did not reach the sphere
+    seconds: float
+
+    @property
+    def power_balance(self) -> float:
+        """power_on_grid / power_lit - 1: zero to round-off when the grid sees every tube."""
+        return self.power_on_grid / self.power_lit - 1.0 if self.power_lit > 0 else float("nan")
+
+
+# --- ray lattice -----------------------------------------------------------------------------
+@lru_cache(maxsize=8)
+def _lattice_tables(m: int) -> tuple[NDArray, NDArray]:
+    """Barycentric weights (L, 3) of the points of an m-fold face lattice, and its m^2
+    sub-triangles (local indices, counter-clockwise like the face)."""
+    ij = [(i, j) for j in range(m + 1) for i in range(m + 1 - j)]
+    index = {p: k for k, p in enumerate(ij)}
+    w = np.array([[1.0 - (i + j) / m, i / m, j / m] for i, j in ij])
+    tris = []
+    for i, j in ij:
+        if i + j < m:
+            tris.append((index[i, j], index[i + 1, j], index[i, j + 1]))
+        if i + j < m - 1:
+            tris.append((index[i + 1, j], index[i + 1, j + 1], index[i, j + 1]))
+    return w, np.array(tris, dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class RayLattice:
+    """Ray start points on the facets and the tubes joining them."""
+
+    points: NDArray[np.float64]  # (N, 3) on the flat facets
+    panel: NDArray[np.int64]  # (N,) panel of each point
+    normals: NDArray[np.float64]  # (N, 3) interpolated vertex normals (used without a surface)
+    tubes: NDArray[np.int32]  # (T, 3) indices into points
+
+
+def ray_lattice(reflector: Reflector, subdivisions: int = 1) -> RayLattice:
+    """Rays on an m-fold lattice of every face (m = ``subdivisions``); m = 1 uses the vertices."""
+    m = int(subdivisions)
+    if m < 1:
+        raise RaysimError(f"subdivisions must be >= 1, got {m}")
+    if m == 1:
+        return RayLattice(reflector.vertices, reflector.vertex_panel, reflector.vertex_normals,
+                          reflector.faces.astype(np.int32))
+    w, local = _lattice_tables(m)
+    corners = reflector.vertices[reflector.faces]  # (F, 3, 3)
+    points = np.einsum("lk,fkc->flc", w, corners).reshape(-1, 3)
+    vn = reflector.vertex_normals[reflector.faces]
+    normals = np.einsum("lk,fkc->flc", w, vn).reshape(-1, 3)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    n_faces, n_local = len(reflector.faces), len(w)
+    tubes = (local[None, :, :] + n_local * np.arange(n_faces)[:, None, None]).reshape(-1, 3)
+    panel = np.repeat(reflector.face_panel, n_local)
+    return RayLattice(points, panel, normals, tubes.astype(np.int32))
+
+
+def tube_power(lattice: RayLattice, k_hat: NDArray) -> NDArray[np.float64]:
+    """Power of each tube: its cross-section normal to the incident wave (m^2, I0 = 1)."""
+    p = lattice.points[lattice.tubes]
+    cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    return 0.5 * np.abs(cross @ k_hat)
+
+
+def lift_to_surface(reflector: Reflector, lattice: RayLattice, k_hat: NDArray,
+                    iterations: int = 8) -> tuple[NDArray, NDArray]:
+    """float64 hit points and unit normals of the lattice rays on the reflector.
+
+    With a smooth surface, Newton's method along each ray from its facet point solves
+    z(t) = s(x(t), y(t)); on axis one step is exact. Without one, the facet point and the
+    interpolated vertex normal stand.
+    """
+    surface = reflector.surface
+    if surface is None:
+        return lattice.points, lattice.normals
+    p0 = lattice.points
+    t = np.zeros(len(p0))
+    for _ in range(iterations):
+        p = p0 + t[:, None] * k_hat
+        g = p[:, 2] - surface.height(p[:, 0], p[:, 1], lattice.panel)
+        sx, sy = surface.slope(p[:, 0], p[:, 1], lattice.panel)
+        dg = k_hat[2] - sx * k_hat[0] - sy * k_hat[1]
+        step = g / dg
+        t -= step
+        if np.max(np.abs(step)) < 1e-13:
+            break
+    hits = p0 + t[:, None] * k_hat
+    return hits, surface.normal(hits[:, 0], hits[:, 1], lattice.panel)
+
+
+# --- the trace ------------------------------------------------------------------------------
+def trace(reflector: Reflector, grid: SphereGrid, direction=ON_AXIS, subdivisions: int = 1,
+          device: str | None = "cpu", progress: Progress | None = None) -> GOResult:
+    """GO intensity of ``reflector`` on ``grid`` for a plane wave travelling along ``direction``.
+
+    Returns cell means relative to the incident intensity (see the module docstring).
+    """
+    wp = warp_runtime.init()
+    dev = warp_runtime.resolve_device(device)
+    if not grid.full_circle and grid.dphi > np.pi:
+        raise RaysimError("a phi cell wider than 180 deg is only supported as the full circle")
+    from raysim.optics.kernels import go as K
+
+    start = time.perf_counter()
+    report = progress or (lambda stage, fraction: None)
+    k_hat = np.asarray(direction, dtype=np.float64)
+    k_hat = k_hat / np.linalg.norm(k_hat)
+    focus = np.array([0.0, 0.0, reflector.F])
+
+    report("lattice", 0.0)
+    lattice = ray_lattice(reflector, subdivisions)
+    n_rays, n_tubes = len(lattice.points), len(lattice.tubes)
+
+    report("bvh", 0.1)
+    mesh = wp.Mesh(points=wp.array(reflector.vertices.astype(np.float32), dtype=wp.vec3, device=dev),
+                   indices=wp.array(reflector.faces.astype(np.int32).ravel(), dtype=wp.int32, device=dev))
+    points = wp.array(lattice.points, dtype=wp.vec3d, device=dev)
+    lit = wp.zeros(n_rays, dtype=wp.int32, device=dev)
+    standoff = float(np.ptp(reflector.vertices, axis=0).max() + 10.0)
+    report("visibility", 0.2)
+    warp_runtime.launch(K.visibility, n_rays,
+                        [mesh.id, points, wp.vec3d(*k_hat), standoff, 1e-3, lit], dev)
+    lit_np = lit.numpy().astype(bool)
+
+    report("surface", 0.4)
+    hits, normals = lift_to_surface(reflector, lattice, k_hat)
+
+    report("reflect", 0.5)
+    chart = wp.zeros(n_rays, dtype=wp.vec2d, device=dev)
+    ok = wp.array(lit_np.astype(np.int32), dtype=wp.int32, device=dev)
+    warp_runtime.launch(K.reflect_to_sphere, n_rays,
+                        [wp.array(hits, dtype=wp.vec3d, device=dev),
+                         wp.array(normals, dtype=wp.vec3d, device=dev),
+                         wp.vec3d(*k_hat), wp.vec3d(*focus), float(grid.radius), ok, chart], dev)
+    ok_np = ok.numpy().astype(bool)
+
+    report("deposit", 0.6)
+    power_t = tube_power(lattice, k_hat)
+    tube_lit = lit_np[lattice.tubes].all(axis=1)
+    rho_edges = 2.0 * np.sin(0.5 * grid.theta_edges)
+    power = wp.zeros((grid.n_theta, grid.n_phi), dtype=wp.float64, device=dev)
+    warp_runtime.launch(
+        K.deposit_tubes, n_tubes,
+        [chart, ok, wp.array(lattice.tubes, dtype=wp.vec3i, device=dev),
+         wp.array(power_t, dtype=wp.float64, device=dev),
+         wp.array(rho_edges, dtype=wp.float64, device=dev),
+         float(grid.theta_min), float(grid.dtheta), grid.n_theta,
+         float(grid.phi_min), float(grid.dphi), grid.n_phi, int(grid.full_circle), power],
+        dev, private=(12,), min_chunk=2048)
+    power_np = power.numpy()
+    intensity = power_np / grid.cell_area()
+    report("done", 1.0)
+    return GOResult(
+        intensity=intensity,
+        power_lit=float(power_t[tube_lit].sum()),
+        power_on_grid=float(power_np.sum()),
+        n_rays=n_rays,
+        n_tubes=n_tubes,
+        n_shadowed=int((~lit_np).sum()),
+        n_missed=int((lit_np & ~ok_np).sum()),
+        seconds=time.perf_counter() - start,
+    )
+
+
+@lru_cache(maxsize=4)
+def _ideal_paraboloid(D: float, F: float, resolution: float) -> Reflector:
+    return paraboloid(D, F, resolution)
+
+
+def forward_intensity(grid: SphereGrid, F: float, D: float, deformation: Deformation | None = None,
+                      device: str | None = "cpu", resolution: float = 0.15,
+                      subdivisions: int = 1) -> NDArray[np.float64]:
+    """GO cell-mean intensity on ``grid`` of the paraboloid (D, F in m) plus ``deformation``.
+
+    The forward model of the inversion: it needs only what every FieldMap carries. The ideal
+    mesh is built once per (D, F, resolution) and reused; the deformed one displaces it.
+    """
+    ideal = _ideal_paraboloid(float(D), float(F), float(resolution))
+    reflector = ideal if deformation is None or isinstance(deformation, NoDeformation) \
+        else ideal.deformed(deformation)
+    return trace(reflector, grid, ON_AXIS, subdivisions, device).intensity

@@ -1,0 +1,323 @@
+"""Warp kernels of the geometric-optics engine (see :mod:`raysim.optics.go`).
+
+Three steps, each a 1-D launch that takes a trailing ``offset`` so it can be split across
+CPU threads: ``visibility`` (the BVH finds the face each incident ray meets first, float32),
+``reflect_to_sphere`` (float64 reflection at the recomputed hit and intersection with the
+probe sphere, mapped to the Lambert equal-area chart of the sphere), and ``deposit_tubes``
+(each ray tube's power spread over the (theta, phi) cells in proportion to the exact area of
+its overlap with each cell in that chart).
+
+The Lambert azimuthal equal-area chart about the sphere's pole -z maps the unit direction u
+to X = sqrt(2 / (1 - u_z)) (u_x, u_y): |X| = 2 sin(theta / 2) and areas are sphere areas
+(R = 1). A cell theta_a..theta_b, phi_a..phi_b is the annular sector between radii
+2 sin(theta_a / 2) and 2 sin(theta_b / 2) and between the rays at phi_a and phi_b.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+vec8d = wp.types.vector(length=8, dtype=wp.float64)
+
+F64_ZERO = wp.constant(wp.float64(0.0))
+F64_HALF = wp.constant(wp.float64(0.5))
+F64_ONE = wp.constant(wp.float64(1.0))
+F64_TWO = wp.constant(wp.float64(2.0))
+
+
+@wp.kernel
+def visibility(
+    mesh: wp.uint64,
+    points: wp.array(dtype=wp.vec3d),
+    k_hat: wp.vec3d,
+    standoff: wp.float64,
+    tolerance: wp.float64,
+    lit: wp.array(dtype=wp.int32),
+    offset: int,
+):
+    """lit[i] = 1 when a ray of the plane wave reaches points[i] with nothing in front of it.
+
+    The ray starts ``standoff`` metres up-beam of the point; the BVH (float32) returns the
+    first face hit, and the point is lit when that hit lies within ``tolerance`` of it.
+    """
+    i = wp.tid() + offset
+    p = points[i]
+    origin = p - standoff * k_hat
+    q = wp.mesh_query_ray(mesh, wp.vec3(origin), wp.normalize(wp.vec3(k_hat)), float(standoff * F64_TWO))
+    if q.result:
+        if wp.float64(q.t) >= standoff - tolerance:
+            lit[i] = 1
+        else:
+            lit[i] = 0
+    else:
+        # a point on the mesh is always hit; a miss is float32 round-off at a face's edge
+        lit[i] = 1
+
+
+@wp.kernel
+def reflect_to_sphere(
+    hits: wp.array(dtype=wp.vec3d),
+    normals: wp.array(dtype=wp.vec3d),
+    k_hat: wp.vec3d,
+    focus: wp.vec3d,
+    radius: wp.float64,
+    ok: wp.array(dtype=wp.int32),
+    chart: wp.array(dtype=wp.vec2d),
+    offset: int,
+):
+    """Reflect k_hat at each hit (float64) and meet the sphere |P - focus| = radius.
+
+    The reflected ray r = k - 2 (k . n) n enters the sphere at the nearer root; chart[i] is
+    that point's Lambert coordinate. ok[i] is cleared when the ray misses the sphere.
+    """
+    i = wp.tid() + offset
+    if ok[i] == 0:
+        return
+    n = normals[i]
+    r = k_hat - F64_TWO * wp.dot(k_hat, n) * n
+    w = hits[i] - focus
+    b = wp.dot(r, w)
+    c = wp.dot(w, w) - radius * radius
+    disc = b * b - c
+    if disc < F64_ZERO:
+        ok[i] = 0
+        return
+    s = -b - wp.sqrt(disc)
+    if s <= F64_ZERO:
+        ok[i] = 0
+        return
+    u = (w + s * r) / radius
+    scale = wp.sqrt(F64_TWO / wp.max(F64_ONE - u[2], wp.float64(1e-300)))
+    chart[i] = wp.vec2d(scale * u[0], scale * u[1])
+
+
+@wp.func
+def cross2(a: wp.vec2d, b: wp.vec2d) -> wp.float64:
+    return a[0] * b[1] - a[1] * b[0]
+
+
+@wp.func
+def signed_angle(a: wp.vec2d, b: wp.vec2d) -> wp.float64:
+    """Angle from a to b about the origin (rad, -pi..pi); 0 when either is the origin."""
+    return wp.atan2(cross2(a, b), wp.dot(a, b))
+
+
+@wp.func
+def edge_disk_area(a: wp.vec2d, b: wp.vec2d, rho: wp.float64) -> wp.float64:
+    """Signed area of (triangle origin, a, b) inside the disk |X| <= rho.
+
+    Inside the disk the triangle counts; outside it the circular sector of the same angle.
+    Summed over a polygon's edges this is the area of polygon and disk in common.
+    """
+    d = b - a
+    A = wp.dot(d, d)
+    if A <= F64_ZERO:
+        return F64_ZERO
+    B = wp.dot(a, d)
+    C = wp.dot(a, a) - rho * rho
+    disc = B * B - A * C
+    r2 = F64_HALF * rho * rho
+    if disc <= F64_ZERO:
+        return r2 * signed_angle(a, b)
+    s = wp.sqrt(disc)
+    t1 = (-B - s) / A
+    t2 = (-B + s) / A
+    if t2 <= F64_ZERO or t1 >= F64_ONE:
+        return r2 * signed_angle(a, b)
+    # a..p1 and p2..b lie outside the disk (sectors), p1..p2 inside (triangle); an end inside
+    # the disk has no sector, and its angle is never taken: near the origin it is meaningless
+    area = F64_ZERO
+    p1 = a
+    if t1 > F64_ZERO:
+        p1 = a + t1 * d
+        area += r2 * signed_angle(a, p1)
+    p2 = b
+    if t2 < F64_ONE:
+        p2 = a + t2 * d
+        area += r2 * signed_angle(p2, b)
+    return area + F64_HALF * cross2(p1, p2)
+
+
+@wp.func
+def polygon_disk_area(px: vec8d, py: vec8d, n: int, rho: wp.float64) -> wp.float64:
+    total = F64_ZERO
+    for k in range(n):
+        k1 = (k + 1) % n
+        total += edge_disk_area(wp.vec2d(px[k], py[k]), wp.vec2d(px[k1], py[k1]), rho)
+    return total
+
+
+@wp.func
+def polygon_area(px: vec8d, py: vec8d, n: int) -> wp.float64:
+    total = F64_ZERO
+    for k in range(n):
+        k1 = (k + 1) % n
+        total += px[k] * py[k1] - px[k1] * py[k]
+    return F64_HALF * total
+
+
+@wp.func
+def segment_distance(a: wp.vec2d, b: wp.vec2d) -> wp.float64:
+    """Distance from the origin to the segment a-b."""
+    d = b - a
+    L = wp.dot(d, d)
+    t = F64_ZERO
+    if L > F64_ZERO:
+        t = wp.clamp(-wp.dot(a, d) / L, F64_ZERO, F64_ONE)
+    return wp.length(a + t * d)
+
+
+@wp.func
+def wrap_angle(x: wp.float64) -> wp.float64:
+    """x wrapped into (-pi, pi]."""
+    two_pi = wp.float64(6.283185307179586)
+    return x - two_pi * wp.floor((x + wp.float64(3.141592653589793)) / two_pi)
+
+
+@wp.kernel
+def deposit_tubes(
+    chart: wp.array(dtype=wp.vec2d),
+    ok: wp.array(dtype=wp.int32),
+    tubes: wp.array(dtype=wp.vec3i),
+    tube_power: wp.array(dtype=wp.float64),
+    rho_edges: wp.array(dtype=wp.float64),
+    theta_min: wp.float64,
+    dtheta: wp.float64,
+    n_theta: int,
+    phi_min: wp.float64,
+    dphi: wp.float64,
+    n_phi: int,
+    full_circle: int,
+    power: wp.array2d(dtype=wp.float64),
+    offset: int,
+):
+    """Spread each ray tube's power over the sphere cells it covers, by exact overlap area.
+
+    A tube is the triangle of three rays' chart points; folds (reversed triangles) count with
+    their absolute area. Cells outside the grid receive nothing; tubes with a ray that was
+    shadowed or missed the sphere carry no power here.
+    """
+    t = wp.tid() + offset
+    tri = tubes[t]
+    if ok[tri[0]] == 0 or ok[tri[1]] == 0 or ok[tri[2]] == 0:
+        return
+    a = chart[tri[0]]
+    b = chart[tri[1]]
+    c = chart[tri[2]]
+    area2 = cross2(b - a, c - a)
+    if area2 < F64_ZERO:
+        tmp = b
+        b = c
+        c = tmp
+        area2 = -area2
+    P = tube_power[t]
+    area = F64_HALF * area2
+    two_pi = wp.float64(6.283185307179586)
+
+    # a caustic: the tube has no extent on the sphere, its power lands in one cell
+    if area <= wp.float64(1e-24):
+        g = (a + b + c) / wp.float64(3.0)
+        th = F64_TWO * wp.asin(wp.min(wp.length(g) * F64_HALF, F64_ONE))
+        ph = wp.atan2(g[1], g[0])
+        i0 = int(wp.floor((th - theta_min) / dtheta))
+        j0 = int(wp.floor(wp.mod(ph - phi_min, two_pi) / dphi))
+        if i0 >= 0 and i0 < n_theta and j0 >= 0 and j0 < n_phi:
+            wp.atomic_add(power, i0, j0, P)
+        return
+
+    # radial (theta) extent of the triangle
+    ra = wp.length(a)
+    rb = wp.length(b)
+    rc = wp.length(c)
+    r_hi = wp.max(ra, wp.max(rb, rc))
+    inside = cross2(a, b) >= F64_ZERO and cross2(b, c) >= F64_ZERO and cross2(c, a) >= F64_ZERO
+    r_lo = F64_ZERO
+    if not inside:
+        r_lo = wp.min(segment_distance(a, b), wp.min(segment_distance(b, c), segment_distance(c, a)))
+    th_lo = F64_TWO * wp.asin(wp.min(r_lo * F64_HALF, F64_ONE))
+    th_hi = F64_TWO * wp.asin(wp.min(r_hi * F64_HALF, F64_ONE))
+    i_lo = int(wp.floor((th_lo - theta_min) / dtheta))
+    i_hi = int(wp.floor((th_hi - theta_min) / dtheta))
+    if i_hi < 0 or i_lo >= n_theta:
+        return
+    i_lo = wp.max(i_lo, 0)
+    i_hi = wp.min(i_hi, n_theta - 1)
+
+    # azimuthal extent: all wedges when the triangle covers the pole
+    j_lo = int(0)
+    j_hi = n_phi - 1
+    if not inside:
+        pa = wp.atan2(a[1], a[0])
+        pb = pa + wrap_angle(wp.atan2(b[1], b[0]) - pa)
+        pc = pa + wrap_angle(wp.atan2(c[1], c[0]) - pa)
+        p_lo = wp.min(pa, wp.min(pb, pc))
+        p_hi = wp.max(pa, wp.max(pb, pc))
+        j_lo = int(wp.floor((p_lo - phi_min) / dphi))
+        j_hi = int(wp.floor((p_hi - phi_min) / dphi))
+        # the radial and angular ranges are exact bounds: inside one cell, no clipping needed
+        th_in = th_lo >= theta_min and th_hi <= theta_min + wp.float64(n_theta) * dtheta
+        if i_lo == i_hi and j_lo == j_hi and th_in:
+            jj = j_lo
+            if full_circle == 1:
+                jj = ((j_lo % n_phi) + n_phi) % n_phi
+            if jj >= 0 and jj < n_phi:
+                wp.atomic_add(power, i_lo, jj, P)
+            return
+
+    for j in range(j_lo, j_hi + 1):
+        jj = j
+        if full_circle == 1:
+            jj = ((j % n_phi) + n_phi) % n_phi
+        elif j < 0 or j >= n_phi:
+            continue
+        # clip the triangle to the wedge phi_min + j dphi .. + dphi (two half-planes)
+        px = vec8d()
+        py = vec8d()
+        px[0] = a[0]
+        py[0] = a[1]
+        px[1] = b[0]
+        py[1] = b[1]
+        px[2] = c[0]
+        py[2] = c[1]
+        n = int(3)
+        if n_phi > 1:
+            alpha = phi_min + wp.float64(j) * dphi
+            beta = alpha + dphi
+            for side in range(2):
+                nx = -wp.sin(alpha)
+                ny = wp.cos(alpha)
+                if side == 1:
+                    nx = wp.sin(beta)
+                    ny = -wp.cos(beta)
+                qx = vec8d()
+                qy = vec8d()
+                m = int(0)
+                for k in range(n):
+                    k1 = (k + 1) % n
+                    s0 = nx * px[k] + ny * py[k]
+                    s1 = nx * px[k1] + ny * py[k1]
+                    if s0 >= F64_ZERO:
+                        qx[m] = px[k]
+                        qy[m] = py[k]
+                        m += 1
+                    if (s0 >= F64_ZERO) != (s1 >= F64_ZERO):
+                        f = s0 / (s0 - s1)
+                        qx[m] = px[k] + f * (px[k1] - px[k])
+                        qy[m] = py[k] + f * (py[k1] - py[k])
+                        m += 1
+                px = qx
+                py = qy
+                n = m
+        if n < 3:
+            continue
+        if polygon_area(px, py, n) <= F64_ZERO:
+            continue
+        below = polygon_disk_area(px, py, n, rho_edges[i_lo])
+        for i in range(i_lo, i_hi + 1):
+            upto = polygon_disk_area(px, py, n, rho_edges[i + 1])
+            share = upto - below
+            below = upto
+            if share > F64_ZERO:
+                wp.atomic_add(power, i, jj, P * share / area)

@@ -1,0 +1,8 @@
+"""The thin layer that runs the others end to end: nothing below imports it.
+
+Modules:
+
+- ``report``: ``raysim report``: scene -> simulate -> invert -> the paper's Figs. 8-10 in one
+  self-contained HTML page.
+- ``paper``: the paper's Tables 2 and 3 run with the project's engines and solver.
+"""

@@ -1,0 +1,281 @@
+"""``raysim report``: scene -> simulate -> invert -> the paper's Figs. 8-10 in one HTML page.
+
+The page (``report.html``) is self-contained: every figure is embedded as a base64 PNG, and the
+same PNGs, the FieldMap and the SurfaceMap are written beside it. It states the run's numbers
+(RMS and RRMS of the recovered surface, simulation, inversion and drawing times, the solver
+and its boundary assumption) and the scene text; for the paper's own case it quotes the paper's
+figures beside ours.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from raysim.render import backend, figures
+from raysim.render.backend import RenderError
+from raysim.render.data import (
+    UM,
+    error_summary,
+    frequency_text,
+    method_text,
+    peak_to_peak,
+    rms,
+    surface_panels,
+)
+
+PAPER_CASE = {"diameter": 110.0, "focal_length": 33.0, "sphere_radius": 10.0}
+PAPER_GO = ("paper, GO data: FDM (Gauss-Seidel, N = 256, 1000 iterations) RRMS 4.06 % in 92 ± 10 s; "
+            "FFT RRMS 7.47 %")
+
+
+def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, method: str | None = None,
+           device: str = "cpu", solver: str | None = None, grid: int | None = None,
+           refine: int | None = None, invert: bool = True,
+           progress: Callable[[str], None] | None = None) -> Path:
+    """Simulate a scene (or take a FieldMap), invert it and write the report into ``out_dir``.
+
+    Parameters
+    ----------
+    source : scene TOML file, or a FieldMap NetCDF (``.nc``) already simulated or measured.
+    out_dir : folder for ``report.html``, ``field.nc``, ``surface.nc`` and ``figures/``.
+    method : simulation method (``go``, ``po``, ``po+ptd``); None takes the scene's ``method``.
+    device : Warp device, ``cpu`` or ``cuda``.
+    solver, grid, refine : the inversion's Poisson solver, aperture grid points N and GO
+        refinement iterations (0: the paper's linear answer); None: the solver's defaults.
+    invert : False leaves the inversion out: the field's figures only (8a-d, 9).
+    progress : optional callback with a line per stage.
+    Returns the path of ``report.html``.
+    """
+    from raysim.maps.fieldmap import load, save
+
+    say = progress or (lambda line: None)
+    run_inversion = inversion() if invert else None  # fail before hours of simulation, not after
+    timings: dict[str, float] = {}
+    if Path(source).suffix.lower() in (".nc", ".nc4", ".netcdf"):
+        field = load(source)
+        out = _folder(out_dir)
+    else:
+        from raysim.scene.scene import load_scene
+        from raysim.simulate import simulate
+
+        loaded = load_scene(source)
+        method = method or loaded.method
+        out = _folder(out_dir)
+        say(f"simulating {loaded.name} ({method})")
+        start = time.perf_counter()
+        field = simulate(loaded, method=method, device=device)
+        timings["simulate"] = time.perf_counter() - start
+        save(field, out / "field.nc")
+    surface = None
+    if run_inversion is not None:
+        say("inverting")
+        start = time.perf_counter()
+        surface = run_inversion(field, solver=solver, grid=grid, refine=refine, device=device)
+        timings["invert"] = time.perf_counter() - start
+        _save_surface(surface, out / "surface.nc")
+    say("drawing")
+    return write_report(field, surface, out, timings=timings)
+
+
+def inversion() -> Callable[..., xr.Dataset]:
+    """The inversion FieldMap -> SurfaceMap of the solver package, as
+    ``f(field, solver=None, grid=None, refine=None, device="cpu")``; RenderError when it is not
+    installed."""
+    try:
+        from solver.invert import invert as run
+    except ImportError as exc:
+        raise RenderError("raysim report needs the solver package (raysim invert), which this "
+                          "installation does not have yet") from exc
+
+    def invert(field: xr.Dataset, solver: str | None = None, grid: int | None = None,
+               refine: int | None = None, device: str = "cpu") -> xr.Dataset:
+        given = {"solver": solver, "N": grid, "refine_iterations": refine}
+        return run(field, device=device, **{k: v for k, v in given.items() if v is not None})
+
+    return invert
+
+
+def write_report(field: xr.Dataset, surface: xr.Dataset | None, out_dir: str | os.PathLike[str], *,
+                 timings: dict[str, float] | None = None) -> Path:
+    """Draw the figure set for a FieldMap and its SurfaceMap (None: no inversion, the field's
+    figures only) and write ``report.html`` with the PNGs beside it in ``figures/``; returns the
+    HTML path. ``timings`` (s) are quoted."""
+    out = _folder(out_dir)
+    (out / "figures").mkdir(exist_ok=True)
+    start = time.perf_counter()
+    items = _figures(field, surface)
+    seconds_draw = time.perf_counter() - start
+    blocks = []
+    for name, caption, image in items:
+        png = _png_bytes(image)
+        (out / "figures" / f"{name}.png").write_bytes(png)
+        blocks.append(_figure_html(name, caption, png))
+    times = {**(timings or {}), "draw": seconds_draw}
+    page = _page(field, surface, blocks, times)
+    path = out / "report.html"
+    tmp = path.with_suffix(".html.tmp")
+    tmp.write_text(page, encoding="utf-8")
+    os.replace(tmp, path)
+    return path
+
+
+# --- the figures -----------------------------------------------------------------------------
+def _figures(field: xr.Dataset, surface: xr.Dataset | None) -> list[tuple[str, str, np.ndarray]]:
+    """(file name, caption, RGB image) of every figure, in the paper's order."""
+    from raysim.render import charts
+    from raysim.render.field3d import field_image
+    from raysim.render.surface3d import surface_plotter
+
+    truth = figures.scene_deformation(field)
+    truth_map = figures.truth_dataset(field, surface, truth)
+    x = figures.aperture_x(field, surface)
+    items: list[tuple[str, str, np.ndarray]] = []
+    if truth_map is not None:
+        items.append(("fig8a_deformation", "Fig. 8a: the assumed deformation delta, height exaggerated as "
+                      "stated, colour in µm.", figures.fig8a_deformation(truth_map)))
+    items += [
+        ("fig8b_ideal_amplitude", "Fig. 8b: amplitude |E| of the ideal reflector on the probe sphere, "
+         "plan view and (phi, theta) map.", backend.figure_image(figures.fig8b_ideal_amplitude(field))),
+        ("fig8c_fa_sphere", "Fig. 8c: FA = I_ideal / I_def - 1 on the sphere, before resampling.",
+         backend.figure_image(figures.fig8c_fa_sphere(field))),
+        ("fig8d_fa_aperture", "Fig. 8d: FA after resampling onto the aperture grid through the ideal GO "
+         "mapping.", backend.figure_image(figures.fig8d_fa_aperture(field, x))),
+        ("fig9_equation", "Fig. 9: FA from the intensities against G times the Laplacian of the true "
+         "deformation, along the x and y axes (the deformation-intensity equation).",
+         backend.figure_image(figures.fig9_equation(field, x, figures.truth_laplacian(truth, surface)))),
+    ]
+    if surface is not None:
+        wide = (2400, 1000) if "truth" in surface.data_vars else figures.SIZE
+        items += [
+            ("fig10_recovered", "Fig. 10: recovered against true deformation along the x and y axes, "
+             "with the error.", backend.figure_image(figures.fig10_recovered(surface))),
+            ("surface_maps", "Recovered surface: truth, recovered and error over the aperture (µm).",
+             backend.figure_image(charts.surface_map(surface, wide))),
+        ]
+    items.append(("field_3d", "The probe hemisphere coloured by FA over the reflector, focus and plane "
+                  "wave marked; inset: the whole antenna.", field_image(field, "fa", figures.SIZE)))
+    if surface is not None:
+        pl = surface_plotter(surface, wide)
+        items.append(("surface_3d", "Recovered surface as warped dishes (truth, recovered, error), one "
+                      "exaggeration.", np.array(backend.screenshot(pl, None))))
+        pl.close()
+    return items
+
+
+def _png_bytes(image: np.ndarray) -> bytes:
+    from matplotlib.image import imsave
+
+    buffer = io.BytesIO()
+    imsave(buffer, image, format="png")
+    return buffer.getvalue()
+
+
+def _figure_html(name: str, caption: str, png: bytes) -> str:
+    data = base64.b64encode(png).decode("ascii")
+    return (f'<figure id="{name}"><img alt="{html.escape(caption)}" src="data:image/png;base64,{data}">'
+            f'<figcaption>{html.escape(caption)} <a href="figures/{name}.png">PNG</a></figcaption>'
+            "</figure>")
+
+
+# --- the page --------------------------------------------------------------------------------
+def numbers(field: xr.Dataset, surface: xr.Dataset | None, times: dict[str, float]) -> list[tuple[str, str]]:
+    """The run's figures as (label, value) rows: geometry, data, solver, RMS, RRMS, times."""
+    a = field.attrs
+    s = surface.attrs if surface is not None else {}
+    data = f"{method_text(str(a.get('method', '?')))} at {frequency_text(float(a.get('frequency_hz', 0)))}"
+    refine = f", {s['refine_iterations']} refinement iterations" if "refine_iterations" in s else ""
+    rows = [
+        ("scene", str(a.get("scene_name", "measured scan" if a.get("method") == "measured" else "?"))),
+        ("dish", f"D = {float(a['diameter']):g} m, F = {float(a['focal_length']):g} m; probe sphere "
+                 f"R = {float(a['sphere_radius']):g} m, {field.sizes['theta']} x {field.sizes['phi']} cells"),
+        ("data", data + (f", {int(a['rays']):,} rays" if "rays" in a else "")),
+    ]
+    if surface is None:
+        rows.append(("inversion", "not run: the field's figures only"))
+    else:
+        rows += [
+            ("solver", f"{s.get('solver', '?')}, grid {surface.sizes['x']} x {surface.sizes['y']}{refine}"),
+            ("boundary", str(s.get("boundary", "?")) + (f"; harmonic part {s['harmonic_part']}"
+                                                        if s.get("harmonic_part") else "")),
+            ("removed terms", str(s.get("removed_terms", "none") or "none")),
+        ]
+        rows += _accuracy(field, surface)
+    time_rows = [("simulate", times.get("simulate", a.get("seconds_total"))),
+                 ("invert", times.get("invert", s.get("time_s"))), ("draw the figures", times.get("draw"))]
+    rows += [(f"time: {label}", f"{float(t):.1f} s") for label, t in time_rows if t is not None]
+    return rows
+
+
+def _accuracy(field: xr.Dataset, surface: xr.Dataset) -> list[tuple[str, str]]:
+    """RMS and RRMS rows, recomputed from the maps (RMS over the aperture, RRMS = RMS / M)."""
+    panels = dict(surface_panels(surface))
+    if "error" not in panels:
+        return [("recovered", f"RMS {rms(panels['deformation']) * UM:.2f} µm (no truth to compare with)")]
+    M = peak_to_peak(panels["truth"])
+    err = rms(panels["error"])
+    rows = [("truth", f"RMS {rms(panels['truth']) * UM:.2f} µm, peak-to-peak M = {M * UM:.1f} µm"),
+            ("recovered - truth", f"RMS {err * UM:.2f} µm, RRMS = RMS / M = {100 * err / M:.2f} %")]
+    if _is_paper_case(field):
+        rows.append(("paper", PAPER_GO))
+    return rows
+
+
+def _is_paper_case(field: xr.Dataset) -> bool:
+    a = field.attrs
+    same = all(abs(float(a.get(k, np.nan)) - v) < 1e-9 for k, v in PAPER_CASE.items())
+    return same and str(a.get("deformation", "")) == "paper Eq. 8 x 1"
+
+
+def _page(field: xr.Dataset, surface: xr.Dataset | None, blocks: list[str], times: dict[str, float]) -> str:
+    rows = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>"
+                   for k, v in numbers(field, surface, times))
+    scene = field.attrs.get("scene")
+    scene_html = (f"<h2>Scene</h2><pre>{html.escape(str(scene))}</pre>" if scene else
+                  "<h2>Scene</h2><p>None: a measured scan, drawn from the FieldMap's attributes.</p>")
+    name = html.escape(str(field.attrs.get("scene_name", "scan")))
+    summary = html.escape(error_summary(surface) if surface is not None else "")
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8">
+<title>raysim report: {name}</title>
+<style>
+body {{ font-family: sans-serif; max-width: 1500px; margin: 2em auto; color: #222; }}
+table {{ border-collapse: collapse; margin: 1em 0; }}
+th, td {{ text-align: left; padding: 0.25em 1em; border-bottom: 1px solid #ddd; vertical-align: top; }}
+figure {{ margin: 2em 0; }} img {{ max-width: 100%; border: 1px solid #ccc; }}
+figcaption {{ font-size: 0.95em; margin-top: 0.4em; }}
+pre {{ background: #f5f5f5; padding: 1em; overflow-x: auto; }}
+</style></head><body>
+<h1>raysim report: {name}</h1>
+<p>Surface deformation from one intensity scan on a hemisphere about the focus. {summary}</p>
+<h2>Numbers of this run</h2><table>{rows}</table>
+<h2>Figures</h2>
+{"".join(blocks)}
+{scene_html}
+<p>raysim {html.escape(str(field.attrs.get("raysim_version", "")))}; FieldMap and SurfaceMap beside this
+page (field.nc, surface.nc) when the run wrote them.</p>
+</body></html>
+"""
+
+
+def _folder(out_dir: str | os.PathLike[str]) -> Path:
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise RenderError(f"{out}: exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def _save_surface(surface: xr.Dataset, path: Path) -> None:
+    """Write the SurfaceMap through its contract's writer (checked, atomic)."""
+    from solver.surface import save
+
+    save(surface, path)

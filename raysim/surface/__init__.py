@@ -1,0 +1,12 @@
+"""The reflector's surface: meshes, deformations, panels, and the samples the engines use.
+
+Modules:
+
+- ``deformation``: surface errors delta(x, y) in metres along +z, with their slopes.
+- ``panels``: ring layouts of panels with gaps.
+- ``mesh``: trimesh reflector meshes (ideal paraboloid, deformed twin on the same
+  triangulation, panels with gaps, meshes loaded from files) and their smooth surfaces.
+- ``quadrature``: Gauss points with vector areas over the faces, lifted onto the smooth
+  surface (the PO surface integral).
+- ``edges``: the free edges of a mesh (rim, holes, panel-gap edges) and their line quadrature.
+"""

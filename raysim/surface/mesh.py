@@ -1,0 +1,374 @@
+"""Reflector meshes: the ideal paraboloid, its deformed twin, panels with gaps, loaded files.
+
+Frame (DESIGN.md): vertex at the origin, axis +z, focus (0, 0, F), metres. A generated mesh is
+laid out in the aperture plane panel by panel (rows of constant radius, about ``resolution``
+apart, triangulated strip by strip) and lifted onto the surface z = r^2/(4F) + delta(x, y).
+The deformed mesh is the ideal one with every vertex moved along z, so both share one
+triangulation and the facets' own errors cancel in the intensity ratio. Panels own their
+vertices: nothing is shared, averaged or triangulated across a gap.
+
+Where the scene defines the surface (``Reflector.surface``), ray hits and normals are taken
+on that smooth surface, not on the flat facets (a facet of size h sags h^2/(16F) below it).
+A mesh loaded from a file has no such surface: its hits lie on the facets and its normals are
+interpolated vertex normals, the same for its ideal counterpart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from raysim.errors import MeshError
+from raysim.surface.deformation import Deformation, NoDeformation
+from raysim.surface.panels import PanelLayout
+
+
+@dataclass(frozen=True)
+class ParaboloidSurface:
+    """The smooth surface z = (x^2 + y^2)/(4F) + delta(x, y, panel), metres."""
+
+    F: float
+    deformation: Deformation = field(default_factory=NoDeformation)
+
+    def height(self, x: ArrayLike, y: ArrayLike, panel: ArrayLike | None = None) -> NDArray:
+        x = np.asarray(x, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        return (x * x + y * y) / (4.0 * self.F) + self.deformation(x, y, panel)
+
+    def slope(self, x: ArrayLike, y: ArrayLike, panel: ArrayLike | None = None) -> tuple[NDArray, NDArray]:
+        """(dz/dx, dz/dy) of the surface, dimensionless."""
+        x = np.asarray(x, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        gx, gy = self.deformation.gradient(x, y, panel)
+        return x / (2.0 * self.F) + gx, y / (2.0 * self.F) + gy
+
+    def normal(self, x: ArrayLike, y: ArrayLike, panel: ArrayLike | None = None) -> NDArray:
+        """Unit normals pointing into the dish (towards +z), shape (..., 3)."""
+        gx, gy = self.slope(x, y, panel)
+        n = np.stack([-gx, -gy, np.ones_like(gx)], axis=-1)
+        return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+@dataclass(frozen=True, eq=False)
+class Reflector:
+    """A triangulated reflector with float64 vertices and per-face panel ids.
+
+    ``vertex_normals`` are unit normals towards +z, smooth within a panel. ``surface`` is the
+    smooth surface hits belong on, or None for a loaded mesh (hits on the facets).
+    """
+
+    vertices: NDArray[np.float64]
+    faces: NDArray[np.int64]
+    face_panel: NDArray[np.int64]
+    vertex_normals: NDArray[np.float64]
+    F: float
+    D: float
+    surface: ParaboloidSurface | None = None
+    layout: PanelLayout | None = None
+
+    @cached_property
+    def vertex_panel(self) -> NDArray[np.int64]:
+        out = np.full(len(self.vertices), -1, dtype=np.int64)
+        out[self.faces.ravel()] = np.repeat(self.face_panel, 3)
+        return out
+
+    @cached_property
+    def mesh(self):
+        """The trimesh view of this reflector (for file export, queries and rendering)."""
+        import trimesh
+
+        return trimesh.Trimesh(self.vertices, self.faces, vertex_normals=self.vertex_normals,
+                               face_attributes={"panel": self.face_panel}, process=False)
+
+    @property
+    def n_panels(self) -> int:
+        return int(self.face_panel.max()) + 1 if len(self.face_panel) else 0
+
+    def projected_area(self, direction: ArrayLike = (0.0, 0.0, -1.0)) -> float:
+        """Area (m^2) of the mesh seen along ``direction``: the aperture a plane wave lights."""
+        d = np.asarray(direction, dtype=np.float64)
+        d = d / np.linalg.norm(d)
+        v = self.vertices[self.faces]
+        cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        return float(0.5 * np.sum(np.abs(cross @ d)))
+
+    def deformed(self, deformation: Deformation) -> Reflector:
+        """This reflector with every vertex moved by delta(x, y) along z (same triangulation)."""
+        x, y = self.vertices[:, 0], self.vertices[:, 1]
+        panel = self._panel_for_deformation()
+        vertices = self.vertices.copy()
+        vertices[:, 2] += deformation(x, y, panel)
+        if self.surface is not None:
+            surface = ParaboloidSurface(self.F, self.surface.deformation + deformation
+                                        if not isinstance(self.surface.deformation, NoDeformation)
+                                        else deformation)
+            normals = surface.normal(x, y, panel)
+        else:
+            surface = None
+            normals = facet_vertex_normals(vertices, self.faces)
+        return Reflector(vertices, self.faces, self.face_panel, normals, self.F, self.D, surface,
+                         self.layout)
+
+    def _panel_for_deformation(self) -> NDArray[np.int64] | None:
+        # scene panel ids only mean something for deformations when the layout made the mesh
+        return self.vertex_panel if self.layout is not None else None
+
+
+# --- generated meshes ------------------------------------------------------------------------
+def paraboloid(D: float, F: float, resolution: float = 0.15,
+               layout: PanelLayout | None = None) -> Reflector:
+    """The ideal paraboloid z = r^2/(4F) of diameter D (m), as panels of ``layout`` or one piece.
+
+    ``resolution`` (m) is the target triangle edge in the aperture plane.
+    """
+    if layout is None:
+        layout = PanelLayout((0.0, 0.5 * D), (1,), 0.0)
+        panel_layout = None
+    else:
+        panel_layout = layout
+    xy_parts, face_parts, panel_parts = [], [], []
+    offset = 0
+    for p in range(layout.n_panels):
+        xy, faces = panel_footprint(layout, p, resolution)
+        xy_parts.append(xy)
+        face_parts.append(faces + offset)
+        panel_parts.append(np.full(len(faces), p, dtype=np.int64))
+        offset += len(xy)
+    xy = np.concatenate(xy_parts)
+    faces = np.concatenate(face_parts)
+    surface = ParaboloidSurface(F)
+    z = surface.height(xy[:, 0], xy[:, 1])
+    vertices = np.column_stack([xy, z])
+    normals = surface.normal(xy[:, 0], xy[:, 1])
+    return Reflector(vertices, faces, np.concatenate(panel_parts), normals, float(F), float(D),
+                     surface, panel_layout)
+
+
+def panel_footprint(layout: PanelLayout, panel: int, h: float) -> tuple[NDArray, NDArray]:
+    """Triangulate one panel's footprint in the aperture plane: (xy (n, 2), faces (m, 3)).
+
+    Rows of constant radius about ``h`` apart; on each row points about ``h`` apart between
+    the panel's gap edges (or all round for a one-panel ring); neighbouring rows joined by a
+    strip of triangles. The straight gap edges are met exactly, arcs by chords. Faces are
+    counter-clockwise seen from +z.
+    """
+    ring = int(layout.ring(panel))
+    lo, hi = layout.radial_limits(ring)
+    n_rows = max(1, int(np.ceil((hi - lo) / h)))
+    radii = np.linspace(lo, hi, n_rows + 1)
+    closed = layout.panels_per_ring[ring] == 1
+    rows: list[NDArray] = []
+    params: list[NDArray] = []
+    for r in radii:
+        if closed:
+            if r <= 0.0:
+                rows.append(np.zeros((1, 2)))
+                params.append(np.array([0.0]))
+                continue
+            n = max(6, int(np.ceil(2.0 * np.pi * r / h)))
+            t = np.arange(n) / n
+            phi = layout.phi0 + 2.0 * np.pi * t
+        else:
+            phi_a, phi_b = layout.lateral_limits(panel, np.array([max(r, 1e-12)]))
+            width = max(float(phi_b[0] - phi_a[0]), 0.0)
+            n = max(1, int(np.ceil(r * width / h)))
+            # the tip of a wedge, where the two gap edges meet, is a single point
+            t = np.linspace(0.0, 1.0, n + 1) if r * width > 1e-9 else np.array([0.5])
+            phi = phi_a[0] + t * width
+        rows.append(np.column_stack([r * np.cos(phi), r * np.sin(phi)]))
+        params.append(t)
+    xy = np.concatenate(rows)
+    starts = np.cumsum([0] + [len(r) for r in rows])
+    faces = [
+        _strip(starts[k], params[k], starts[k + 1], params[k + 1], closed)
+        for k in range(len(rows) - 1)
+    ]
+    faces_arr = np.concatenate(faces) if faces else np.zeros((0, 3), dtype=np.int64)
+    faces_arr = _counter_clockwise(xy, faces_arr)
+    used = np.zeros(len(xy), dtype=bool)
+    used[faces_arr.ravel()] = True
+    renumber = np.cumsum(used) - 1
+    return xy[used], renumber[faces_arr]
+
+
+def _strip(a0: int, ta: NDArray, b0: int, tb: NDArray, closed: bool) -> NDArray[np.int64]:
+    """Triangles joining row A (indices a0.., parameters ta) to row B (b0.., tb).
+
+    Walking both rows in parameter order, each step advances along the row whose next point
+    comes first and closes one triangle. Closed rows wrap to their first point.
+    """
+    na, nb = len(ta), len(tb)
+    if closed:
+        ia = np.append(np.arange(na), 0)
+        ib = np.append(np.arange(nb), 0)
+        ka = np.append(ta, 1.0) if na > 1 else np.array([0.0])
+        kb = np.append(tb, 1.0) if nb > 1 else np.array([0.0])
+    else:
+        ia, ib, ka, kb = np.arange(na), np.arange(nb), ta, tb
+    # events: advancing A to its point s (s >= 1) at key ka[s], or B likewise
+    keys = np.concatenate([ka[1:], kb[1:]])
+    is_a = np.concatenate([np.ones(len(ka) - 1, bool), np.zeros(len(kb) - 1, bool)])
+    order = np.argsort(keys, kind="stable")
+    is_a = is_a[order]
+    i_now = np.cumsum(is_a) - is_a
+    j_now = np.cumsum(~is_a) - ~is_a
+    a_cur = a0 + ia[i_now]
+    b_cur = b0 + ib[j_now]
+    a_next = a0 + ia[np.minimum(i_now + 1, len(ia) - 1)]
+    b_next = b0 + ib[np.minimum(j_now + 1, len(ib) - 1)]
+    third = np.where(is_a, a_next, b_next)
+    tris = np.column_stack([a_cur, b_cur, third]).astype(np.int64)
+    # drop degenerate triangles (a row of one point closing on itself)
+    ok = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])
+    return tris[ok]
+
+
+def _counter_clockwise(xy: NDArray, faces: NDArray) -> NDArray:
+    if len(faces) == 0:
+        return faces
+    a, b, c = xy[faces[:, 0]], xy[faces[:, 1]], xy[faces[:, 2]]
+    area2 = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    faces = faces.copy()
+    flip = area2 < 0
+    faces[flip] = faces[flip][:, [0, 2, 1]]
+    return faces[np.abs(area2) > 1e-14]
+
+
+def facet_vertex_normals(vertices: NDArray, faces: NDArray) -> NDArray:
+    """Area-weighted vertex normals towards +z; vertices shared only within a panel, so gaps
+    never mix normals."""
+    v = vertices[faces]
+    cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    normals = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(normals, faces[:, k], cross)
+    normals[normals[:, 2] < 0] *= -1.0
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    return normals / np.where(length > 0, length, 1.0)
+
+
+# --- meshes from files ----------------------------------------------------------------------
+@dataclass(frozen=True)
+class ParaboloidFit:
+    """Best-fit paraboloid z = z0 + ((x - x0)^2 + (y - y0)^2) / (4F) of a mesh (m)."""
+
+    F: float
+    x0: float
+    y0: float
+    z0: float
+    rms: float
+
+
+def fit_paraboloid(points: NDArray, F: float | None = None) -> ParaboloidFit:
+    """Least-squares paraboloid with its axis along z through ``points`` (n, 3), metres.
+
+    With ``F`` given only the vertex (x0, y0, z0) is fitted: to first order that removes the
+    piston and tilts of the surface and keeps its focus term.
+    """
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    if F is not None:
+        k = 1.0 / (4.0 * F)
+        A = np.column_stack([np.ones_like(x), x, y])
+        coef, *_ = np.linalg.lstsq(A, z - k * (x * x + y * y), rcond=None)
+        a, b, c = coef
+        model = A @ coef + k * (x * x + y * y)
+    else:
+        A = np.column_stack([np.ones_like(x), x, y, x * x + y * y])
+        coef, *_ = np.linalg.lstsq(A, z, rcond=None)
+        a, b, c, k = coef
+        model = A @ coef
+    if not k > 0:
+        raise MeshError("the mesh is not a dish opening towards +z (no paraboloid fits)")
+    x0, y0 = -b / (2 * k), -c / (2 * k)
+    z0 = a - k * (x0 * x0 + y0 * y0)
+    rms = float(np.sqrt(np.mean((model - z) ** 2)))
+    return ParaboloidFit(1.0 / (4.0 * k), float(x0), float(y0), float(z0), rms)
+
+
+def load_reflector(path: str | Path, unit: float = 1.0, F: float | None = None,
+                   ideal_path: str | Path | None = None) -> tuple[Reflector, Reflector, ParaboloidFit]:
+    """Load any mesh trimesh reads (STL, PLY, OBJ, GLB) as the deformed reflector.
+
+    Returns (ideal, deformed, fit). The mesh is shifted so the best-fit paraboloid's vertex is
+    the origin; the ideal counterpart is ``ideal_path`` (same triangulation required) or the
+    mesh's own vertices moved onto the paraboloid z = r^2/(4F) (F given, or fitted). Panels
+    are the mesh's connected pieces. ``unit`` scales file coordinates to metres.
+    """
+    mesh = _read_mesh(path, unit)
+    fit = fit_paraboloid(np.asarray(mesh.vertices, dtype=np.float64), F)
+    F_used = fit.F
+    shift = np.array([fit.x0, fit.y0, fit.z0])
+    vertices = np.asarray(mesh.vertices, dtype=np.float64) - shift
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    faces = _faces_up(vertices, faces)
+    panel = _components(faces, len(vertices))
+    D = 2.0 * float(np.max(np.hypot(vertices[:, 0], vertices[:, 1])))
+    deformed = Reflector(vertices, faces, panel, facet_vertex_normals(vertices, faces), F_used, D)
+    if ideal_path is not None:
+        ideal_mesh = _read_mesh(ideal_path, unit)
+        same = ideal_mesh.vertices.shape == mesh.vertices.shape
+        same = same and np.array_equal(ideal_mesh.faces, mesh.faces)
+        if not same:
+            raise MeshError(f"{ideal_path}: the ideal mesh must share the deformed mesh's triangulation")
+        iv = np.asarray(ideal_mesh.vertices, dtype=np.float64) - shift
+    else:
+        iv = vertices.copy()
+        iv[:, 2] = (iv[:, 0] ** 2 + iv[:, 1] ** 2) / (4.0 * F_used)
+    ideal = Reflector(iv, faces, panel, facet_vertex_normals(iv, faces), F_used, D)
+    return ideal, deformed, fit
+
+
+def _read_mesh(path: str | Path, unit: float):
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise MeshError(f"{path}: no such mesh file")
+    try:
+        mesh = trimesh.load(path, force="mesh", process=True)
+    except Exception as exc:  # trimesh raises many kinds for unreadable files
+        raise MeshError(f"{path}: trimesh cannot read it ({exc.__class__.__name__}: {exc})") from exc
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise MeshError(f"{path}: holds no triangles")
+    mesh.apply_scale(unit)
+    return mesh
+
+
+def _faces_up(vertices: NDArray, faces: NDArray) -> NDArray:
+    """Wind every face so its normal points to +z (towards the focus)."""
+    v = vertices[faces]
+    e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+    nz = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    faces = faces.copy()
+    faces[nz < 0] = faces[nz < 0][:, [0, 2, 1]]
+    return faces
+
+
+def _components(faces: NDArray, n_vertices: int) -> NDArray[np.int64]:
+    """Panel id per face: the connected pieces of the mesh, numbered by first appearance."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rows = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
+    cols = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_vertices, n_vertices))
+    _, label = connected_components(graph, directed=False)
+    _, first, inverse = np.unique(label[faces[:, 0]], return_index=True, return_inverse=True)
+    rank = np.argsort(np.argsort(first))
+    return rank[inverse].astype(np.int64)
+
+
+def reflectors_for(scene) -> tuple[Reflector, Reflector]:
+    """The (ideal, deformed) reflector pair a :class:`~raysim.scene.scene.Scene` describes."""
+    dish = scene.dish
+    if dish.mesh is not None:
+        ideal, loaded, _ = load_reflector(dish.mesh, dish.mesh_unit, dish.focal_length, dish.ideal_mesh)
+        if isinstance(scene.deformation, NoDeformation):
+            return ideal, loaded
+        return ideal, loaded.deformed(scene.deformation)
+    ideal = paraboloid(dish.diameter, dish.focal_length, dish.resolution, scene.panels)
+    return ideal, ideal.deformed(scene.deformation)

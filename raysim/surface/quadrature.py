@@ -1,0 +1,344 @@
+"""Quadrature of surface integrals over a reflector mesh: sample points and vector area elements.
+
+Frame and units of DESIGN.md (reflector frame, metres). The integral of a field f over the
+reflector surface S is approximated by sum_i f(r_i) . dS_i, where dS_i = n_i dA_i is the vector
+area element (m^2) of sample i, n_i the unit normal towards the dish's front (+z side).
+
+Where the reflector has a smooth surface z = h(x, y) (``Reflector.surface``), the surface is a
+graph over the aperture plane, so every face is integrated over its projection on (x, y): the
+sample lies at (x, y, h(x, y)) and n dA = (-dh/dx, -dh/dy, 1) dx dy. This is exact geometry: the
+flat facets only define the domain. Free mesh edges whose two ends lie on one circle about the
+axis (the rim, a central hole, the inner and outer edges of a ring of panels) are taken as arcs
+of that circle: the thin circular segment between chord and arc is added (outer boundaries) or
+removed (inner boundaries) by a product Gauss rule in polar coordinates. Without a smooth
+surface (a mesh from a file) the samples lie on the flat facets, with the facet's area and the
+interpolated vertex normal.
+
+Each face carries a conical product rule of order n (n^2 points, exact to degree 2n - 1; the
+conical product formulas of Stroud, *Approximate Calculation of Multiple Integrals*, 1971):
+Gauss-Jacobi in the collapsed coordinate, Gauss-Legendre along the opposite edge. n is the face's longest edge
+over ``spacing`` (so about n points span each edge); a face that would need more than
+``n_max`` is split into m^2 congruent sub-triangles (its m-fold barycentric lattice) first.
+The integrand on a reflector is smooth within a face, so the error falls exponentially with n:
+a few large faces with high-order rules beat many small ones.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from functools import cached_property, lru_cache
+
+import numpy as np
+from numpy.typing import NDArray
+
+from raysim.errors import RaysimError
+from raysim.surface.mesh import Reflector
+
+
+@dataclass(frozen=True, eq=False)
+class TriangleRule:
+    """A rule on the reference triangle: barycentric points (P, 3), weights (P,) summing to 1
+    (fractions of the triangle's area), exact for polynomials up to ``degree``."""
+
+    bary: NDArray[np.float64]
+    weights: NDArray[np.float64]
+    degree: int
+
+    @property
+    def size(self) -> int:
+        return len(self.weights)
+
+
+@lru_cache(maxsize=16)
+def conical_rule(n: int) -> TriangleRule:
+    """The conical product rule with n^2 points (degree 2n - 1): Gauss-Jacobi in the
+    collapsed coordinate s (weight s), Gauss-Legendre along t; x = A + s (B - A) + s t (C - B)."""
+    from scipy.special import roots_jacobi
+
+    xs, ws = roots_jacobi(n, 0.0, 1.0)  # weight (1 + x) on [-1, 1]
+    s, w_s = 0.5 * (xs + 1.0), ws / ws.sum()
+    t, w_t = gauss_legendre01(n)
+    S, T = np.meshgrid(s, t, indexing="ij")
+    bary = np.column_stack([1.0 - S.ravel(), (S * (1.0 - T)).ravel(), (S * T).ravel()])
+    return TriangleRule(bary, np.outer(w_s, w_t).ravel(), 2 * n - 1)
+
+
+@lru_cache(maxsize=64)
+def lattice_rule(rule: TriangleRule, m: int) -> TriangleRule:
+    """``rule`` applied on each of the m^2 sub-triangles of the triangle's m-fold lattice."""
+    if m == 1:
+        return rule
+    corners = []
+    for j in range(m):
+        for i in range(m - j):
+            corners.append(((i, j), (i + 1, j), (i, j + 1)))
+            if i + j < m - 1:
+                corners.append(((i + 1, j), (i + 1, j + 1), (i, j + 1)))
+    bary = []
+    for tri in corners:
+        # lattice point (i, j) has barycentrics (1 - (i + j)/m, i/m, j/m)
+        c = np.array([[1.0 - (i + j) / m, i / m, j / m] for i, j in tri])
+        bary.append(rule.bary @ c)
+    weights = np.tile(rule.weights / (m * m), len(corners))
+    return TriangleRule(np.concatenate(bary), weights, rule.degree)
+
+
+def gauss_legendre01(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Gauss-Legendre nodes and weights on [0, 1] (weights sum to 1)."""
+    x, w = np.polynomial.legendre.leggauss(n)
+    return 0.5 * (x + 1.0), 0.5 * w
+
+
+@dataclass(frozen=True)
+class Samples:
+    """Quadrature samples of a set of faces (reflector frame, metres).
+
+    ``points`` (N, 3) lie on the smooth surface (or the facets); ``area`` (N, 3) are the vector
+    area elements n dA (m^2), n towards the dish's front; ``facet`` (N, 3) are points on the
+    flat facets with the same footing, for the BVH's shadow test; ``face`` (N,) the face.
+    """
+
+    points: NDArray[np.float64]
+    area: NDArray[np.float64]
+    facet: NDArray[np.float64]
+    face: NDArray[np.int64]
+
+    def __len__(self) -> int:
+        return len(self.face)
+
+
+@dataclass(frozen=True)
+class Arcs:
+    """Free mesh edges lying on circles about the z axis, to be integrated as arcs.
+
+    Edge e joins vertices ``b[e]`` and ``c[e]`` (both at radius ``radius[e]``) of face
+    ``face[e]``; ``sign[e]`` is +1 when the face lies inside the circle (the circular segment
+    between chord and arc is added) and -1 when it lies outside (the segment is removed).
+    """
+
+    b: NDArray[np.int64]
+    c: NDArray[np.int64]
+    face: NDArray[np.int64]
+    radius: NDArray[np.float64]
+    sign: NDArray[np.float64]
+
+    def __len__(self) -> int:
+        return len(self.face)
+
+
+def free_edges(faces: NDArray[np.int64]) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """The mesh's free edges (used by one face only): the rim, hole and gap edges.
+
+    Returns (b, c, a, face): the edge runs from vertex b to vertex c in the winding of
+    ``face``, and a is that face's third vertex.
+    """
+    local = np.array([(0, 1, 2), (1, 2, 0), (2, 0, 1)])  # (b, c, opposite) per edge
+    b = faces[:, local[:, 0]].ravel()
+    c = faces[:, local[:, 1]].ravel()
+    a = faces[:, local[:, 2]].ravel()
+    face = np.repeat(np.arange(len(faces)), 3)
+    key = np.sort(np.column_stack([b, c]), axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    free = counts[inverse.ravel()] == 1
+    return b[free], c[free], a[free], face[free]
+
+
+def boundary_arcs(reflector: Reflector, rtol: float = 1e-9) -> Arcs:
+    """The free edges of ``reflector`` whose two ends lie at one radius from the z axis.
+
+    Only meaningful for a reflector with a smooth surface: generated meshes put their panel
+    rows on circles, so these are the rim and the ring edges. A straight radial gap edge has
+    ends at different radii and stays straight.
+    """
+    r = np.hypot(reflector.vertices[:, 0], reflector.vertices[:, 1])
+    b, c, a, face = free_edges(reflector.faces)
+    rb, rc = r[b], r[c]
+    sel = np.flatnonzero((rb > 0) & (np.abs(rb - rc) <= rtol * np.maximum(rb, rc)))
+    radius = 0.5 * (rb[sel] + rc[sel])
+    # the opposite vertex tells the side: inside the circle -> add the segment
+    sign = np.where(r[a[sel]] < radius, 1.0, -1.0)
+    return Arcs(b[sel], c[sel], face[sel], radius, sign)
+
+
+@dataclass(frozen=True, eq=False)
+class FaceQuadrature:
+    """The quadrature plan of one reflector: per-face rule order and the boundary arcs.
+
+    ``spacing`` (m) is the target distance between samples along a face's edges: a face of
+    longest edge L gets the conical rule of order n = ceil(L / spacing), at least ``n_min``;
+    beyond ``n_max`` it is split into m^2 sub-triangles with n = ceil(L / (m spacing)).
+    Samples are produced in chunks of faces (:meth:`chunks`) so that a fine plan never holds
+    all its samples at once.
+    """
+
+    reflector: Reflector
+    spacing: float
+    n_min: int = 3
+    n_max: int = 10
+    curve_rim: bool = True
+
+    @cached_property
+    def face_area(self) -> NDArray[np.float64]:
+        """Area of each face (m^2): projected on (x, y) with a smooth surface, else 3-D."""
+        v = self.reflector.vertices[self.reflector.faces]
+        cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        if self.reflector.surface is not None:
+            return 0.5 * np.abs(cross[:, 2])
+        return 0.5 * np.linalg.norm(cross, axis=1)
+
+    @cached_property
+    def edge_length(self) -> NDArray[np.float64]:
+        """Longest edge of each face (m), projected on (x, y) with a smooth surface."""
+        v = self.reflector.vertices[self.reflector.faces]
+        if self.reflector.surface is not None:
+            v = v[..., :2]
+        edges = v[:, [1, 2, 0]] - v
+        return np.linalg.norm(edges, axis=2).max(axis=1)
+
+    @cached_property
+    def orders(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """(m, n) per face: m-fold lattice of sub-triangles, conical rule of order n on each."""
+        need = np.ceil(self.edge_length / self.spacing)
+        m = np.maximum(1, np.ceil(need / self.n_max)).astype(np.int64)
+        n = np.ceil(self.edge_length / (m * self.spacing))
+        n = np.clip(n, self.n_min, self.n_max).astype(np.int64)
+        return m, n
+
+    @property
+    def points_per_face(self) -> NDArray[np.int64]:
+        m, n = self.orders
+        return (m * n) ** 2
+
+    @cached_property
+    def arcs(self) -> Arcs:
+        if self.reflector.surface is None or not self.curve_rim:
+            empty = np.zeros(0, dtype=np.int64)
+            return Arcs(empty, empty, empty, np.zeros(0), np.zeros(0))
+        return boundary_arcs(self.reflector)
+
+    @cached_property
+    def arc_order(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """Gauss points along each arc (as many as its face has along an edge, plus one) and
+        across it (two, more where the segment is thicker than ``spacing``)."""
+        v = self.reflector.vertices
+        arcs = self.arcs
+        length = np.linalg.norm(v[arcs.c, :2] - v[arcs.b, :2], axis=1)
+        m, n = self.orders
+        along = np.maximum(m[arcs.face] * n[arcs.face], np.ceil(length / self.spacing)) + 1
+        sag = arcs.radius * (1.0 - np.cos(0.5 * length / np.maximum(arcs.radius, 1e-300)))
+        across = np.maximum(2, np.ceil(2.0 * sag / self.spacing))
+        return along.astype(np.int64), across.astype(np.int64)
+
+    @property
+    def n_samples(self) -> int:
+        along, across = self.arc_order
+        return int(np.sum(self.points_per_face) + np.sum(along * across))
+
+    def chunks(self, max_points: int = 262_144) -> Iterator[Samples]:
+        """Samples of consecutive face ranges (about ``max_points`` each), then of the arcs."""
+        yield from (self._face_samples(s) for s in _ranges(self.points_per_face, max_points))
+        if len(self.arcs):
+            along, across = self.arc_order
+            yield from (self._arc_samples(s) for s in _ranges(along * across, max_points))
+
+    def samples(self) -> Samples:
+        """All samples at once (small plans and tests)."""
+        return _concat(list(self.chunks(max_points=1 << 62)))
+
+    # --- faces -------------------------------------------------------------------------------
+    def _face_samples(self, faces: NDArray[np.int64]) -> Samples:
+        refl = self.reflector
+        parts: list[Samples] = []
+        m_all, n_all = self.orders
+        key = m_all[faces] * (self.n_max + 1) + n_all[faces]
+        for value in np.unique(key):
+            sel = faces[key == value]
+            rule = lattice_rule(conical_rule(int(value % (self.n_max + 1))), int(value // (self.n_max + 1)))
+            corners = refl.vertices[refl.faces[sel]]  # (F, 3, 3)
+            facet = np.einsum("pk,fkc->fpc", rule.bary, corners).reshape(-1, 3)
+            face = np.repeat(sel, rule.size)
+            weight = (self.face_area[sel][:, None] * rule.weights[None, :]).reshape(-1)
+            if refl.surface is not None:
+                points, area = self._lift(facet[:, 0], facet[:, 1], face, weight)
+            else:
+                vn = refl.vertex_normals[refl.faces[sel]]
+                nrm = np.einsum("pk,fkc->fpc", rule.bary, vn).reshape(-1, 3)
+                nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+                points, area = facet, nrm * weight[:, None]
+            parts.append(Samples(points, area, facet, face))
+        return _concat(parts)
+
+    def _lift(self, x: NDArray, y: NDArray, face: NDArray, weight: NDArray) -> tuple[NDArray, NDArray]:
+        """Points on the smooth surface over (x, y) and their vector areas for projected
+        areas ``weight`` (m^2)."""
+        refl = self.reflector
+        panel = refl.face_panel[face] if refl.layout is not None else None
+        z = refl.surface.height(x, y, panel)
+        sx, sy = refl.surface.slope(x, y, panel)
+        points = np.column_stack([x, y, z])
+        area = np.column_stack([-sx * weight, -sy * weight, weight])
+        return points, area
+
+    # --- arcs --------------------------------------------------------------------------------
+    def _arc_samples(self, index: NDArray[np.int64]) -> Samples:
+        """Product Gauss rule over the circular segments between chord and arc, in polar
+        coordinates (r, phi): phi along the arc, r from the chord out to the circle."""
+        refl = self.reflector
+        arcs = self.arcs
+        along, across = self.arc_order
+        v = refl.vertices
+        parts = []
+        pairs = along[index] * 1000 + across[index]
+        for value in np.unique(pairs):
+            e = index[pairs == value]
+            xp, wp = gauss_legendre01(int(value // 1000))
+            xr, wr = gauss_legendre01(int(value % 1000))
+            b, c, rho = v[arcs.b[e]], v[arcs.c[e]], arcs.radius[e]
+            phi_b = np.arctan2(b[:, 1], b[:, 0])
+            dphi = np.angle(np.exp(1j * (np.arctan2(c[:, 1], c[:, 0]) - phi_b)))
+            mid = phi_b + 0.5 * dphi
+            phi = phi_b[:, None] + xp[None, :] * dphi[:, None]  # (E, P)
+            r_chord = (rho * np.cos(0.5 * dphi))[:, None] / np.cos(phi - mid[:, None])
+            # polar area element r dr dphi over r in [r_chord, rho], phi along the arc
+            r = r_chord[..., None] + xr * (rho[:, None] - r_chord)[..., None]  # (E, P, Q)
+            w = ((np.abs(dphi) * arcs.sign[e])[:, None] * wp[None, :] * (rho[:, None] - r_chord))
+            w = w[..., None] * wr * r
+            phi3 = np.broadcast_to(phi[..., None], r.shape)
+            x, y = (r * np.cos(phi3)).ravel(), (r * np.sin(phi3)).ravel()
+            face = np.repeat(arcs.face[e], len(xp) * len(xr))
+            points, area = self._lift(x, y, face, w.ravel())
+            # the shadow test looks at the facet just inside the chord, at the same phi
+            opposite = v[refl.faces[arcs.face[e]]].sum(axis=1) - b - c
+            on_chord = b[:, None, :] + xp[None, :, None] * (c - b)[:, None, :]
+            inside = on_chord + 1e-3 * (opposite[:, None, :] - on_chord)
+            facet = np.repeat(inside.reshape(-1, 3), len(xr), axis=0)
+            parts.append(Samples(points, area, facet, face))
+        return _concat(parts)
+
+
+def _ranges(counts: NDArray[np.int64], max_points: int) -> Iterator[NDArray[np.int64]]:
+    """Consecutive index ranges whose counts add up to about ``max_points`` (at least one)."""
+    cum = np.cumsum(counts)
+    start = 0
+    while start < len(counts):
+        base = cum[start - 1] if start else 0
+        stop = int(np.searchsorted(cum, base + max_points, side="right"))
+        stop = min(max(stop, start + 1), len(counts))
+        yield np.arange(start, stop)
+        start = stop
+
+
+def _concat(parts: list[Samples]) -> Samples:
+    if len(parts) == 1:
+        return parts[0]
+    return Samples(*(np.concatenate([getattr(p, f) for p in parts])
+                     for f in ("points", "area", "facet", "face")))
+
+
+def plan(reflector: Reflector, wavelength: float, samples_per_wavelength: float) -> FaceQuadrature:
+    """The quadrature plan for ``reflector`` at ``wavelength`` (m): about
+    ``samples_per_wavelength`` Gauss points per wavelength along every face edge."""
+    if not samples_per_wavelength > 0:
+        raise RaysimError(f"samples per wavelength must be > 0, got {samples_per_wavelength}")
+    return FaceQuadrature(reflector, wavelength / samples_per_wavelength)

@@ -1,0 +1,345 @@
+"""Dataset runs on Dask: physical samples in the store, identical reruns, a killed client
+resumed, failures recorded, and a real distributed run (scheduler and worker processes)."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zarr
+
+from raysim.dataset import (
+    DatasetError,
+    generate,
+    load_spec,
+    open_dataset,
+    sample_fieldmap,
+    sample_intensity,
+)
+from raysim.dataset import worker as dataset_worker
+from raysim.dataset.models import RimAstigmatism
+from raysim.maps.fieldmap import validate
+from raysim.maps.sphere import ideal_go_cell_mean
+from raysim.surface.deformation import GaussianBumps, PanelRigid, zernike_radial
+
+pytestmark = pytest.mark.slow
+
+ROOT = Path(__file__).resolve().parents[3]
+DEMO = ROOT / "scenes" / "dataset_demo.toml"
+RUN_TIMEOUT = 240  # s, for any command below
+PROVENANCE = {"seconds", "cpu_seconds", "finished"}  # per-run bookkeeping: when and how long, not data
+
+
+@pytest.fixture(scope="module")
+def spec():
+    return load_spec(DEMO)
+
+
+@pytest.fixture(scope="module")
+def inproc():
+    """A Dask cluster inside this process (one worker thread, no network), for the quick runs.
+
+    The dataset's worker plugin sets RAYSIM_THREADS=1 in the worker's process, here ours:
+    it is restored afterwards.
+    """
+    from distributed import LocalCluster
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("RAYSIM_THREADS", "1")
+        with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                          dashboard_address=None) as cluster:
+            yield cluster.scheduler_address
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory, spec, inproc):
+    """The demo dataset made once, uninterrupted, by one worker."""
+    path = tmp_path_factory.mktemp("reference") / "demo.zarr"
+    report = generate(spec, path, scheduler=inproc)
+    assert report.done == spec.samples and report.failed == 0 and report.workers == 1
+    return path
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    env.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
+    return env
+
+
+def _cli(*args: str, **kwargs) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "raysim.cli", *args], env=_env(), capture_output=True,
+                          text=True, timeout=RUN_TIMEOUT, **kwargs)
+
+
+def _arrays(path: Path) -> dict[str, np.ndarray]:
+    group = zarr.open_group(str(path), mode="r")
+    return {name: np.asarray(arr[...]) for name, arr in group.arrays() if name not in PROVENANCE}
+
+
+def assert_same_store(a: Path, b: Path) -> None:
+    """Every data array bit-identical (NaN where NaN), the same attributes but the date."""
+    left, right = _arrays(a), _arrays(b)
+    assert sorted(left) == sorted(right)
+    for name in left:
+        x, y = left[name], right[name]
+        same = np.array_equal(x, y, equal_nan=True) if x.dtype.kind == "f" else np.array_equal(x, y)
+        assert same, f"array {name!r} differs"
+    attrs = [dict(zarr.open_group(str(p), mode="r").attrs) for p in (a, b)]
+    for d in attrs:
+        d.pop("created")
+    assert attrs[0] == attrs[1]
+
+
+def _markers(path: Path) -> set[int]:
+    """Samples whose completion marker exists (one chunk file per sample)."""
+    folder = path / "status" / "c"
+    return {int(p.name) for p in folder.iterdir()} if folder.is_dir() else set()
+
+
+class _ZernikeReference:
+    """Zernike sum written out from the radial polynomial: Noll norm sqrt((2 - d_m0)(n + 1))."""
+
+    def __init__(self, terms, a):
+        self.terms, self.a = terms, a
+
+    def __call__(self, x, y):
+        rho, phi = np.hypot(x, y) / self.a, np.arctan2(y, x)
+        out = np.zeros_like(rho)
+        for n, m, c in self.terms:
+            angular = np.cos(m * phi) if m >= 0 else np.sin(-m * phi)
+            out += c * np.sqrt((2 - (m == 0)) * (n + 1)) * zernike_radial(n, m, rho)[0] * angular
+        return out
+
+
+def _rebuild(ds, i: int, spec) -> dict[str, object]:
+    """Each error of sample i rebuilt from the stored parameters with the plain classes."""
+    s = ds.isel(sample=i)
+    a = 0.5 * spec.scene.D
+    terms = tuple((int(n), int(m), float(c)) for n, m, c in zip(
+        ds["zernike_term_n"].values, ds["zernike_term_m"].values, s["zernike_coefficient"].values,
+        strict=True))
+    parts: dict[str, object] = {"zernike": _ZernikeReference(terms, a)}
+    if int(s["bumps_present"]):
+        rows = np.column_stack([s[f"bumps_{k}"].values for k in ("x", "y", "amplitude", "sigma")])
+        parts["bumps"] = GaussianBumps(tuple(map(tuple, rows[np.isfinite(rows).all(axis=1)])))
+    parts["panel_rigid"] = PanelRigid(spec.scene.panels, s["panel_rigid_piston"].values,
+                                      s["panel_rigid_tilt_x"].values, s["panel_rigid_tilt_y"].values)
+    parts["gravity"] = RimAstigmatism(float(s["gravity_amplitude"]), float(s["gravity_exponent"]),
+                                      float(s["gravity_angle"]), a)
+    return parts
+
+
+def test_store_holds_distinct_physical_samples(reference, spec, monkeypatch):
+    ds = open_dataset(reference).load()
+    n = spec.samples
+    assert (ds["status"].values == 1).all() and (ds["error"].values == "").all()
+    assert int(ds["split"].sum()) == 2
+    sphere = spec.scene.sphere
+    area = sphere.cell_area()  # sr per cell on the unit sphere scaled by R^2 (m^2)
+    ideal = ds["intensity_ideal"].values[0]
+    # power through the sphere = the lit aperture: pi a^2 less the panel gaps (faceted rim)
+    lit = np.pi * (spec.scene.D / 2) ** 2 - spec.scene.panels.gap_area()
+    assert np.sum(ideal * area) == pytest.approx(lit, rel=3e-3)
+    # the ideal ring means follow the closed-form GO cell means (2F / (1 + cos))^2 / R^2
+    edges = sphere.theta_edges
+    expected = ideal_go_cell_mean(edges[:-1], edges[1:], spec.scene.F, sphere.radius, spec.scene.D)
+    inner = sphere.theta < np.radians(70.0)
+    ratio = ideal.mean(axis=1)[inner] / expected[inner]
+    assert np.median(np.abs(ratio - 1.0)) < 5e-3
+    intensity = ds["intensity"].values
+    for i in range(n):
+        # the deformation moves power about but the sphere still receives all of it
+        assert np.sum(intensity[i] * area) == pytest.approx(np.sum(ideal * area), rel=2e-3)
+        both = (ideal > 1.0) & (intensity[i] > 1.0)
+        fa = ideal[both] / intensity[i][both] - 1.0
+        assert 1e-4 < np.median(np.abs(fa)) < 0.2  # a real but perturbative signal
+        for j in range(i):
+            assert np.max(np.abs(intensity[i] - intensity[j])) > 1e-3
+    # the stored maps are the sum of the stored errors; each error has its drawn RMS
+    x, y = np.meshgrid(ds["x"].values, ds["y"].values)
+    inside = np.hypot(x, y) < spec.scene.D / 2
+    for i in range(n):
+        parts = _rebuild(ds, i, spec)
+        total = np.zeros(inside.sum())
+        for name, part in parts.items():
+            values = part(x[inside], y[inside])
+            total += values
+            assert np.sqrt(np.mean(values**2)) == pytest.approx(float(ds[f"{name}_rms"][i]), rel=1e-6)
+        stored = ds["deformation"].values[i]
+        assert np.isnan(stored[~inside]).all()
+        assert np.allclose(stored[inside], total, rtol=1e-9, atol=1e-15)
+        assert float(ds["rms"][i]) == pytest.approx(np.sqrt(np.mean(total**2)), rel=1e-9)
+    # a sample read back as a FieldMap passes the FieldMap contract
+    fieldmap = validate(sample_fieldmap(ds, 3))
+    assert np.array_equal(fieldmap["intensity"].values, intensity[3])
+    assert np.array_equal(fieldmap["intensity_ideal"].values, ideal)
+    assert fieldmap.attrs["diameter"] == spec.scene.D and fieldmap.attrs["sample"] == 3
+    # any sample regenerates alone, bit for bit (one thread per launch, as in the workers)
+    monkeypatch.setenv("RAYSIM_THREADS", "1")
+    for i in (0, n - 1):
+        deformation, values = sample_intensity(spec, i)
+        assert np.array_equal(values, intensity[i])
+        assert np.array_equal(deformation, ds["deformation"].values[i], equal_nan=True)
+
+
+def test_killed_client_resumes_to_the_same_store(reference, spec, tmp_path, inproc):
+    """Two local worker processes (the CLI's default cluster), the client killed with SIGKILL
+    after the first sample, then resumed by another cluster: the same arrays as the
+    reference made by one worker, and the samples done before the kill untouched."""
+    store = tmp_path / "killed.zarr"
+    proc = subprocess.Popen([sys.executable, "-m", "raysim.cli", "dataset", str(DEMO), "-o", str(store),
+                             "--workers", "2"], env=_env(), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + RUN_TIMEOUT
+        while not _markers(store) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert proc.poll() is None, "the run ended before it could be interrupted"
+        proc.send_signal(signal.SIGKILL)  # the client; its local workers lose their scheduler
+        proc.wait(timeout=30)
+    finally:
+        _kill_group(proc)
+    done = _markers(store)
+    assert 0 < len(done) < spec.samples
+    group = zarr.open_group(str(store), mode="r")
+    finished = np.asarray(group["finished"][...])
+    report = generate(spec, store, resume=True, scheduler=inproc)
+    assert (report.done, report.skipped, report.computed) == (spec.samples, len(done),
+                                                              spec.samples - len(done))
+    assert_same_store(reference, store)
+    after = np.asarray(zarr.open_group(str(store), mode="r")["finished"][...])
+    kept = sorted(done)
+    assert np.array_equal(after[kept], finished[kept])  # done samples were not redone
+
+
+def test_a_store_of_another_spec_is_refused(reference, spec, tmp_path):
+    other = tmp_path / "other.toml"
+    other.write_text(DEMO.read_text().replace("seed = 20240917", "seed = 1"))
+    before = _arrays(reference)
+    result = _cli("dataset", str(other), "-o", str(reference), "--resume")
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in result.stderr and "different spec" in lines[0]
+    with pytest.raises(DatasetError, match="already exists; add --resume"):
+        generate(spec, reference)
+    after = _arrays(reference)
+    assert all(np.array_equal(before[k], after[k], equal_nan=before[k].dtype.kind == "f") for k in before)
+
+
+def test_failed_samples_are_recorded_and_the_others_go_on(reference, spec, tmp_path, monkeypatch, inproc):
+    real = dataset_worker.draw_sample
+
+    def flaky(spec_, index, seed=None):
+        if index in (2, 5):
+            raise RuntimeError(f"injected failure of sample {index}")
+        return real(spec_, index, seed)
+
+    store = tmp_path / "flaky.zarr"
+    monkeypatch.setattr(dataset_worker, "draw_sample", flaky)
+    report = generate(spec, store, scheduler=inproc)
+    assert (report.done, report.failed) == (spec.samples - 2, 2)
+    assert sorted(i for i, _ in report.failures) == [2, 5]
+    ds = open_dataset(store)
+    assert ds["status"].values.tolist() == [1, 1, 2, 1, 1, 2, 1, 1]
+    assert ds["error"].values[5] == "RuntimeError: injected failure of sample 5"
+    monkeypatch.setattr(dataset_worker, "draw_sample", real)
+    again = generate(spec, store, scheduler=inproc, resume=True)
+    assert (again.done, again.failed, again.computed) == (spec.samples, 0, 2)
+    assert_same_store(reference, store)
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _kill_group(proc: subprocess.Popen) -> None:
+    """Stop a process started in its own session, and everything it started."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(proc.pid, signal.SIGTERM)
+    try:
+        proc.wait(timeout=15)
+    except subprocess.TimeoutExpired:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=15)
+    with contextlib.suppress(ProcessLookupError):  # children that outlived their parent
+        os.killpg(proc.pid, signal.SIGKILL)
+
+
+def _worker_processes(nanny_pid: int) -> list[int]:
+    """The worker processes a `dask worker` (nanny) process spawned (not its resource tracker)."""
+    out: list[int] = []
+    for task in Path(f"/proc/{nanny_pid}/task").iterdir():
+        for child in (task / "children").read_text().split():
+            with contextlib.suppress(OSError):
+                cmdline = Path(f"/proc/{child}/cmdline").read_bytes()
+                if b"spawn_main" in cmdline:
+                    out.append(int(child))
+    return out
+
+
+def _wait_until(predicate, timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+        time.sleep(0.05)
+
+
+def _listening(port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.settimeout(0.2)
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+def test_separate_scheduler_and_worker_with_a_worker_killed(reference, spec, tmp_path):
+    """A `dask scheduler` and a `dask worker` process on loopback, the CLI as client; the
+    worker process is killed after the first sample and its nanny restarts it: the store
+    completes, identical to the reference."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    common = dict(env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host",
+                                  "127.0.0.1", "--port", str(port), "--no-dashboard"], **common)
+    nanny = None
+    try:
+        _wait_until(lambda: _listening(port), 60, "the scheduler to listen")
+        nanny = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--host",
+                                  "127.0.0.1", "--nworkers", "1", "--nthreads", "1", "--no-dashboard"],
+                                 **common)
+        store = tmp_path / "distributed.zarr"
+        run = subprocess.Popen([sys.executable, "-m", "raysim.cli", "dataset", str(DEMO), "-o", str(store),
+                                "--scheduler", address], env=_env(), stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+        try:
+            _wait_until(lambda: bool(_markers(store)) or run.poll() is not None, RUN_TIMEOUT,
+                        "a first sample")
+            workers = _worker_processes(nanny.pid)
+            killed = bool(workers) and run.poll() is None and len(_markers(store)) < spec.samples
+            for pid in workers:  # the worker process under the nanny: the nanny restarts it
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGKILL)
+            out, err = run.communicate(timeout=RUN_TIMEOUT)
+        finally:
+            if run.poll() is None:
+                run.kill()
+                run.wait(timeout=15)
+        assert killed, "the run ended before a worker could be killed"
+        assert run.returncode == 0, err
+        assert f"{spec.samples}/{spec.samples} samples done" in out and "on 1 workers" in out
+        assert_same_store(reference, store)
+    finally:
+        for proc in (nanny, scheduler):
+            if proc is not None:
+                _kill_group(proc)

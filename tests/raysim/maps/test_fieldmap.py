@@ -1,0 +1,100 @@
+"""FieldMap: the NetCDF contract, atomic writes, one clear error per defect."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from raysim.errors import FieldMapError
+from raysim.maps.fieldmap import fieldmap, grid_of, load, save
+from raysim.maps.sphere import SphereGrid, ideal_go_intensity
+
+
+def small_map(**kw):
+    grid = SphereGrid(10.0, 9, 36)
+    ideal = np.repeat(ideal_go_intensity(grid.theta, 33.0, 10.0)[:, None], 36, axis=1)
+    args = dict(focal_length=33.0, diameter=110.0, frequency_hz=3e8, method="go", sampling="cell_mean",
+                scene="name = 'x'\n")
+    args.update(kw)
+    return grid, fieldmap(grid, ideal * 0.99, ideal, **args)
+
+
+def test_round_trip_through_plain_xarray(tmp_path: Path):
+    grid, ds = small_map(intensity_std=np.full((9, 36), 1e-3))
+    path = save(ds, tmp_path / "f.nc")
+    with xr.open_dataset(path) as plain:  # any xarray user reads it without raysim
+        assert plain["theta"].attrs["units"] == "rad"
+        assert plain["intensity"].dims == ("theta", "phi")
+        assert plain.attrs["sphere_radius"] == 10.0 and plain.attrs["sampling"] == "cell_mean"
+        assert np.array_equal(plain["intensity_ideal"].values, ds["intensity_ideal"].values)
+    back = load(path)
+    assert grid_of(back) == grid
+    assert back.attrs["scene"] == "name = 'x'\n"
+    assert "intensity_std" in back
+
+
+def test_grid_is_rebuilt_from_the_attributes_alone(tmp_path: Path):
+    grid = SphereGrid(8.0, 30, 90, np.radians(10), np.radians(70))
+    ds = fieldmap(grid, np.ones((30, 90)), np.ones((30, 90)), focal_length=20.0, diameter=40.0,
+                  frequency_hz=1e9, method="measured", sampling="centre")
+    rebuilt = grid_of(load(save(ds, tmp_path / "m.nc")))
+    assert rebuilt.n_theta == 30 and np.isclose(rebuilt.theta_min, np.radians(10))
+    assert np.allclose(rebuilt.theta, grid.theta) and np.allclose(rebuilt.cell_area(), grid.cell_area())
+
+
+def test_write_is_atomic_and_keeps_the_old_file_on_failure(tmp_path: Path, monkeypatch):
+    _, ds = small_map()
+    path = save(ds, tmp_path / "f.nc")
+    before = path.read_bytes()
+
+    def broken(self, *args, **kwargs):
+        Path(args[0]).write_bytes(b"half a file")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", broken)
+    with pytest.raises(OSError, match="disk full"):
+        save(ds, path)
+    assert path.read_bytes() == before  # the old map is intact
+    assert [p.name for p in tmp_path.iterdir()] == ["f.nc"]  # no temporary left behind
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        (lambda ds: ds.drop_vars("intensity_ideal"), "missing variable 'intensity_ideal'"),
+        (lambda ds: ds.assign_attrs(sphere_radius=40.0), "sphere_radius must be smaller than focal_length"),
+        (lambda ds: ds.drop_attrs(deep=False).assign_attrs(method="go"), "missing attribute 'focal_length'"),
+        (lambda ds: ds.assign_coords(theta=ds.theta.assign_attrs(units="deg")), "'theta' must be in rad"),
+        (lambda ds: ds.assign_coords(theta=ds.theta * 30), "theta beyond 90 deg"),
+        (lambda ds: ds.assign_attrs(focal_length="thirty"), "'focal_length' must be a number"),
+    ],
+)
+def test_broken_maps_are_refused_with_one_line(tmp_path: Path, damage, message):
+    _, ds = small_map()
+    bad = damage(ds)
+    path = tmp_path / "bad.nc"
+    bad.to_netcdf(path)
+    with pytest.raises(FieldMapError) as info:
+        load(path)
+    assert message in str(info.value) and "\n" not in str(info.value)
+
+
+def test_unreadable_files_are_field_map_errors(tmp_path: Path):
+    junk = tmp_path / "junk.nc"
+    junk.write_text("not netcdf")
+    with pytest.raises(FieldMapError, match="not a readable NetCDF file"):
+        load(junk)
+    with pytest.raises(FieldMapError, match="no such file"):
+        load(tmp_path / "missing.nc")
+
+
+def test_shape_and_vocabulary_are_checked():
+    grid = SphereGrid(10.0, 9, 36)
+    with pytest.raises(FieldMapError, match="shape"):
+        fieldmap(grid, np.ones((9, 35)), np.ones((9, 36)), focal_length=33, diameter=110, frequency_hz=3e8,
+                 method="go", sampling="cell_mean")
+    with pytest.raises(FieldMapError, match="method must be one of"):
+        small_map(method="magic")

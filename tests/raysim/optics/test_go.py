@@ -1,0 +1,338 @@
+"""Geometric optics: analytic intensities, an independent trace, power balance, gaps, shadows."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from raysim.errors import DeviceError
+from raysim.maps.sphere import SphereGrid, ideal_go_cell_mean, theta_rim
+from raysim.optics import go
+from raysim.surface.deformation import Deformation
+from raysim.surface.mesh import Reflector, panel_footprint, paraboloid
+from raysim.surface.panels import PanelLayout
+from tests.reference_go import cell_mean_intensity
+
+D, F, R = 110.0, 33.0, 10.0
+
+
+def ring_mean_from_preimage(grid: SphereGrid, r_of_theta, r_max: float) -> np.ndarray:
+    """Exact cell means of an axisymmetric map aperture radius r -> sphere angle theta.
+
+    Power through the band theta_a..theta_b is pi (r_b^2 - r_a^2) for a unit incident wave
+    (aperture normal to the beam); the band's area is 2 pi R^2 (cos theta_a - cos theta_b).
+    """
+    e = grid.theta_edges
+    r = np.array([min(r_of_theta(t), r_max) for t in e])
+    return (r[1:] ** 2 - r[:-1] ** 2) / (2 * grid.radius**2 * (np.cos(e[:-1]) - np.cos(e[1:])))
+
+
+def flat_plate(a: float, focus_height: float, h: float = 0.2) -> Reflector:
+    """A horizontal disk of radius a at z = 0 (no smooth surface: hits on the facets)."""
+    xy, faces = panel_footprint(PanelLayout((0.0, a), (1,), 0.0), 0, h)
+    vertices = np.column_stack([xy, np.zeros(len(xy))])
+    normals = np.tile([0.0, 0.0, 1.0], (len(xy), 1))
+    return Reflector(vertices, faces, np.zeros(len(faces), dtype=np.int64), normals, focus_height, 2 * a)
+
+
+def test_ideal_paraboloid_is_rho_over_R_squared():
+    grid = SphereGrid(R, 90, 360)
+    result = go.trace(paraboloid(D, F), grid)  # the default mesh resolution
+    e = grid.theta_edges
+    exact = ideal_go_cell_mean(e[:-1], e[1:], F, R, D)
+    rows = e[1:] <= theta_rim(D, F) - np.radians(2.0)
+    rel = result.intensity[rows] / exact[rows, None] - 1.0
+    assert np.abs(rel).max() < 1e-3
+    # beyond the rim image nothing arrives
+    beyond = e[:-1] >= theta_rim(D, F)
+    assert np.all(result.intensity[beyond] == 0.0)
+
+
+def test_ideal_intensity_converges_with_mesh_refinement():
+    grid = SphereGrid(R, 45, 90)
+    e = grid.theta_edges
+    exact = ideal_go_cell_mean(e[:-1], e[1:], F, R, D)
+    rows = e[1:] <= theta_rim(D, F) - np.radians(2.0)
+    errors = []
+    for h in (1.2, 0.6, 0.3):
+        I = go.trace(paraboloid(D, F, h), grid).intensity
+        errors.append(np.sqrt(np.mean((I[rows] / exact[rows, None] - 1.0) ** 2)))
+    # second order in the triangle size: halving h divides the error by about 4
+    assert errors[0] / errors[1] > 3.0 and errors[1] / errors[2] > 3.0, errors
+
+
+def test_flat_plate_on_axis_gives_cos_theta():
+    # rays leave a horizontal plate straight up; on the sphere the flux density is cos(theta)
+    # and the band theta_a..theta_b receives the rays from radii R sin(theta_a)..R sin(theta_b)
+    grid = SphereGrid(R, 60, 72)
+    a = 8.0
+    # the plate's map is steep (d theta / dr = 1 / (R cos theta)), so its tubes must be small
+    result = go.trace(flat_plate(a, focus_height=20.0, h=0.05), grid)
+    exact = ring_mean_from_preimage(grid, lambda t: R * np.sin(t), a)
+    inside = grid.theta_edges[1:] < np.arcsin(a / R) - 0.02
+    assert np.abs(result.intensity[inside] / exact[inside, None] - 1).max() < 1e-3
+    assert result.power_balance == pytest.approx(0.0, abs=1e-12)
+
+
+class SphericalResidual(Deformation):
+    """The sphere z = Rc - sqrt(Rc^2 - r^2) written as the paraboloid r^2/(4F) plus delta."""
+
+    def __init__(self, Rc: float, F: float) -> None:
+        self.Rc, self.F = Rc, F
+
+    def __call__(self, x, y, panel=None):
+        r2 = np.asarray(x) ** 2 + np.asarray(y) ** 2
+        return self.Rc - np.sqrt(self.Rc**2 - r2) - r2 / (4 * self.F)
+
+    def gradient(self, x, y, panel=None):
+        x, y = np.asarray(x, float), np.asarray(y, float)
+        g = 1 / np.sqrt(self.Rc**2 - x * x - y * y) - 1 / (2 * self.F)
+        return g * x, g * y
+
+
+def spherical_mirror_theta(r: float, Rc: float, F: float, R: float) -> float:
+    """Where the ray reflected at aperture radius r by a spherical mirror (radius Rc, vertex at
+    the origin) enters the sphere of radius R about (0, F): the polar angle from -z.
+
+    In the meridional plane the normal at the hit is (-sin a, cos a), sin a = r / Rc, and the
+    reflected direction is (-sin 2a, cos 2a).
+    """
+    alpha = np.arcsin(r / Rc)
+    p = np.array([r, Rc - np.sqrt(Rc**2 - r**2) - F])
+    d = np.array([-np.sin(2 * alpha), np.cos(2 * alpha)])
+    b = p @ d
+    s = -b - np.sqrt(b * b - (p @ p - R * R))
+    q = p + s * d
+    return float(np.arctan2(q[0], -q[1]))
+
+
+def test_spherical_mirror_matches_its_exact_ray_map():
+    Rc, a = 2 * F, 20.0
+    grid = SphereGrid(R, 60, 36, theta_max=np.radians(60.0))
+    mirror = paraboloid(2 * a, F, 0.2).deformed(SphericalResidual(Rc, F))
+    result = go.trace(mirror, grid)
+    t_max = spherical_mirror_theta(a, Rc, F, R)
+
+    def r_of_theta(t: float) -> float:
+        if t >= t_max:
+            return a
+        return brentq(lambda r: spherical_mirror_theta(r, Rc, F, R) - t, 0.0, a, xtol=1e-13)
+
+    exact = ring_mean_from_preimage(grid, r_of_theta, a)
+    inside = grid.theta_edges[1:] < t_max - 0.02
+    assert inside.sum() > 20
+    assert np.abs(result.intensity[inside] / exact[inside, None] - 1).max() < 1e-3
+
+
+def test_flat_plate_off_axis_is_a_tilted_parallel_beam():
+    # a wave arriving 20 deg off axis leaves the plate as a parallel beam along b, the incident
+    # direction mirrored in the plate; it enters the sphere where u . b < 0 with flux |u . b|
+    beta = np.radians(20.0)
+    k_hat = np.array([-np.sin(beta), 0.0, -np.cos(beta)])
+    b_hat = np.array([k_hat[0], k_hat[1], -k_hat[2]])
+    a, H = 12.0, 20.0
+    grid = SphereGrid(R, 40, 80)
+    result = go.trace(flat_plate(a, focus_height=H, h=0.05), grid, direction=k_hat)
+    # power intercepted: the plate's area projected on the wave front
+    assert result.power_lit == pytest.approx(np.pi * a * a * np.cos(beta), rel=2e-4)
+    # cell means of |u . b| by Gauss quadrature (sin(theta) area weight) over each cell
+    x, w = np.polynomial.legendre.leggauss(4)
+    te, pe = grid.theta_edges, grid.phi_edges
+    t = 0.5 * (te[:-1] + te[1:])[:, None] + 0.5 * grid.dtheta * x[None, :]
+    p = 0.5 * (pe[:-1] + pe[1:])[:, None] + 0.5 * grid.dphi * x[None, :]
+    T, P = t[:, None, :, None], p[None, :, None, :]
+    u = np.stack(np.broadcast_arrays(np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), -np.cos(T)), axis=-1)
+    flux = u @ b_hat
+    weight = w[:, None] * w[None, :] * np.sin(T)
+    mean_flux = np.sum(np.abs(flux) * weight, axis=(2, 3)) / np.sum(weight, axis=(2, 3))
+    # a cell counts where every quadrature point is entered by the beam and traces back to
+    # the plate well inside its rim (away from the grazing line, where the map is singular)
+    q = np.array([0.0, 0.0, H]) + R * u
+    foot = q - (q[..., 2] / b_hat[2])[..., None] * b_hat
+    lit = (np.hypot(foot[..., 0], foot[..., 1]) < a - 1.0) & (flux < -0.3)
+    inside = lit.all(axis=(2, 3))
+    assert inside.sum() > 1500
+    assert np.abs(result.intensity[inside] / mean_flux[inside] - 1).max() < 1e-3
+
+
+def test_tube_deposition_matches_exact_overlap_areas():
+    # the kernel alone: random chart triangles (half of them covering the pole) spread over the
+    # cells by their overlap areas, checked against shapely's polygon intersections
+    import shapely
+
+    from raysim.optics import runtime as warp_runtime
+    from raysim.optics.kernels import go as K
+
+    wp = warp_runtime.init()
+    grid = SphereGrid(R, 20, 40)
+    te, pe = grid.theta_edges, grid.phi_edges
+    arc = np.linspace(0, 1, 400)
+
+    def cell(i, j):
+        ph = pe[j] + arc * grid.dphi
+        ra, rb = 2 * np.sin(te[i] / 2), 2 * np.sin(te[i + 1] / 2)
+        ring = [np.column_stack([rb * np.cos(ph), rb * np.sin(ph)]),
+                np.column_stack([ra * np.cos(ph[::-1]), ra * np.sin(ph[::-1])])]
+        return shapely.Polygon(np.vstack(ring))
+
+    cells = [[cell(i, j) for j in range(grid.n_phi)] for i in range(grid.n_theta)]
+    rng = np.random.default_rng(0)
+    n = 40
+    centres = np.where(np.arange(n)[:, None] % 2 == 0, rng.normal(0, 0.04, (n, 2)), rng.normal(0, 0.5, (n, 2)))
+    tris = centres[:, None, :] + rng.normal(0, 0.06, (n, 3, 2))
+    for tri in tris:
+        power = wp.zeros((grid.n_theta, grid.n_phi), dtype=wp.float64)
+        wp.launch(K.deposit_tubes, dim=1, inputs=[
+            wp.array(tri, dtype=wp.vec2d), wp.array(np.ones(3, np.int32), dtype=wp.int32),
+            wp.array(np.array([[0, 1, 2]], np.int32), dtype=wp.vec3i), wp.array([1.0], dtype=wp.float64),
+            wp.array(2 * np.sin(te / 2), dtype=wp.float64), grid.theta_min, grid.dtheta, grid.n_theta,
+            grid.phi_min, grid.dphi, grid.n_phi, 1, power, 0])
+        T = shapely.Polygon(tri)
+        expected = np.array([[T.intersection(c).area for c in row] for row in cells]) / T.area
+        # the cells' arcs are polygons of 400 chords: 3e-6 of a cell's radial extent
+        assert np.abs(power.numpy() - expected).max() < 1e-4
+
+
+def test_paper_case_ratio_matches_an_independent_trace(paper_scene, paper_reflectors):
+    grid = paper_scene.sphere
+    ideal, deformed = paper_reflectors
+    I_ideal = go.trace(ideal, grid).intensity
+    I_def = go.trace(deformed, grid).intensity
+    ref_ideal = cell_mean_intensity(grid, F, D, None, order=2)
+    ref_def = cell_mean_intensity(grid, F, D, paper_scene.deformation, order=2)
+    rows = grid.theta_edges[1:] <= np.radians(78.0)
+    FA = I_ideal[rows] / I_def[rows] - 1
+    FA_ref = ref_ideal[rows] / ref_def[rows] - 1
+    signal = np.sqrt(np.mean(FA_ref**2))
+    assert 4e-3 < signal < 1e-2  # the paper's case: FA of a few 1e-3
+    worst_per_theta = np.abs(FA - FA_ref).max(axis=1)
+    assert worst_per_theta.max() < 0.02 * signal, worst_per_theta.max() / signal
+
+
+def test_power_balance_ideal_and_with_gaps(panels_scene):
+    grid = SphereGrid(R, 90, 360)
+    for reflector in (paraboloid(D, F, 0.3), paraboloid(D, F, 0.3, panels_scene.panels)):
+        result = go.trace(reflector, grid)
+        # every lit tube's power reaches the sphere, and the lit power is the mesh's footprint
+        assert abs(result.power_balance) < 1e-6
+        assert result.power_lit == pytest.approx(reflector.projected_area(), rel=1e-12)
+        total = np.sum(result.intensity * grid.cell_area())
+        assert total == pytest.approx(result.power_lit, rel=1e-6)
+    # the gaps' area is missing from the panelled dish's power (up to the chords of the arcs)
+    layout = panels_scene.panels
+    assert result.power_lit == pytest.approx(np.pi * (D / 2) ** 2 - layout.gap_area(), rel=2e-5)
+
+
+def predicted_gap_fraction(grid: SphereGrid, layout: PanelLayout) -> np.ndarray:
+    """Fraction of each cell's aperture preimage in the gaps, from the gaps' geometry alone.
+
+    The ideal mapping r = 2F tan(theta/2) takes a cell to the annular sector ra..rb,
+    phi_a..phi_b. The ring gaps (width g about each inner ring edge) cover whole arcs of it;
+    a radial gap about the cut at angle psi covers |phi - psi| < asin(g / 2r) at radius r,
+    integrated over r by Gauss quadrature. (Where two gaps cross, g^2 is counted twice.)
+    """
+    g = layout.gap
+    e, pe = grid.theta_edges, grid.phi_edges
+    ra, rb = 2 * F * np.tan(e[:-1] / 2), 2 * F * np.tan(e[1:] / 2)
+    gap = np.zeros((grid.n_theta, grid.n_phi))
+    for i in range(grid.n_theta):
+        for edge in layout.ring_edges[1:-1]:
+            lo, hi = max(ra[i], edge - g / 2), min(rb[i], edge + g / 2)
+            if hi > lo:
+                gap[i] += 0.5 * grid.dphi * (hi * hi - lo * lo)
+        for ring in range(layout.n_rings):
+            n = layout.panels_per_ring[ring]
+            lo, hi = max(ra[i], layout.ring_edges[ring]), min(rb[i], layout.ring_edges[ring + 1])
+            if n == 1 or hi <= lo:
+                continue
+            x, w = np.polynomial.legendre.leggauss(64)
+            r = 0.5 * (hi + lo) + 0.5 * (hi - lo) * x
+            half = np.arcsin(np.minimum(g / (2 * r), 1.0))
+            for psi in layout.phi0 + 2 * np.pi * np.arange(n) / n:
+                # the cut's angle nearest to each cell, unwrapped; covered angle per radius
+                c = pe[:-1] + np.mod(psi - pe[:-1] + np.pi, 2 * np.pi) - np.pi
+                a0 = np.maximum(c[:, None] - half[None, :], pe[:-1, None])
+                a1 = np.minimum(c[:, None] + half[None, :], pe[1:, None])
+                covered = np.maximum(a1 - a0, 0.0)
+                gap[i] += 0.5 * (hi - lo) * covered @ (w * r)
+    sector = 0.5 * grid.dphi * (rb**2 - ra**2)
+    return gap / sector[:, None]
+
+
+def test_panel_gaps_are_dark_where_the_ideal_mapping_puts_them(panels_scene):
+    layout = panels_scene.panels
+    grid = SphereGrid(R, 45, 180)
+    whole = go.trace(paraboloid(D, F, 0.3), grid).intensity
+    panelled = go.trace(paraboloid(D, F, 0.3, layout), grid).intensity
+    rows = grid.theta_edges[1:] <= theta_rim(D, F) - np.radians(1.0)
+    dark = 1 - panelled[rows] / whole[rows]
+    expected = predicted_gap_fraction(grid, layout)[rows]
+    # the dark lines are where the gaps' images fall, cell by cell ...
+    crossed = expected > 0
+    assert crossed.mean() > 0.2 and np.all(np.abs(dark[~crossed]) < 1e-3)
+    assert np.abs(dark - expected).max() < 0.1 * expected.max()
+    # ... and over the whole sphere the power missing is the gaps' share of the aperture
+    area = grid.cell_area()
+    missing = np.sum((whole - panelled) * area) / np.sum(whole * area)
+    assert missing == pytest.approx(layout.gap_area() / (np.pi * (D / 2) ** 2), rel=2e-3)
+
+
+def test_panels_scene_ratio_is_finite_where_both_are_lit(panels_scene):
+    from dataclasses import replace
+
+    from raysim.surface.mesh import reflectors_for
+
+    small = panels_scene.with_overrides(n_theta=45, n_phi=180)
+    small = replace(small, dish=replace(small.dish, resolution=0.3))
+    ideal, deformed = reflectors_for(small)
+    I0 = go.trace(ideal, small.sphere).intensity
+    I1 = go.trace(deformed, small.sphere).intensity
+    both = (I0 > 0) & (I1 > 0)
+    ratio = I0[both] / I1[both] - 1
+    assert both.mean() > 0.85 and np.all(np.isfinite(ratio))
+    # 50 um panel errors: a few percent at most away from the gap images
+    assert np.median(np.abs(ratio)) < 0.02
+
+
+def test_shadowed_rays_carry_no_power():
+    # a small plate 2 m above a larger one hides the lower plate's centre from the wave
+    lower = flat_plate(8.0, 20.0, 0.25)
+    upper_xy, upper_faces = panel_footprint(PanelLayout((0.0, 3.1), (1,), 0.0), 0, 0.25)
+    vertices = np.vstack([lower.vertices, np.column_stack([upper_xy, np.full(len(upper_xy), 2.0)])])
+    faces = np.vstack([lower.faces, upper_faces + len(lower.vertices)])
+    panel = np.concatenate([np.zeros(len(lower.faces), int), np.ones(len(upper_faces), int)])
+    both = Reflector(vertices, faces, panel, np.tile([0.0, 0.0, 1.0], (len(vertices), 1)), 20.0, 16.0)
+    result = go.trace(both, SphereGrid(R, 60, 72))
+    # the upper plate (a 3.1 m polygon of chords) hides the lower vertices under it
+    r = np.hypot(lower.vertices[:, 0], lower.vertices[:, 1])
+    hidden = r < 3.1 * np.cos(np.pi / len(upper_xy[np.isclose(np.hypot(*upper_xy.T), 3.1)]))
+    assert result.n_shadowed == hidden.sum()
+    # lit power: the upper plate and the lower faces with no hidden corner, from the mesh alone
+    def area(xy, f):
+        a, b, c = xy[f[:, 0]], xy[f[:, 1]], xy[f[:, 2]]
+        return 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+
+    open_faces = ~hidden[lower.faces].any(axis=1)
+    expected = area(lower.vertices[:, :2], lower.faces[open_faces]).sum() + area(upper_xy, upper_faces).sum()
+    assert result.power_lit == pytest.approx(expected, rel=1e-12)
+    assert abs(result.power_balance) < 1e-9
+
+
+def test_threads_do_not_change_the_result(monkeypatch):
+    grid = SphereGrid(R, 45, 90)
+    mesh = paraboloid(D, F, 0.6)
+    monkeypatch.setenv("RAYSIM_THREADS", "1")
+    one = go.trace(mesh, grid).intensity
+    monkeypatch.setenv("RAYSIM_THREADS", "2")
+    two = go.trace(mesh, grid).intensity
+    assert np.allclose(one, two, rtol=1e-12, atol=0)
+
+
+def test_cuda_without_a_gpu_is_one_clear_error():
+    from raysim.optics.runtime import init
+
+    if init().is_cuda_available():
+        pytest.skip("a GPU is present: the CUDA path is checked by the device runs instead")
+    with pytest.raises(DeviceError, match="no CUDA GPU"):
+        go.trace(paraboloid(D, F, 2.0), SphereGrid(R, 9, 36), device="cuda")

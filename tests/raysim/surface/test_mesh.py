@@ -1,0 +1,165 @@
+"""Panels and meshes: exact footprint areas, no triangle across a gap, smooth normals, files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import shapely
+from shapely.geometry import LineString, Point
+
+from raysim.errors import MeshError
+from raysim.surface.deformation import GaussianBumps, PanelRigid
+from raysim.surface.mesh import fit_paraboloid, load_reflector, paraboloid
+from raysim.surface.panels import PanelLayout
+
+D, F = 110.0, 33.0
+LAYOUT = PanelLayout((0.0, 6.875, 13.75, 27.5, 55.0), (6, 12, 24, 36), 0.01)
+
+
+def shapely_panel(layout: PanelLayout, panel: int):
+    """The panel's footprint built independently: an annular sector minus buffered cut lines."""
+    ring = int(layout.ring(panel))
+    a, b = layout.ring_edges[ring], layout.ring_edges[ring + 1]
+    phi_a, phi_b = layout.angular_limits(panel)
+    phi = np.linspace(phi_a, phi_b, 4000)
+    outer = np.column_stack([b * np.cos(phi), b * np.sin(phi)])
+    inner = np.column_stack([a * np.cos(phi[::-1]), a * np.sin(phi[::-1])]) if a > 0 else np.zeros((1, 2))
+    sector = shapely.Polygon(np.vstack([outer, inner]))
+    cuts = [LineString([(0, 0), (70 * np.cos(p), 70 * np.sin(p))]) for p in (phi_a, phi_b)]
+    half = layout.gap / 2
+    removed = shapely.union_all([c.buffer(half, cap_style="flat") for c in cuts])
+    if ring > 0:
+        removed = removed.union(Point(0, 0).buffer(a + half, 4000).difference(Point(0, 0).buffer(a - half, 4000)))
+    if ring < layout.n_rings - 1:
+        removed = removed.union(Point(0, 0).buffer(b + half, 4000).difference(Point(0, 0).buffer(b - half, 4000)))
+    return sector.difference(removed)
+
+
+@pytest.mark.parametrize("panel", [0, 3, 6, 17, 40, 77])
+def test_panel_area_matches_an_independent_polygon(panel):
+    assert LAYOUT.panel_area(panel) == pytest.approx(shapely_panel(LAYOUT, panel).area, rel=2e-5)
+
+
+def test_panel_at_agrees_with_the_independent_polygons():
+    rng = np.random.default_rng(4)
+    x, y = rng.uniform(-56, 56, 3000), rng.uniform(-56, 56, 3000)
+    ids = LAYOUT.panel_at(x, y)
+    for panel in (3, 17, 40):
+        poly = shapely_panel(LAYOUT, panel)
+        inside = shapely.contains_xy(poly, x, y)
+        # points within 1 mm of an edge may fall either way (the polygon's arcs are chords)
+        far = shapely.distance(poly.boundary, shapely.points(x, y)) > 1e-3
+        assert np.array_equal(inside[far], (ids == panel)[far])
+
+
+def test_mesh_covers_the_aperture():
+    r = paraboloid(D, F, 0.3)
+    # a disk of radius a triangulated with n rim chords lacks a^2 (n/2 sin(2 pi/n) - pi)
+    n_rim = np.sum(np.isclose(np.hypot(r.vertices[:, 0], r.vertices[:, 1]), D / 2))
+    polygon = 0.5 * n_rim * (D / 2) ** 2 * np.sin(2 * np.pi / n_rim)
+    assert r.projected_area() == pytest.approx(polygon, rel=1e-12)
+    assert r.mesh.euler_number == 1  # one disk, no holes
+
+
+def test_paraboloid_vertices_and_normals_are_exact():
+    r = paraboloid(D, F, 0.5)
+    x, y, z = r.vertices.T
+    assert np.allclose(z, (x * x + y * y) / (4 * F), rtol=0, atol=1e-12)
+    analytic = np.column_stack([-x / (2 * F), -y / (2 * F), np.ones_like(x)])
+    analytic /= np.linalg.norm(analytic, axis=1, keepdims=True)
+    assert np.abs(r.vertex_normals - analytic).max() < 1e-14
+    # faces are wound so their normals point into the dish, towards the focus
+    assert np.all(r.mesh.face_normals[:, 2] > 0)
+
+
+def test_panels_own_their_vertices_and_no_face_crosses_a_gap():
+    r = paraboloid(D, F, 0.4, LAYOUT)
+    assert r.n_panels == LAYOUT.n_panels
+    # each vertex belongs to the faces of a single panel
+    owners = np.full(len(r.vertices), -1)
+    for k in range(3):
+        owners[r.faces[:, k]] = r.face_panel
+    for k in range(3):
+        assert np.array_equal(owners[r.faces[:, k]], r.face_panel)
+    # every face lies on its panel: its centroid is on that panel, and no edge spans a gap
+    c = r.vertices[r.faces].mean(axis=1)
+    assert np.array_equal(LAYOUT.panel_at(c[:, 0], c[:, 1]), r.face_panel)
+    # mesh footprint area = exact panel area up to the chords of the arcs
+    exact = sum(LAYOUT.panel_area(p) for p in range(LAYOUT.n_panels))
+    assert r.projected_area() == pytest.approx(exact, rel=1e-4)
+
+
+def test_normals_are_smooth_within_a_panel_and_jump_across_a_gap():
+    rng = np.random.default_rng(5)
+    n = LAYOUT.n_panels
+    tilt = PanelRigid(LAYOUT, np.zeros(n), rng.normal(0, 1e-3, n), rng.normal(0, 1e-3, n))
+    ideal = paraboloid(D, F, 0.4, LAYOUT)
+    bent = ideal.deformed(tilt)
+    # same triangulation, vertices moved along z only
+    assert np.array_equal(bent.faces, ideal.faces)
+    assert np.array_equal(bent.vertices[:, :2], ideal.vertices[:, :2])
+    # each panel's normals are the ideal ones tilted by that panel's slope (no averaging)
+    x, y = ideal.vertices[:, 0], ideal.vertices[:, 1]
+    k = ideal.vertex_panel
+    expect = np.column_stack([-(x / (2 * F) + tilt.tilt_x[k]), -(y / (2 * F) + tilt.tilt_y[k]), np.ones_like(x)])
+    expect /= np.linalg.norm(expect, axis=1, keepdims=True)
+    assert np.abs(bent.vertex_normals - expect).max() < 1e-14
+
+
+def test_deformed_mesh_moves_vertices_by_delta():
+    bump = GaussianBumps(((5.0, 5.0, 1e-3, 3.0),))
+    ideal = paraboloid(D, F, 0.5)
+    bent = ideal.deformed(bump)
+    x, y = ideal.vertices[:, 0], ideal.vertices[:, 1]
+    assert np.allclose(bent.vertices[:, 2] - ideal.vertices[:, 2], bump(x, y), rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("suffix", [".stl", ".ply", ".obj", ".glb"])
+def test_loaded_mesh_recovers_the_paraboloid(tmp_path: Path, suffix: str):
+    bump = GaussianBumps(((10.0, -8.0, 2e-3, 4.0),))
+    source = paraboloid(20.0, 8.0, 0.5, PanelLayout((0.0, 4.0, 10.0), (1, 8), 0.05)).deformed(bump)
+    shifted = source.mesh.copy()
+    shifted.apply_translation([0.3, -0.2, 1.5])  # not in the reflector frame
+    shifted.apply_scale(1000.0)  # written in millimetres
+    path = tmp_path / f"dish{suffix}"
+    shifted.export(path)
+    ideal, loaded, fit = load_reflector(path, unit=1e-3, F=8.0)
+    assert loaded.n_panels == 9  # the connected pieces: a central disk and eight panels
+    assert len(loaded.faces) == len(source.faces)
+    # with F known the fit finds the vertex: the loaded surface error is the bump less its
+    # least-squares piston and tilts (computed here independently), to within float32 storage
+    xs, ys = source.vertices[:, 0], source.vertices[:, 1]
+    A = np.column_stack([np.ones_like(xs), xs, ys])
+    coef, *_ = np.linalg.lstsq(A, bump(xs, ys), rcond=None)
+    residual = bump(xs, ys) - A @ coef
+    dz = loaded.vertices[:, 2] - ideal.vertices[:, 2]
+    from scipy.spatial import cKDTree
+
+    moved = loaded.vertices[:, :2] + [fit.x0 - 0.3, fit.y0 + 0.2]
+    distance, match = cKDTree(source.vertices[:, :2]).query(moved)
+    assert distance.max() < 1e-3
+    assert np.abs(dz - residual[match]).max() < 5e-6
+    assert fit.F == 8.0 and (fit.x0, fit.y0) == pytest.approx((0.3, -0.2), abs=2e-3)
+    assert np.array_equal(ideal.faces, loaded.faces)
+    assert np.all(loaded.mesh.face_normals[:, 2] > 0)
+
+
+def test_fit_paraboloid_finds_focal_length_and_vertex():
+    rng = np.random.default_rng(6)
+    x, y = rng.uniform(-40, 40, 5000), rng.uniform(-40, 40, 5000)
+    z = 2.0 + ((x - 0.5) ** 2 + (y + 1.5) ** 2) / (4 * 30.0)
+    fit = fit_paraboloid(np.column_stack([x, y, z]))
+    assert (fit.F, fit.x0, fit.y0, fit.z0) == pytest.approx((30.0, 0.5, -1.5, 2.0), rel=1e-10, abs=1e-9)
+    with pytest.raises(MeshError, match="not a dish"):
+        fit_paraboloid(np.column_stack([x, y, -z]))
+
+
+def test_unreadable_mesh_is_a_mesh_error(tmp_path: Path):
+    bad = tmp_path / "broken.stl"
+    bad.write_text("solid nothing\nendsolid\n")
+    with pytest.raises(MeshError):
+        load_reflector(bad)
+    with pytest.raises(MeshError, match="no such mesh file"):
+        load_reflector(tmp_path / "missing.ply")
