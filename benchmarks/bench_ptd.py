@@ -48,10 +48,10 @@ def kernel_rates(threads: int) -> None:
     dish = paraboloid(D, F, 5.0)
     points = SphereGrid(R).points(F).reshape(-1, 3)
     edges = ptd.fringe_elements(edge_quadrature(dish, wave.wavelength / 4.0, "rim"), wave)
-    ptd.EdgeRadiator(points[:8], wave.k).add(edges)  # compile or load
-    radiator = ptd.EdgeRadiator(points, wave.k)
+    po.Radiator(points[:8], wave.k).add_packed(edges, "fringe")  # compile or load
+    radiator = po.Radiator(points, wave.k)
     with Clock() as c:
-        radiator.add(edges)
+        radiator.add_packed(edges, "fringe")
     print(f"fringe kernel: {len(points):,} points x {edges.shape[1]:,} edge points = {radiator.pairs:,} "
           f"pairs, {threads} thread(s): wall {c.wall:.2f} s, {radiator.pairs / c.cpu / 1e6:.1f} M pairs "
           f"per CPU-second")

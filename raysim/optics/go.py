@@ -22,7 +22,6 @@ the cell over its area, relative to the incident intensity.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -31,12 +30,13 @@ from numpy.typing import NDArray
 
 from raysim.errors import RaysimError
 from raysim.maps.sphere import SphereGrid
-from raysim.optics import runtime as warp_runtime
+from raysim.optics import runtime
+from raysim.optics.bvh import ReflectorBVH
+from raysim.optics.runtime import Progress
 from raysim.surface.deformation import Deformation, NoDeformation
 from raysim.surface.mesh import Reflector, paraboloid
 
 ON_AXIS = (0.0, 0.0, -1.0)
-Progress = Callable[[str, float], None]
 
 
 @dataclass(frozen=True)
@@ -140,13 +140,16 @@ def lift_to_surface(reflector: Reflector, lattice: RayLattice, k_hat: NDArray,
 
 # --- the trace ------------------------------------------------------------------------------
 def trace(reflector: Reflector, grid: SphereGrid, direction=ON_AXIS, subdivisions: int = 1,
-          device: str | None = "cpu", progress: Progress | None = None) -> GOResult:
+          device: str | None = "cpu", progress: Progress | None = None,
+          bvh: ReflectorBVH | None = None) -> GOResult:
     """GO intensity of ``reflector`` on ``grid`` for a plane wave travelling along ``direction``.
 
-    Returns cell means relative to the incident intensity (see the module docstring).
+    Returns cell means relative to the incident intensity (see the module docstring). ``bvh``:
+    the reflector's BVH when the caller already has it (a deformed twin's is the ideal one
+    refitted, :meth:`~raysim.optics.bvh.ReflectorBVH.refit`); built here otherwise.
     """
-    wp = warp_runtime.init()
-    dev = warp_runtime.resolve_device(device)
+    wp = runtime.init()
+    dev = runtime.resolve_device(device)
     if not grid.full_circle and grid.dphi > np.pi:
         raise RaysimError("a phi cell wider than 180 deg is only supported as the full circle")
     from raysim.optics.kernels import go as K
@@ -162,15 +165,9 @@ def trace(reflector: Reflector, grid: SphereGrid, direction=ON_AXIS, subdivision
     n_rays, n_tubes = len(lattice.points), len(lattice.tubes)
 
     report("bvh", 0.1)
-    mesh = wp.Mesh(points=wp.array(reflector.vertices.astype(np.float32), dtype=wp.vec3, device=dev),
-                   indices=wp.array(reflector.faces.astype(np.int32).ravel(), dtype=wp.int32, device=dev))
-    points = wp.array(lattice.points, dtype=wp.vec3d, device=dev)
-    lit = wp.zeros(n_rays, dtype=wp.int32, device=dev)
-    standoff = float(np.ptp(reflector.vertices, axis=0).max() + 10.0)
+    bvh = bvh if bvh is not None else ReflectorBVH.build(reflector, dev)
     report("visibility", 0.2)
-    warp_runtime.launch(K.visibility, n_rays,
-                        [mesh.id, points, wp.vec3d(*k_hat), standoff, 1e-3, lit], dev)
-    lit_np = lit.numpy().astype(bool)
+    lit_np = bvh.lit(lattice.points, k_hat)
 
     report("surface", 0.4)
     hits, normals = lift_to_surface(reflector, lattice, k_hat)
@@ -178,10 +175,10 @@ def trace(reflector: Reflector, grid: SphereGrid, direction=ON_AXIS, subdivision
     report("reflect", 0.5)
     chart = wp.zeros(n_rays, dtype=wp.vec2d, device=dev)
     ok = wp.array(lit_np.astype(np.int32), dtype=wp.int32, device=dev)
-    warp_runtime.launch(K.reflect_to_sphere, n_rays,
-                        [wp.array(hits, dtype=wp.vec3d, device=dev),
-                         wp.array(normals, dtype=wp.vec3d, device=dev),
-                         wp.vec3d(*k_hat), wp.vec3d(*focus), float(grid.radius), ok, chart], dev)
+    runtime.launch(K.reflect_to_sphere, n_rays,
+                   [wp.array(hits, dtype=wp.vec3d, device=dev),
+                    wp.array(normals, dtype=wp.vec3d, device=dev),
+                    wp.vec3d(*k_hat), wp.vec3d(*focus), float(grid.radius), ok, chart], dev)
     ok_np = ok.numpy().astype(bool)
 
     report("deposit", 0.6)
@@ -189,7 +186,7 @@ def trace(reflector: Reflector, grid: SphereGrid, direction=ON_AXIS, subdivision
     tube_lit = lit_np[lattice.tubes].all(axis=1)
     rho_edges = 2.0 * np.sin(0.5 * grid.theta_edges)
     power = wp.zeros((grid.n_theta, grid.n_phi), dtype=wp.float64, device=dev)
-    warp_runtime.launch(
+    runtime.launch(
         K.deposit_tubes, n_tubes,
         [chart, ok, wp.array(lattice.tubes, dtype=wp.vec3i, device=dev),
          wp.array(power_t, dtype=wp.float64, device=dev),

@@ -63,8 +63,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from raysim.errors import RaysimError
 from raysim.maps.sphere import SphereGrid
-from raysim.optics import runtime as warp_runtime
-from raysim.optics.po import ETA0, Illumination, Progress, Taper, shadow_tolerance
+from raysim.optics import runtime
+from raysim.optics.bvh import ReflectorBVH
+from raysim.optics.illumination import ETA0, Illumination, Taper
+from raysim.optics.radiator import Radiator
+from raysim.optics.runtime import Progress
 from raysim.surface.edges import Edges, edge_quadrature
 from raysim.surface.mesh import Reflector
 
@@ -114,7 +117,7 @@ def fringe_elements(edges: Edges, wave: Illumination, lit: NDArray[np.bool_] | N
     phase = np.exp(-1j * k * (edges.points @ k_hat)) * weight
     E_t = (t @ e_hat) * phase  # E_t dl (V)
     H_t = (t @ np.cross(k_hat, e_hat)) / ETA0 * phase  # H_t dl (A)
-    electric = -1j * k * ETA0 / (4.0 * np.pi)  # radiation prefactors (see raysim.optics.po.Radiator)
+    electric = -1j * k * ETA0 / (4.0 * np.pi)  # radiation prefactors (see raysim.optics.radiator)
     magnetic = 1j * k / (4.0 * np.pi)
     CE = electric * (-2j * sp * E_t / (k * ETA0 * sin_b**2))
     CH = electric * (2j * cos_b * H_t / (k * sin_b**2))
@@ -129,87 +132,14 @@ def fringe_elements(edges: Edges, wave: Illumination, lit: NDArray[np.bool_] | N
     return out
 
 
-def lit_points(reflector: Reflector, edges: Edges, wave: Illumination, device: str = "cpu") -> NDArray:
-    """(N,) bool: the edge points the plane wave reaches (Warp's BVH, as PO's samples).
-
-    A point counts as shadowed when the ray meets another face more than
-    :func:`raysim.optics.po.shadow_tolerance` before it.
-    """
-    from raysim.optics.kernels import po as po_kernels
-
-    wp = warp_runtime.init()
+def lit_points(reflector: Reflector, edges: Edges, wave: Illumination, device: str = "cpu",
+               bvh: ReflectorBVH | None = None) -> NDArray:
+    """(N,) bool: the edge points the plane wave reaches (the shadow test of every engine,
+    :meth:`raysim.optics.bvh.ReflectorBVH.lit`, on each point's own face)."""
     if len(edges) == 0:
         return np.zeros(0, dtype=bool)
-    mesh = wp.Mesh(points=wp.array(reflector.vertices.astype(np.float32), dtype=wp.vec3, device=device),
-                   indices=wp.array(reflector.faces.astype(np.int32).ravel(), dtype=wp.int32,
-                                    device=device))
-    standoff = float(np.ptp(reflector.vertices, axis=0).max() + 10.0)
-    lit = wp.zeros(len(edges), dtype=wp.int32, device=device)
-    warp_runtime.launch(po_kernels.lit_samples, len(edges),
-                        [mesh.id, wp.array(edges.facet, dtype=wp.vec3d, device=device),
-                         wp.array(edges.face.astype(np.int32), dtype=wp.int32, device=device),
-                         wp.vec3d(*wave.k_hat), standoff, shadow_tolerance(reflector), lit], device)
-    return lit.numpy().astype(bool)
-
-
-class EdgeRadiator:
-    """The fringe field (V/m) of edge elements at fixed points, accumulated in float64.
-
-    Parameters
-    ----------
-    points : (n, 3) field points (m, reflector frame).
-    k : wavenumber (rad/m).
-    device : Warp device (``cpu``, ``cuda``, ``cuda:N``).
-    block : edge elements per launch.
-    """
-
-    def __init__(self, points: ArrayLike, k: float, device: str | None = "cpu",
-                 block: int = 1024) -> None:
-        from raysim.optics.kernels import po as po_kernels
-        from raysim.optics.kernels import ptd as ptd_kernels
-
-        self.wp = warp_runtime.init()
-        self.device = warp_runtime.resolve_device(device)
-        self.K = ptd_kernels
-        self.max_phase = po_kernels.MAX_PHASE
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        self.n = len(pts)
-        self.k = float(k)
-        wp = self.wp
-        self.field_points = wp.array(np.ascontiguousarray(pts.T), dtype=wp.float64, device=self.device)
-        self.E = wp.zeros((6, self.n), dtype=wp.float64, device=self.device)
-        self.table = wp.array(po_kernels.cis_table(), dtype=wp.vec2d, device=self.device)
-        self.block = int(block)
-        self.pairs = 0
-        self.seconds = 0.0
-        self._bounds = (pts.min(axis=0), pts.max(axis=0)) if self.n else (np.zeros(3), np.zeros(3))
-
-    def add(self, elements: NDArray[np.float64], progress: Progress | None = None) -> None:
-        """Add the field of ``elements`` (the :func:`fringe_elements` layout) at every point."""
-        n_src = elements.shape[1]
-        if n_src == 0 or self.n == 0:
-            return
-        lo = np.minimum(elements[:3].min(axis=1), self._bounds[0])
-        hi = np.maximum(elements[:3].max(axis=1), self._bounds[1])
-        if self.k * float(np.linalg.norm(hi - lo)) >= self.max_phase:
-            raise RaysimError("k R exceeds the radiation kernel's phase range: lower the frequency")
-        wp = self.wp
-        src = wp.array(np.ascontiguousarray(elements), dtype=wp.float64, device=self.device)
-        for begin in range(0, n_src, self.block):
-            end = min(begin + self.block, n_src)
-            start = time.perf_counter()
-            warp_runtime.launch(self.K.radiate_fringe, self.n,
-                                [self.field_points, src, begin, end, self.k, 1.0 / self.k,
-                                 self.table, self.E], self.device, min_chunk=16)
-            self.seconds += time.perf_counter() - start
-            self.pairs += (end - begin) * self.n
-            if progress is not None:
-                progress(f"edges {self.pairs / max(self.seconds, 1e-9) / 1e6:.0f} M pairs/s", end / n_src)
-
-    def field(self) -> NDArray[np.complex128]:
-        """E (n, 3) complex (V/m) of everything added so far."""
-        e = self.E.numpy()
-        return (e[:3] + 1j * e[3:]).T.copy()
+    bvh = bvh if bvh is not None else ReflectorBVH.build(reflector, device)
+    return bvh.lit(edges.facet, wave.k_hat, edges.face)
 
 
 def edge_field(reflector: Reflector, points: ArrayLike, wave: Illumination, edges: str = "rim",
@@ -225,11 +155,11 @@ def edge_field(reflector: Reflector, points: ArrayLike, wave: Illumination, edge
     start = time.perf_counter()
     if not points_per_wavelength > 0:
         raise RaysimError(f"edge points per wavelength must be > 0, got {points_per_wavelength:g}")
-    dev = warp_runtime.resolve_device(device)
+    dev = runtime.resolve_device(device)
     quad = edge_quadrature(reflector, wave.wavelength / points_per_wavelength, edges, curve=curve)
     lit = lit_points(reflector, quad, wave, dev)
-    radiator = EdgeRadiator(points, wave.k, dev)
-    radiator.add(fringe_elements(quad, wave, lit, taper), progress)
+    radiator = Radiator(points, wave.k, dev, block=1024)
+    radiator.add_packed(fringe_elements(quad, wave, lit, taper), "fringe", progress)
     return EdgeResult(radiator.field(), len(quad), int(lit.sum()), radiator.pairs,
                       time.perf_counter() - start)
 

@@ -1,11 +1,11 @@
 """Warp kernels of the geometric-optics engine (see :mod:`raysim.optics.go`).
 
-Three steps, each a 1-D launch that takes a trailing ``offset`` so it can be split across
-CPU threads: ``visibility`` (the BVH finds the face each incident ray meets first, float32),
-``reflect_to_sphere`` (float64 reflection at the recomputed hit and intersection with the
-probe sphere, mapped to the Lambert equal-area chart of the sphere), and ``deposit_tubes``
-(each ray tube's power spread over the (theta, phi) cells in proportion to the exact area of
-its overlap with each cell in that chart).
+Two steps after the shadow test (:mod:`raysim.optics.kernels.visibility`), each a 1-D launch
+that takes a trailing ``offset`` so it can be split across CPU threads: ``reflect_to_sphere``
+(float64 reflection at the recomputed hit and intersection with the probe sphere, mapped to
+the Lambert equal-area chart of the sphere) and ``deposit_tubes`` (each ray tube's power
+spread over the (theta, phi) cells in proportion to the exact area of its overlap with each
+cell in that chart).
 
 The Lambert azimuthal equal-area chart about the sphere's pole -z maps the unit direction u
 to X = sqrt(2 / (1 - u_z)) (u_x, u_y): |X| = 2 sin(theta / 2) and areas are sphere areas
@@ -17,43 +17,12 @@ from __future__ import annotations
 
 import warp as wp
 
+from raysim.optics.kernels.f64 import F64_HALF, F64_ONE, F64_TWO, F64_ZERO
+
 wp.set_module_options({"enable_backward": False})
 
 vec8d = wp.types.vector(length=8, dtype=wp.float64)
 
-F64_ZERO = wp.constant(wp.float64(0.0))
-F64_HALF = wp.constant(wp.float64(0.5))
-F64_ONE = wp.constant(wp.float64(1.0))
-F64_TWO = wp.constant(wp.float64(2.0))
-
-
-@wp.kernel
-def visibility(
-    mesh: wp.uint64,
-    points: wp.array(dtype=wp.vec3d),
-    k_hat: wp.vec3d,
-    standoff: wp.float64,
-    tolerance: wp.float64,
-    lit: wp.array(dtype=wp.int32),
-    offset: int,
-):
-    """lit[i] = 1 when a ray of the plane wave reaches points[i] with nothing in front of it.
-
-    The ray starts ``standoff`` metres up-beam of the point; the BVH (float32) returns the
-    first face hit, and the point is lit when that hit lies within ``tolerance`` of it.
-    """
-    i = wp.tid() + offset
-    p = points[i]
-    origin = p - standoff * k_hat
-    q = wp.mesh_query_ray(mesh, wp.vec3(origin), wp.normalize(wp.vec3(k_hat)), float(standoff * F64_TWO))
-    if q.result:
-        if wp.float64(q.t) >= standoff - tolerance:
-            lit[i] = 1
-        else:
-            lit[i] = 0
-    else:
-        # a point on the mesh is always hit; a miss is float32 round-off at a face's edge
-        lit[i] = 1
 
 
 @wp.kernel

@@ -15,7 +15,7 @@ import warp as wp
 from raysim.errors import RaysimError
 from raysim.optics import po
 from raysim.optics import runtime as warp_runtime
-from raysim.optics.kernels import po as po_kernels
+from raysim.optics.kernels import radiation
 
 K = 2.0 * np.pi / 0.7  # rad/m: lambda = 0.7 m
 
@@ -133,7 +133,7 @@ def test_incident_field_convention():
 def _cis_kernel(x: wp.array(dtype=wp.float64), table: wp.array(dtype=wp.vec2d),
                 out: wp.array(dtype=wp.vec2d)):
     i = wp.tid()
-    out[i] = po_kernels.cis(x[i], table)
+    out[i] = radiation.cis(x[i], table)
 
 
 def test_cis_against_long_double():
@@ -141,11 +141,11 @@ def test_cis_against_long_double():
     warp_runtime.init()
     rng = np.random.default_rng(8)
     x = np.concatenate([np.linspace(0.0, 20.0, 20001), rng.uniform(0, 1e4, 50000),
-                        rng.uniform(0, 0.99 * po_kernels.MAX_PHASE, 50000)])
+                        rng.uniform(0, 0.99 * radiation.MAX_PHASE, 50000)])
     out = wp.zeros(len(x), dtype=wp.vec2d, device="cpu")
     wp.launch(_cis_kernel, dim=len(x), device="cpu",
               inputs=[wp.array(x, dtype=wp.float64, device="cpu"),
-                      wp.array(po_kernels.cis_table(), dtype=wp.vec2d, device="cpu"), out])
+                      wp.array(radiation.cis_table(), dtype=wp.vec2d, device="cpu"), out])
     got = out.numpy()
     xl = x.astype(np.longdouble)
     assert np.finfo(np.longdouble).eps < 1e-18, "needs 80-bit long double for the reference"

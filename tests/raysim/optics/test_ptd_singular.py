@@ -32,8 +32,8 @@ def element_field(directions, beta_i, phi_i, polarisation_deg=30.0):
     one = np.zeros((1, 3))
     edge = Edges(one, T[None], Y[None], X[None], np.ones(1), one, np.zeros(1, dtype=np.int64),
                  np.zeros(1, dtype=bool))
-    radiator = ptd.EdgeRadiator(FAR * np.asarray(directions), wave.k)
-    radiator.add(ptd.fringe_elements(edge, wave))
+    radiator = po.Radiator(FAR * np.asarray(directions), wave.k)
+    radiator.add_packed(ptd.fringe_elements(edge, wave), "fringe")
     return radiator.field() * FAR
 
 

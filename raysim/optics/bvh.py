@@ -1,0 +1,97 @@
+"""The reflector's Warp BVH and the one shadow rule of every engine (GO rays, PO samples, edges).
+
+Warp's BVH holds float32 points: it finds the face a ray meets first, and the engines recompute
+hit points and normals in float64 from the float64 vertices. A deformed twin shares the ideal
+mesh's triangulation, so its BVH is the ideal one refitted to the moved vertices
+(:meth:`ReflectorBVH.refit`) rather than built again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from raysim.optics import runtime
+from raysim.surface.mesh import Reflector
+
+
+def facet_sag(reflector: Reflector) -> float:
+    """Largest distance (m) along z between a face's flat facet and the smooth surface, at the
+    face centroids (0 for a mesh without a smooth surface)."""
+    if reflector.surface is None or len(reflector.faces) == 0:
+        return 0.0
+    c = reflector.vertices[reflector.faces].mean(axis=1)
+    panel = reflector.face_panel if reflector.layout is not None else None
+    return float(np.abs(reflector.surface.height(c[:, 0], c[:, 1], panel) - c[:, 2]).max())
+
+
+def shadow_tolerance(reflector: Reflector) -> float:
+    """How far (m) before a point another face may meet its ray without shadowing it: 1 mm
+    plus twice the facets' sag. At a panel's edge the neighbouring panel's facet, a chord of
+    the surface like its own, can overlap it in projection by that much without hiding it."""
+    return 1e-3 + 2.0 * facet_sag(reflector)
+
+
+def standoff(vertices: NDArray[np.float64]) -> float:
+    """Where (m up-beam of a point) a shadow ray starts: beyond the whole mesh."""
+    return float(np.ptp(vertices, axis=0).max() + 10.0)
+
+
+@dataclass
+class ReflectorBVH:
+    """A reflector's faces in a Warp BVH on ``device``, with the shadow test's two lengths.
+
+    ``standoff`` (m): where a shadow ray starts, up-beam of its point; ``tolerance`` (m): see
+    :func:`shadow_tolerance`.
+    """
+
+    mesh: Any
+    device: str
+    standoff: float
+    tolerance: float
+    _points: Any = field(repr=False, default=None)
+
+    @classmethod
+    def build(cls, reflector: Reflector, device: str | None = "cpu") -> ReflectorBVH:
+        wp = runtime.init()
+        dev = runtime.resolve_device(device)
+        points = wp.array(reflector.vertices.astype(np.float32), dtype=wp.vec3, device=dev)
+        indices = wp.array(reflector.faces.astype(np.int32).ravel(), dtype=wp.int32, device=dev)
+        mesh = wp.Mesh(points=points, indices=indices)
+        return cls(mesh, dev, standoff(reflector.vertices), shadow_tolerance(reflector), points)
+
+    def refit(self, reflector: Reflector) -> None:
+        """Move the BVH to ``reflector``'s vertices (same triangulation) and refit it."""
+        wp = runtime.init()
+        self._points.assign(wp.array(reflector.vertices.astype(np.float32), dtype=wp.vec3,
+                                     device=self.device))
+        self.mesh.refit()
+        self.standoff = standoff(reflector.vertices)
+        self.tolerance = shadow_tolerance(reflector)
+
+    def lit(self, points: ArrayLike, k_hat: ArrayLike, face: ArrayLike | None = None) -> NDArray[np.bool_]:
+        """(n,) bool: the plane wave travelling along ``k_hat`` reaches each point (m).
+
+        ``face`` (n,) gives each point's own face (a point on a facet); None for points that
+        belong to several faces (vertices), which then count as lit unless a face lies more
+        than ``tolerance`` in front of them.
+        """
+        from raysim.optics.kernels import visibility
+
+        wp = runtime.init()
+        pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        n = len(pts)
+        if n == 0:
+            return np.zeros(0, dtype=bool)
+        faces = np.full(n, -1, np.int32) if face is None else np.asarray(face, dtype=np.int32)
+        dev = self.device
+        out = wp.zeros(n, dtype=wp.int32, device=dev)
+        runtime.launch(visibility.lit_points, n,
+                       [self.mesh.id, wp.array(pts, dtype=wp.vec3d, device=dev),
+                        wp.array(faces, dtype=wp.int32, device=dev),
+                        wp.vec3d(*np.asarray(k_hat, dtype=np.float64)), self.standoff,
+                        self.tolerance, out], dev)
+        return out.numpy().astype(bool)
