@@ -41,7 +41,7 @@ def sample_fieldmap(ds: xr.Dataset, index: int) -> xr.Dataset:
 
 def sample_intensity(spec: DatasetSpec, index: int, device: str = "cpu") -> tuple[np.ndarray, np.ndarray]:
     """Regenerate sample ``index`` alone, in this process: (deformation map (m), intensity)."""
-    from raysim.dataset.worker import simulate_sample
+    from raysim.dataset.engine import simulate_sample
 
     draw = draw_sample(spec, index)
     return spec.grid.evaluate(draw.deformation), simulate_sample(spec, draw.deformation,

@@ -24,22 +24,18 @@ import os
 import pkgutil
 import threading
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from raysim.dataset.memo import Memo
+from raysim.dataset.engine import intensity, simulate_sample
 from raysim.dataset.sampling import draw_sample
 from raysim.dataset.spec import DatasetError, DatasetSpec, parse_spec
 from raysim.dataset.store import Writer, open_readonly
 from raysim.optics import runtime as warp_runtime
-from raysim.surface.deformation import Deformation, NoDeformation
-from raysim.surface.mesh import Reflector, paraboloid
-from raysim.surface.panels import PanelLayout
 
 _lock = threading.Lock()
 
@@ -124,35 +120,6 @@ def context(store: str, fingerprint: str) -> Context:
     return Context(spec, Writer(zarr.open_group(store, mode="r+")))
 
 
-@lru_cache(maxsize=2)
-def _ideal_reflector(D: float, F: float, resolution: float, layout: PanelLayout | None) -> Reflector:
-    """The ideal generated reflector (D, F, resolution in m; panel layout), kept per process."""
-    return paraboloid(D, F, resolution, layout)
-
-
-def intensity(spec: DatasetSpec, deformation: Deformation | None, f_index: int,
-              device: str = "cpu") -> np.ndarray:
-    """Intensity on the spec's sphere grid, (n_theta, n_phi), relative to the incident wave.
-
-    ``deformation`` None gives the ideal paraboloid. GO traces the per-process ideal mesh
-    displaced by the deformation (one shared triangulation); other methods go through
-    :func:`raysim.simulate.simulate`.
-    """
-    scene = spec.scene.with_overrides(frequency_hz=spec.frequencies[f_index])
-    if spec.method == "go":
-        from raysim.optics import go
-
-        dish = spec.scene.dish
-        ideal = _ideal_reflector(dish.diameter, dish.focal_length, dish.resolution, spec.scene.panels)
-        reflector = ideal if deformation is None else ideal.deformed(Memo(deformation))
-        result = go.trace(reflector, scene.sphere, scene.source.direction, scene.subdivisions, device)
-        return result.intensity
-    from raysim.simulate import simulate
-
-    ds = simulate(replace(scene, deformation=deformation or NoDeformation()), spec.method, device)
-    return np.asarray(ds["intensity_ideal" if deformation is None else "intensity"].values)
-
-
 def run_ideal(store: str, fingerprint: str, f_index: int, device: str = "cpu") -> dict[str, Any]:
     """Task: the ideal intensity of frequency ``f_index``, written into the store."""
     ctx = context(store, fingerprint)
@@ -185,17 +152,6 @@ def run_sample(store: str, fingerprint: str, index: int, device: str = "cpu") ->
         seconds = time.perf_counter() - start
         writer.failed(index, reason, seconds)
         return {"index": index, "ok": False, "error": reason, "seconds": seconds}
-
-
-def simulate_sample(spec: DatasetSpec, deformation: Deformation, f_index: int,
-                    device: str = "cpu") -> np.ndarray:
-    """The deformed reflector's intensity of one sample, checked to be finite and lit."""
-    values = intensity(spec, deformation, f_index, device)
-    if not np.all(np.isfinite(values)):
-        raise ValueError("the simulated intensity holds non-finite values")
-    if not np.any(values > 0):
-        raise ValueError("no power reached the sphere")
-    return values
 
 
 def _reason(exc: BaseException) -> str:

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -145,71 +145,141 @@ def trace(reflector: Reflector, grid: SphereGrid, direction=ON_AXIS, subdivision
 
     Returns cell means relative to the incident intensity (see the module docstring).
     """
-    wp = warp_runtime.init()
-    dev = warp_runtime.resolve_device(device)
-    if not grid.full_circle and grid.dphi > np.pi:
-        raise RaysimError("a phi cell wider than 180 deg is only supported as the full circle")
-    from raysim.optics.kernels import go as K
-
     start = time.perf_counter()
-    report = progress or (lambda stage, fraction: None)
-    k_hat = np.asarray(direction, dtype=np.float64)
-    k_hat = k_hat / np.linalg.norm(k_hat)
-    focus = np.array([0.0, 0.0, reflector.F])
+    result = Tracer(reflector, grid, direction, subdivisions, device).trace(reflector, progress)
+    return replace(result, seconds=time.perf_counter() - start)
 
-    report("lattice", 0.0)
-    lattice = ray_lattice(reflector, subdivisions)
-    n_rays, n_tubes = len(lattice.points), len(lattice.tubes)
 
-    report("bvh", 0.1)
-    mesh = wp.Mesh(points=wp.array(reflector.vertices.astype(np.float32), dtype=wp.vec3, device=dev),
-                   indices=wp.array(reflector.faces.astype(np.int32).ravel(), dtype=wp.int32, device=dev))
-    points = wp.array(lattice.points, dtype=wp.vec3d, device=dev)
-    lit = wp.zeros(n_rays, dtype=wp.int32, device=dev)
-    standoff = float(np.ptp(reflector.vertices, axis=0).max() + 10.0)
-    report("visibility", 0.2)
-    warp_runtime.launch(K.visibility, n_rays,
-                        [mesh.id, points, wp.vec3d(*k_hat), standoff, 1e-3, lit], dev)
-    lit_np = lit.numpy().astype(bool)
+class Tracer:
+    """One GO set-up (mesh topology, sphere grid, wave, lattice) traced for many vertex sets.
 
-    report("surface", 0.4)
-    hits, normals = lift_to_surface(reflector, lattice, k_hat)
+    Built from a ``template`` reflector; :meth:`trace` then takes the template or any twin
+    that shares its faces and panels and differs only in its vertices (``Reflector.deformed``),
+    and gives what :func:`trace` gives for that twin, bit for bit. Kept between traces: the
+    float32 BVH, whose bounds are refitted to each twin's vertices instead of being rebuilt
+    (the ray queries return the nearest hit whatever the tree's shape, so the lit test does
+    not change); the lattice's tubes and the device arrays of the sphere's tables; and, for a
+    wave along -z over a twin with the template's (x, y), each tube's power (its
+    cross-section normal to the wave depends on (x, y) alone there).
+    """
 
-    report("reflect", 0.5)
-    chart = wp.zeros(n_rays, dtype=wp.vec2d, device=dev)
-    ok = wp.array(lit_np.astype(np.int32), dtype=wp.int32, device=dev)
-    warp_runtime.launch(K.reflect_to_sphere, n_rays,
-                        [wp.array(hits, dtype=wp.vec3d, device=dev),
-                         wp.array(normals, dtype=wp.vec3d, device=dev),
-                         wp.vec3d(*k_hat), wp.vec3d(*focus), float(grid.radius), ok, chart], dev)
-    ok_np = ok.numpy().astype(bool)
+    def __init__(self, template: Reflector, grid: SphereGrid, direction=ON_AXIS,
+                 subdivisions: int = 1, device: str | None = "cpu") -> None:
+        wp = warp_runtime.init()
+        self.device = warp_runtime.resolve_device(device)
+        if not grid.full_circle and grid.dphi > np.pi:
+            raise RaysimError("a phi cell wider than 180 deg is only supported as the full circle")
+        self.template, self.grid, self.subdivisions = template, grid, int(subdivisions)
+        k_hat = np.asarray(direction, dtype=np.float64)
+        self.k_hat = k_hat / np.linalg.norm(k_hat)
+        dev = self.device
+        lattice = ray_lattice(template, self.subdivisions)
+        self.n_rays, self.n_tubes = len(lattice.points), len(lattice.tubes)
+        self.mesh = wp.Mesh(points=wp.array(template.vertices.astype(np.float32), dtype=wp.vec3, device=dev),
+                            indices=wp.array(template.faces.astype(np.int32).ravel(), dtype=wp.int32,
+                                             device=dev))
+        self._bvh_of: Reflector = template  # the reflector whose vertices the BVH holds
+        self._tubes = wp.array(lattice.tubes, dtype=wp.vec3i, device=dev)
+        self._rho_edges = wp.array(2.0 * np.sin(0.5 * grid.theta_edges), dtype=wp.float64, device=dev)
+        self._lattice = lattice  # the template's
+        self._axial = bool(self.k_hat[0] == 0.0 and self.k_hat[1] == 0.0)
+        self._power = tube_power(lattice, self.k_hat) if self._axial else None
 
-    report("deposit", 0.6)
-    power_t = tube_power(lattice, k_hat)
-    tube_lit = lit_np[lattice.tubes].all(axis=1)
-    rho_edges = 2.0 * np.sin(0.5 * grid.theta_edges)
-    power = wp.zeros((grid.n_theta, grid.n_phi), dtype=wp.float64, device=dev)
-    warp_runtime.launch(
-        K.deposit_tubes, n_tubes,
-        [chart, ok, wp.array(lattice.tubes, dtype=wp.vec3i, device=dev),
-         wp.array(power_t, dtype=wp.float64, device=dev),
-         wp.array(rho_edges, dtype=wp.float64, device=dev),
-         float(grid.theta_min), float(grid.dtheta), grid.n_theta,
-         float(grid.phi_min), float(grid.dphi), grid.n_phi, int(grid.full_circle), power],
-        dev, private=(12,), min_chunk=2048)
-    power_np = power.numpy()
-    intensity = power_np / grid.cell_area()
-    report("done", 1.0)
-    return GOResult(
-        intensity=intensity,
-        power_lit=float(power_t[tube_lit].sum()),
-        power_on_grid=float(power_np.sum()),
-        n_rays=n_rays,
-        n_tubes=n_tubes,
-        n_shadowed=int((~lit_np).sum()),
-        n_missed=int((lit_np & ~ok_np).sum()),
-        seconds=time.perf_counter() - start,
-    )
+    def _check_twin(self, reflector: Reflector) -> None:
+        t = self.template
+        if reflector is t:
+            return
+        if reflector.faces is not t.faces and not np.array_equal(reflector.faces, t.faces):
+            raise RaysimError("a Tracer traces twins of its template only (the same faces)")
+        if reflector.face_panel is not t.face_panel and not np.array_equal(reflector.face_panel,
+                                                                           t.face_panel):
+            raise RaysimError("a Tracer traces twins of its template only (the same panels)")
+
+    def _twin_lattice(self, reflector: Reflector) -> RayLattice:
+        """The rays of ``reflector``: its own points and normals, the template's tubes and panels."""
+        t = self._lattice
+        if reflector is self.template:
+            return t
+        if self.subdivisions == 1:
+            return RayLattice(reflector.vertices, t.panel, reflector.vertex_normals, t.tubes)
+        return ray_lattice(reflector, self.subdivisions)
+
+    def _update_bvh(self, reflector: Reflector) -> None:
+        """Refit the BVH's bounds to ``reflector``'s vertices (float32), unless it has them."""
+        if reflector is self._bvh_of:
+            return
+        self.mesh.points.assign(reflector.vertices.astype(np.float32))
+        self.mesh.refit()
+        self._bvh_of = reflector
+
+    def _tube_power(self, reflector: Reflector, lattice: RayLattice) -> NDArray[np.float64]:
+        """Power of each tube: the template's where only z moved under an axial wave."""
+        if self._power is None:
+            return tube_power(lattice, self.k_hat)
+        t = self.template.vertices
+        same_xy = reflector is self.template or np.array_equal(reflector.vertices[:, :2], t[:, :2])
+        return self._power if same_xy else tube_power(lattice, self.k_hat)
+
+    def trace(self, reflector: Reflector, progress: Progress | None = None) -> GOResult:
+        """The GO result of ``reflector`` (the template or a twin of it); see :func:`trace`."""
+        wp = warp_runtime.init()
+        from raysim.optics.kernels import go as K
+
+        self._check_twin(reflector)
+        start = time.perf_counter()
+        report = progress or (lambda stage, fraction: None)
+        dev, grid, k_hat = self.device, self.grid, self.k_hat
+        focus = np.array([0.0, 0.0, reflector.F])
+
+        report("lattice", 0.0)
+        lattice = self._twin_lattice(reflector)
+        n_rays = len(lattice.points)
+
+        report("bvh", 0.1)
+        self._update_bvh(reflector)
+        points = wp.array(lattice.points, dtype=wp.vec3d, device=dev)
+        lit = wp.zeros(n_rays, dtype=wp.int32, device=dev)
+        standoff = float(np.ptp(reflector.vertices, axis=0).max() + 10.0)
+        report("visibility", 0.2)
+        warp_runtime.launch(K.visibility, n_rays,
+                            [self.mesh.id, points, wp.vec3d(*k_hat), standoff, 1e-3, lit], dev)
+        lit_np = lit.numpy().astype(bool)
+
+        report("surface", 0.4)
+        hits, normals = lift_to_surface(reflector, lattice, k_hat)
+
+        report("reflect", 0.5)
+        chart = wp.zeros(n_rays, dtype=wp.vec2d, device=dev)
+        ok = wp.array(lit_np.astype(np.int32), dtype=wp.int32, device=dev)
+        warp_runtime.launch(K.reflect_to_sphere, n_rays,
+                            [wp.array(hits, dtype=wp.vec3d, device=dev),
+                             wp.array(normals, dtype=wp.vec3d, device=dev),
+                             wp.vec3d(*k_hat), wp.vec3d(*focus), float(grid.radius), ok, chart], dev)
+        ok_np = ok.numpy().astype(bool)
+
+        report("deposit", 0.6)
+        power_t = self._tube_power(reflector, lattice)
+        tube_lit = lit_np[lattice.tubes].all(axis=1)
+        power = wp.zeros((grid.n_theta, grid.n_phi), dtype=wp.float64, device=dev)
+        warp_runtime.launch(
+            K.deposit_tubes, self.n_tubes,
+            [chart, ok, self._tubes, wp.array(power_t, dtype=wp.float64, device=dev), self._rho_edges,
+             float(grid.theta_min), float(grid.dtheta), grid.n_theta,
+             float(grid.phi_min), float(grid.dphi), grid.n_phi, int(grid.full_circle), power],
+            dev, private=(12,), min_chunk=2048)
+        power_np = power.numpy()
+        intensity = power_np / grid.cell_area()
+        report("done", 1.0)
+        return GOResult(
+            intensity=intensity,
+            power_lit=float(power_t[tube_lit].sum()),
+            power_on_grid=float(power_np.sum()),
+            n_rays=n_rays,
+            n_tubes=self.n_tubes,
+            n_shadowed=int((~lit_np).sum()),
+            n_missed=int((lit_np & ~ok_np).sum()),
+            seconds=time.perf_counter() - start,
+        )
 
 
 @lru_cache(maxsize=4)
