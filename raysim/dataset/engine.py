@@ -30,6 +30,7 @@ from raysim.surface.panels import PanelLayout
 
 Stages = Callable[[str, float], None]  # (stage, seconds it took)
 _SETUPS: OrderedDict[tuple[str, str], GOSetup] = OrderedDict()
+_IDEALS: OrderedDict[tuple[str, str, int], np.ndarray] = OrderedDict()
 _KEEP = 2  # specs whose set-up a process keeps
 
 
@@ -94,6 +95,18 @@ def intensity(spec: DatasetSpec, deformation: Deformation | None, f_index: int,
     values = wave_intensity(scene, reflector, spec.method, device)
     report("wave", time.perf_counter() - start)
     return values
+
+
+def ideal_intensity(spec: DatasetSpec, f_index: int, device: str = "cpu") -> np.ndarray:
+    """The ideal paraboloid's intensity at frequency ``f_index``, once per process (the same
+    array every call: do not write into it)."""
+    key = (spec.fingerprint, device, int(f_index))
+    if key not in _IDEALS:
+        _IDEALS[key] = intensity(spec, None, f_index, device)
+        _IDEALS[key].flags.writeable = False
+        while len(_IDEALS) > 4 * _KEEP:
+            _IDEALS.popitem(last=False)
+    return _IDEALS[key]
 
 
 def wave_intensity(scene, reflector: Reflector, method: str, device: str = "cpu") -> np.ndarray:

@@ -7,7 +7,9 @@ Layout (Zarr format 3, every array with ``dimension_names`` and a ``units`` attr
   ``y`` (m, the N x N cell-centred aperture grid), ``frequency`` (Hz), and per model its own
   (``<model>_term_n``/``_m``, ``panel``);
 - ``intensity(sample, theta, phi)``: |E|^2 relative to the incident wave, one chunk per
-  sample; ``intensity_ideal(frequency, theta, phi)``, the ideal paraboloid once per frequency;
+  sample; with measurement effects also ``intensity_measured`` (the same with the sample's
+  effects, NaN where a point is missing) and the effects' values ``measure_*``;
+  ``intensity_ideal(frequency, theta, phi)``, the ideal paraboloid once per frequency;
 - ``deformation(sample, y, x)``: delta (m), NaN outside the aperture r < D/2;
 - ``seed``, ``split`` (0 train, 1 validation), ``frequency_hz``, ``rms``, ``peak_to_peak``
   and every model's parameters per sample; ``status`` (0 pending, 1 done, 2 failed),
@@ -163,9 +165,12 @@ class Writer:
         self["rms"][index] = float(np.sqrt(np.mean(values**2))) if values.size else math.nan
         self["peak_to_peak"][index] = float(np.ptp(values)) if values.size else math.nan
 
-    def done(self, index: int, intensity: np.ndarray, seconds: float, cpu_seconds: float = math.nan) -> None:
-        """The sample's intensity, then its completion marker (last)."""
+    def done(self, index: int, intensity: np.ndarray, seconds: float, cpu_seconds: float = math.nan,
+             measured: np.ndarray | None = None) -> None:
+        """The sample's intensity (and its measured one), then its completion marker (last)."""
         self["intensity"][index] = intensity
+        if measured is not None:
+            self["intensity_measured"][index] = measured
         self["seconds"][index] = seconds
         self["cpu_seconds"][index] = cpu_seconds
         self["error"][index] = ""
@@ -213,6 +218,8 @@ def _attributes(spec: DatasetSpec) -> dict[str, Any]:
         "phi_max": float(grid.phi_max),
         "validation_fraction": spec.validation_fraction,
         "models": ", ".join(f"{m.name} ({m.kind})" for m in spec.models) or "none",
+        "measurement": "intensity_measured: intensity with the measure_* effects of each sample "
+                       "(raysim.dataset.effects)" if spec.measurement is not None else "none",
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
         "status_meanings": "0 pending, 1 done, 2 failed",
         **versions(),

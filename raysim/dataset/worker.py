@@ -31,7 +31,7 @@ from typing import Any
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from raysim.dataset.engine import intensity, simulate_sample
+from raysim.dataset.engine import ideal_intensity, simulate_sample
 from raysim.dataset.sampling import draw_sample
 from raysim.dataset.spec import DatasetError, DatasetSpec, parse_spec
 from raysim.dataset.store import Writer, open_readonly
@@ -125,7 +125,7 @@ def run_ideal(store: str, fingerprint: str, f_index: int, device: str = "cpu") -
     ctx = context(store, fingerprint)
     start = time.perf_counter()
     try:
-        ctx.writer.ideal(f_index, intensity(ctx.spec, None, f_index, device))
+        ctx.writer.ideal(f_index, ideal_intensity(ctx.spec, f_index, device))
         return {"frequency": f_index, "ok": True, "error": "", "seconds": time.perf_counter() - start}
     except Exception as exc:  # recorded, never raised: the samples still go on
         reason = _reason(exc)
@@ -144,8 +144,10 @@ def run_sample(store: str, fingerprint: str, index: int, device: str = "cpu") ->
         writer.params(index, draw.params, spec.frequencies[draw.frequency_index],
                       spec.grid.evaluate(draw.deformation))
         values = simulate_sample(spec, draw.deformation, draw.frequency_index, device)
+        measured = None if draw.effects is None else \
+            draw.measured(values, ideal_intensity(spec, draw.frequency_index, device), spec)
         seconds = time.perf_counter() - start
-        writer.done(index, values, seconds, time.process_time() - cpu_start)
+        writer.done(index, values, seconds, time.process_time() - cpu_start, measured)
         return {"index": index, "ok": True, "error": "", "seconds": seconds}
     except Exception as exc:
         reason = _reason(exc)
