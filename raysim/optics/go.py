@@ -21,6 +21,7 @@ the cell over its area, relative to the incident intensity.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -184,6 +185,7 @@ class Tracer:
         self._lattice = lattice  # the template's
         self._axial = bool(self.k_hat[0] == 0.0 and self.k_hat[1] == 0.0)
         self._power = tube_power(lattice, self.k_hat) if self._axial else None
+        self._lock = threading.Lock()
 
     def _check_twin(self, reflector: Reflector) -> None:
         t = self.template
@@ -221,7 +223,13 @@ class Tracer:
         return self._power if same_xy else tube_power(lattice, self.k_hat)
 
     def trace(self, reflector: Reflector, progress: Progress | None = None) -> GOResult:
-        """The GO result of ``reflector`` (the template or a twin of it); see :func:`trace`."""
+        """The GO result of ``reflector`` (the template or a twin of it); see :func:`trace`.
+
+        One trace at a time: the BVH holds one twin's vertices (concurrent calls queue)."""
+        with self._lock:
+            return self._trace(reflector, progress)
+
+    def _trace(self, reflector: Reflector, progress: Progress | None) -> GOResult:
         wp = warp_runtime.init()
         from raysim.optics.kernels import go as K
 
@@ -287,15 +295,24 @@ def _ideal_paraboloid(D: float, F: float, resolution: float) -> Reflector:
     return paraboloid(D, F, resolution)
 
 
+@lru_cache(maxsize=2)
+def _forward_tracer(D: float, F: float, resolution: float, grid: SphereGrid, subdivisions: int,
+                    device: str) -> Tracer:
+    return Tracer(_ideal_paraboloid(D, F, resolution), grid, ON_AXIS, subdivisions, device)
+
+
 def forward_intensity(grid: SphereGrid, F: float, D: float, deformation: Deformation | None = None,
                       device: str | None = "cpu", resolution: float = 0.15,
                       subdivisions: int = 1) -> NDArray[np.float64]:
     """GO cell-mean intensity on ``grid`` of the paraboloid (D, F in m) plus ``deformation``.
 
     The forward model of the inversion: it needs only what every FieldMap carries. The ideal
-    mesh is built once per (D, F, resolution) and reused; the deformed one displaces it.
+    mesh and its :class:`Tracer` are made once per (D, F, resolution, grid) and reused; the
+    deformed mesh displaces the ideal one and is traced with the BVH refitted.
     """
-    ideal = _ideal_paraboloid(float(D), float(F), float(resolution))
+    tracer = _forward_tracer(float(D), float(F), float(resolution), grid, int(subdivisions),
+                             warp_runtime.resolve_device(device))
+    ideal = tracer.template
     reflector = ideal if deformation is None or isinstance(deformation, NoDeformation) \
         else ideal.deformed(deformation)
-    return trace(reflector, grid, ON_AXIS, subdivisions, device).intensity
+    return tracer.trace(reflector).intensity
