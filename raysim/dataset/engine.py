@@ -4,7 +4,8 @@ and the intensity of one deformed reflector.
 Every sample of a spec traces a twin of the same ideal mesh (same triangulation, vertices
 moved along z), on the same sphere grid, under the same wave. So each process keeps, per
 spec: the ideal mesh; for GO a :class:`raysim.optics.go.Tracer` (its BVH refitted to each
-twin instead of rebuilt, the lattice's tubes and, on axis, their power) and the
+twin instead of rebuilt, the lattice's tubes and, on axis, their power; on axis over a mesh
+whose vertices stand clear of the other faces, no visibility test at all) and the
 :class:`~raysim.dataset.memo.VertexFactors` of the deformations at the mesh's vertices. The
 ideal intensity itself (any method) is made once per frequency by the run's ideal tasks and
 stored; a sample computes its deformed reflector only. None of this changes a number: a
@@ -63,7 +64,8 @@ def go_setup(spec: DatasetSpec, device: str = "cpu") -> GOSetup:
         return _SETUPS[key]
     ideal = spec_reflector(spec)
     scene = spec.scene
-    tracer = go.Tracer(ideal, scene.sphere, scene.source.direction, scene.subdivisions, device)
+    tracer = go.Tracer(ideal, scene.sphere, scene.source.direction, scene.subdivisions, device,
+                       footprint_shortcut=True)
     setup = GOSetup(ideal, tracer, VertexFactors(ideal.vertices[:, 0], ideal.vertices[:, 1]))
     _SETUPS[key] = setup
     while len(_SETUPS) > _KEEP:

@@ -162,10 +162,18 @@ class Tracer:
     not change); the lattice's tubes and the device arrays of the sphere's tables; and, for a
     wave along -z over a twin with the template's (x, y), each tube's power (its
     cross-section normal to the wave depends on (x, y) alone there).
+
+    With ``footprint_shortcut``, a wave along -z and rays at the vertices (``subdivisions``
+    1), a twin with the template's (x, y) skips the BVH and its visibility test when the
+    template's vertices stand clear of the faces they are not corners of
+    (:func:`raysim.surface.footprint.vertices_clear_of_other_faces`, checked once, on the
+    first such twin): a ray along -z through a vertex can then meet only that vertex's own
+    faces, at the vertex, so the test would find every ray lit.
     """
 
     def __init__(self, template: Reflector, grid: SphereGrid, direction=ON_AXIS,
-                 subdivisions: int = 1, device: str | None = "cpu") -> None:
+                 subdivisions: int = 1, device: str | None = "cpu",
+                 footprint_shortcut: bool = False) -> None:
         wp = warp_runtime.init()
         self.device = warp_runtime.resolve_device(device)
         if not grid.full_circle and grid.dphi > np.pi:
@@ -186,6 +194,8 @@ class Tracer:
         self._axial = bool(self.k_hat[0] == 0.0 and self.k_hat[1] == 0.0)
         self._power = tube_power(lattice, self.k_hat) if self._axial else None
         self._lock = threading.Lock()
+        self._shortcut = bool(footprint_shortcut and self._axial and self.subdivisions == 1)
+        self._clear: bool | None = None  # the template's footprint check, once needed
 
     def _check_twin(self, reflector: Reflector) -> None:
         t = self.template
@@ -214,13 +224,25 @@ class Tracer:
         self.mesh.refit()
         self._bvh_of = reflector
 
+    def _all_lit(self, reflector: Reflector) -> bool:
+        """Whether the footprint shortcut decides that every ray of ``reflector`` is lit."""
+        if not self._shortcut or not self._same_xy(reflector):
+            return False
+        if self._clear is None:
+            from raysim.surface.footprint import vertices_clear_of_other_faces
+
+            self._clear = vertices_clear_of_other_faces(self.template.vertices, self.template.faces)
+        return self._clear
+
+    def _same_xy(self, reflector: Reflector) -> bool:
+        t = self.template.vertices
+        return reflector is self.template or np.array_equal(reflector.vertices[:, :2], t[:, :2])
+
     def _tube_power(self, reflector: Reflector, lattice: RayLattice) -> NDArray[np.float64]:
         """Power of each tube: the template's where only z moved under an axial wave."""
         if self._power is None:
             return tube_power(lattice, self.k_hat)
-        t = self.template.vertices
-        same_xy = reflector is self.template or np.array_equal(reflector.vertices[:, :2], t[:, :2])
-        return self._power if same_xy else tube_power(lattice, self.k_hat)
+        return self._power if self._same_xy(reflector) else tube_power(lattice, self.k_hat)
 
     def trace(self, reflector: Reflector, progress: Progress | None = None) -> GOResult:
         """The GO result of ``reflector`` (the template or a twin of it); see :func:`trace`.
@@ -244,14 +266,18 @@ class Tracer:
         n_rays = len(lattice.points)
 
         report("bvh", 0.1)
-        self._update_bvh(reflector)
-        points = wp.array(lattice.points, dtype=wp.vec3d, device=dev)
-        lit = wp.zeros(n_rays, dtype=wp.int32, device=dev)
-        standoff = float(np.ptp(reflector.vertices, axis=0).max() + 10.0)
-        report("visibility", 0.2)
-        warp_runtime.launch(K.visibility, n_rays,
-                            [self.mesh.id, points, wp.vec3d(*k_hat), standoff, 1e-3, lit], dev)
-        lit_np = lit.numpy().astype(bool)
+        if self._all_lit(reflector):
+            report("visibility", 0.2)
+            lit_np = np.ones(n_rays, dtype=bool)
+        else:
+            self._update_bvh(reflector)
+            points = wp.array(lattice.points, dtype=wp.vec3d, device=dev)
+            lit = wp.zeros(n_rays, dtype=wp.int32, device=dev)
+            standoff = float(np.ptp(reflector.vertices, axis=0).max() + 10.0)
+            report("visibility", 0.2)
+            warp_runtime.launch(K.visibility, n_rays,
+                                [self.mesh.id, points, wp.vec3d(*k_hat), standoff, 1e-3, lit], dev)
+            lit_np = lit.numpy().astype(bool)
 
         report("surface", 0.4)
         hits, normals = lift_to_surface(reflector, lattice, k_hat)

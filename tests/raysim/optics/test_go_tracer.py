@@ -73,3 +73,29 @@ def test_a_tracer_refuses_a_mesh_of_other_faces():
     tracer = go.Tracer(paraboloid(40.0, 15.0, 2.0), grid)
     with pytest.raises(RaysimError, match="twins of its template"):
         tracer.trace(paraboloid(40.0, 15.0, 3.0))
+
+
+def test_footprint_shortcut_changes_no_result():
+    from raysim.surface.footprint import vertices_clear_of_other_faces
+    from raysim.surface.panels import PanelLayout as Layout
+
+    grid = SphereGrid(5.0, 24, 60)
+    rings = ((0.0, 8.0, 14.0, 20.0), (6, 12, 18))
+    gapped = paraboloid(40.0, 15.0, 1.5, Layout(*rings, 0.05))
+    touching = paraboloid(40.0, 15.0, 1.5, Layout(*rings, 0.0))  # vertices on the next panel's edges
+    plates = _stacked_plates(2.0)
+    assert vertices_clear_of_other_faces(gapped.vertices, gapped.faces)
+    assert not vertices_clear_of_other_faces(touching.vertices, touching.faces)
+    assert not vertices_clear_of_other_faces(plates.vertices, plates.faces)
+    for template in (gapped, touching):
+        tracer = go.Tracer(template, grid, footprint_shortcut=True)
+        for s in (1.0, -2.0):
+            twin = template.deformed(PaperDeformation(40.0, 15.0, s))
+            assert _same(tracer.trace(twin), go.trace(twin, grid))
+        assert tracer._clear is (template is gapped)
+    lowered = plates.vertices.copy()
+    lowered[plates.vertices[:, 2] > 1.0, 2] = -2.0
+    twin = dataclasses.replace(plates, vertices=lowered)
+    tracer = go.Tracer(plates, grid, footprint_shortcut=True)
+    result = tracer.trace(twin)
+    assert result.n_shadowed > 0 and _same(result, go.trace(twin, grid))
