@@ -137,6 +137,14 @@ def cluster_run(spec_path: Path, workers: int, threads: int, folder: Path) -> di
             "load_average": os.getloadavg()[0]}
 
 
+def save(results: dict, path: Path | None) -> None:
+    """Record the load average at the end and write ``results`` as JSON to ``path`` (if any)."""
+    results["load_average_end"] = os.getloadavg()
+    if path:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(results, indent=2))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=16)
@@ -173,10 +181,7 @@ def main() -> None:
               f"{row['steady_samples_per_s']:.3f} samples/s, "
               f"median task {row['task_seconds_median']:.2f} s wall, "
               f"{row['task_cpu_seconds_median']:.2f} s CPU; load {row['load_average']:.1f}")
-        results["load_average_end"] = os.getloadavg()
-        if args.json:
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps(results, indent=2))
+        save(results, args.json)
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 

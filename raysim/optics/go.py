@@ -166,9 +166,9 @@ class Tracer:
     With ``footprint_shortcut``, a wave along -z and rays at the vertices (``subdivisions``
     1), a twin with the template's (x, y) skips the BVH and its visibility test when the
     template's vertices stand clear of the faces they are not corners of
-    (:func:`raysim.surface.footprint.vertices_clear_of_other_faces`, checked once, on the
-    first such twin): a ray along -z through a vertex can then meet only that vertex's own
-    faces, at the vertex, so the test would find every ray lit.
+    (:func:`raysim.surface.footprint.vertices_clear_of_other_faces`, checked once, here): a
+    ray along -z through a vertex can then meet only that vertex's own faces, at the vertex,
+    so the test would find every ray lit.
     """
 
     def __init__(self, template: Reflector, grid: SphereGrid, direction=ON_AXIS,
@@ -194,8 +194,11 @@ class Tracer:
         self._axial = bool(self.k_hat[0] == 0.0 and self.k_hat[1] == 0.0)
         self._power = tube_power(lattice, self.k_hat) if self._axial else None
         self._lock = threading.Lock()
-        self._shortcut = bool(footprint_shortcut and self._axial and self.subdivisions == 1)
-        self._clear: bool | None = None  # the template's footprint check, once needed
+        self._clear = False  # whether the footprint shortcut holds for this template
+        if footprint_shortcut and self._axial and self.subdivisions == 1:
+            from raysim.surface.footprint import vertices_clear_of_other_faces
+
+            self._clear = vertices_clear_of_other_faces(template.vertices, template.faces)
 
     def _check_twin(self, reflector: Reflector) -> None:
         t = self.template
@@ -226,13 +229,7 @@ class Tracer:
 
     def _all_lit(self, reflector: Reflector) -> bool:
         """Whether the footprint shortcut decides that every ray of ``reflector`` is lit."""
-        if not self._shortcut or not self._same_xy(reflector):
-            return False
-        if self._clear is None:
-            from raysim.surface.footprint import vertices_clear_of_other_faces
-
-            self._clear = vertices_clear_of_other_faces(self.template.vertices, self.template.faces)
-        return self._clear
+        return self._clear and self._same_xy(reflector)
 
     def _same_xy(self, reflector: Reflector) -> bool:
         t = self.template.vertices

@@ -143,3 +143,12 @@ def test_a_store_without_effects_has_no_measured_intensity(tmp_path):
     assert "intensity_measured" not in group and not any(k.startswith("measure_") for k in group)
     with pytest.raises(DatasetError, match="no measured intensity"):
         sample_fieldmap(open_dataset(tmp_path / "plain.zarr"), 0, "measured")
+
+
+def test_the_demo_specs_commented_measurement_table_is_valid():
+    text = (ROOT / "scenes" / "dataset_demo.toml").read_text()
+    head, _, tail = text.partition("# [measurement]")
+    lines = ["[measurement]"] + [line[2:] for line in tail.splitlines() if line.startswith("# ") and "=" in line]
+    spec = parse_spec(head + "\n".join(lines) + "\n", base=ROOT / "scenes")
+    assert spec.measurement is not None and spec.measurement.readings.support == (1.0, 4.0)
+    assert spec.measurement.centre_offset.b == pytest.approx(1e-3)  # mm in the file, m inside
