@@ -14,10 +14,11 @@ per sample. Nothing is trained here.
 
     python benchmarks/bench_baseline.py [--store STORE.zarr] [--samples 20] [--json out.json]
 
-Without a store (``--store`` absent or not there yet) it first makes one of the paper's dish (D = 110 m, F = 33 m, R = 10 m,
-90 x 360 cells, 0.15 m mesh) with the error models of ``bench_dataset.py`` and a set of
-measurement effects (0.01 dB readings, two per point, 0.2 dB unknown gain, 0.5 mm centre
-offsets, up to 0.005 dB of uncorrected drift, 0.2 % missing points) on two local workers.
+Without a store (``--store`` absent or not there yet) it first makes one of the paper's dish
+(D = 110 m, F = 33 m, R = 10 m, 90 x 360 cells, 0.15 m mesh) with the error models of
+``bench_dataset.py`` and a set of measurement effects (0.01 dB readings, two per point,
+0.2 dB unknown gain, 0.5 mm centre offsets, up to 0.005 dB of uncorrected drift, 0.2 %
+missing points) on two local workers.
 """
 
 from __future__ import annotations
