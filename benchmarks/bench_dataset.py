@@ -5,10 +5,11 @@ The dish is the paper's (D = 110 m, F = 33 m, R = 10 m, 90 x 360 one-degree cell
 0.15 m mesh); each sample is a Zernike spectrum (orders 2..6) plus actuator-scale bumps plus
 a gravity-like rim astigmatism, as a training set would hold. Run from the repository root:
 
-    python benchmarks/bench_dataset.py [--samples 8] [--workers 1,2] [--json out/bench.json]
+    python benchmarks/bench_dataset.py [--samples 16] [--workers 1,2] [--json out/bench.json]
 
-It prints the stages of one sample in this process (drawing, the deformation map, displacing
-the mesh, the trace; wall time, and the CPU time of the whole sample) and, per cluster, the
+It prints the stages of one sample in this process (drawing, the deformation map, the mesh's
+deformed twin, the BVH refit, GO's visibility, surface, reflection and deposition, the store
+write; wall time, and the CPU time of the whole sample) and, per cluster, the
 wall time, the steady throughput (samples finished per second between the first and the last
 completion, so start-up is left out), the speed-up over one worker, and the median wall and
 CPU time of a sample's task as the store records them. The load average is printed too: on
@@ -68,42 +69,50 @@ rms_um = {{ uniform = [40.0, 150.0] }}
 """
 
 
-def one_sample(spec, threads: int, repeats: int = 3) -> dict[str, float]:
-    """Median stage times (s) of one sample in this process, with ``threads`` per launch."""
+def one_sample(spec, threads: int, folder: Path, repeats: int = 3) -> dict[str, float]:
+    """Median stage times (s) of one sample in this process, with ``threads`` per launch.
+
+    Stages: ``draw`` (the random surface and its parameters), ``map`` (delta on the stored
+    aperture grid), ``deform`` (the mesh's twin: delta and its slopes at the vertices), ``bvh``
+    (refit), ``visibility``, ``surface`` (hits and normals on the smooth surface), ``reflect``,
+    ``deposit`` (GO's stages), ``write`` (the sample's arrays into a local Zarr store).
+    """
     os.environ["RAYSIM_THREADS"] = str(threads)
     from raysim.dataset import draw_sample
-    from raysim.dataset.memo import Memo
-    from raysim.dataset.worker import _ideal_reflector, prepare_process
-    from raysim.optics import go
+    from raysim.dataset import store as zstore
+    from raysim.dataset.engine import go_setup, simulate_sample
+    from raysim.dataset.worker import prepare_process
 
     prepare_process(threads)
-    dish, scene = spec.scene.dish, spec.scene
     start = time.perf_counter()
-    ideal = _ideal_reflector(dish.diameter, dish.focal_length, dish.resolution, scene.panels)
-    mesh_s = time.perf_counter() - start
-    stages: dict[str, list[float]] = {"draw": [], "map": [], "deform": [], "trace": []}
+    go_setup(spec)
+    setup_s = time.perf_counter() - start
+    writer = zstore.Writer(zstore.create(str(folder / f"one_t{threads}.zarr"), spec))
+    stages: dict[str, list[float]] = {}
     cpu: list[float] = []
-    for i in range(repeats + 1):
+    for i in range(repeats + 1):  # the first round warms the caches
+        seen: dict[str, float] = {}
         c0 = time.process_time()
         t0 = time.perf_counter()
         draw = draw_sample(spec, i)
         t1 = time.perf_counter()
-        spec.grid.evaluate(draw.deformation)
+        deformation_map = spec.grid.evaluate(draw.deformation)
+        seen.update(draw=t1 - t0, map=time.perf_counter() - t1)
+        values = simulate_sample(spec, draw.deformation, draw.frequency_index,
+                                 stages=seen.__setitem__)
         t2 = time.perf_counter()
-        deformed = ideal.deformed(Memo(draw.deformation))
-        t3 = time.perf_counter()
-        go.trace(deformed, scene.sphere, scene.source.direction, scene.subdivisions)
-        t4 = time.perf_counter()
+        writer.params(i, draw.params, spec.frequencies[draw.frequency_index], deformation_map)
+        writer.done(i, values, 0.0)
+        seen["write"] = time.perf_counter() - t2
         if i:
             cpu.append(time.process_time() - c0)
-        if i:  # the first round warms caches
-            for key, value in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t4 - t3), strict=True):
-                stages[key].append(value)
+            for key, value in seen.items():
+                stages.setdefault(key, []).append(value)
     out = {key: float(np.median(v)) for key, v in stages.items()}
-    out["ideal_mesh_once"] = mesh_s
-    out["total"] = out["draw"] + out["map"] + out["deform"] + out["trace"]
+    out["total"] = sum(out.values())
     out["total_cpu"] = float(np.median(cpu))  # CPU seconds of this process (all its threads)
-    out["rays"] = float(len(ideal.vertices))
+    out["setup_once"] = setup_s  # ideal mesh, tracer (BVH build), first of the factors
+    out["rays"] = float(len(go_setup(spec).ideal.vertices))
     return out
 
 
@@ -128,9 +137,17 @@ def cluster_run(spec_path: Path, workers: int, threads: int, folder: Path) -> di
             "load_average": os.getloadavg()[0]}
 
 
+def save(results: dict, path: Path | None) -> None:
+    """Record the load average at the end and write ``results`` as JSON to ``path`` (if any)."""
+    results["load_average_end"] = os.getloadavg()
+    if path:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(results, indent=2))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--samples", type=int, default=8)
+    parser.add_argument("--samples", type=int, default=16)
     parser.add_argument("--workers", default="1,2", help="comma-separated local worker counts")
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
     args = parser.parse_args()
@@ -144,7 +161,7 @@ def main() -> None:
         print(f"cores usable: {len(os.sched_getaffinity(0))}, load average {os.getloadavg()}")
         results: dict[str, object] = {"one_sample": {}, "clusters": []}
         for threads in (1, 2):
-            cost = one_sample(spec, threads)
+            cost = one_sample(spec, threads, folder)
             results["one_sample"][f"threads_{threads}"] = cost
             print(f"one sample, {threads} thread(s) per launch: " + ", ".join(
                 f"{k} {v:.3f} s" if k != "rays" else f"{int(v):,} rays" for k, v in cost.items()))
@@ -164,10 +181,7 @@ def main() -> None:
               f"{row['steady_samples_per_s']:.3f} samples/s, "
               f"median task {row['task_seconds_median']:.2f} s wall, "
               f"{row['task_cpu_seconds_median']:.2f} s CPU; load {row['load_average']:.1f}")
-        results["load_average_end"] = os.getloadavg()
-        if args.json:
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps(results, indent=2))
+        save(results, args.json)
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from hardware.config import Table, read_toml
 from hardware.errors import PlanError
+from raysim.maps.measurement import probe_point
 
 TWO_PI = 2.0 * math.pi
 
@@ -105,11 +106,8 @@ class Rig:
         """
         s = slider - self.calibration.slider_zero
         a = rotation - self.calibration.rotation_zero
-        u = np.array([math.sin(s) * math.cos(a), math.sin(s) * math.sin(a), -math.cos(s)])
-        p = np.asarray(self.calibration.centre_offset, dtype=np.float64) + self.radius * u
-        theta = math.atan2(math.hypot(float(p[0]), float(p[1])), float(-p[2]))
-        phi = math.atan2(float(p[1]), float(p[0])) % TWO_PI
-        return theta, phi, float(np.linalg.norm(p))
+        theta, phi, r = probe_point(s, a, self.radius, self.calibration.centre_offset)
+        return float(theta), float(phi), float(r)
 
     def within_limits(self, slider: float, rotation: float) -> bool:
         """Whether axis readings (rad) lie inside the travel limits."""

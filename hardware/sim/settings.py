@@ -14,6 +14,7 @@ from typing import Any
 
 from hardware.config import Table
 from hardware.rig import Calibration, Rig
+from raysim.maps import measurement
 
 
 @dataclass(frozen=True)
@@ -80,10 +81,9 @@ def drift_db(settings: SimSettings, index: int) -> float:
     """Receiver gain drift (dB) at sample ``index`` since the start of the scan (0 at index 0).
 
     A slow sinusoid of amplitude ``drift_db`` and period ``drift_period`` samples whose phase
-    follows from the seed: A (sin(2 pi n / P + p) - sin(p)).
+    follows from the seed (:func:`raysim.maps.measurement.drift_db`).
     """
     if settings.drift_db == 0.0:
         return 0.0
     phase = (settings.seed * 0.6180339887498949 % 1.0) * 2.0 * math.pi
-    wave = math.sin(2.0 * math.pi * index / settings.drift_period + phase) - math.sin(phase)
-    return settings.drift_db * wave
+    return float(measurement.drift_db(settings.drift_db, settings.drift_period, phase, index))

@@ -12,10 +12,15 @@ Modules, in the order data flows through them:
 - ``store_layout``, ``store``: the Zarr layout; creation, checks, per-sample writes.
 - ``worker``: what runs in a Dask worker (set-up plugin, the sample and ideal tasks).
 - ``run``: the client (:func:`generate`): cluster, tasks, progress, resume.
+- ``effects``: measurement effects (the spec's ``[measurement]`` table), drawn per sample.
+- ``memo``, ``engine``: one sample's physics, with what the samples share kept per process.
 - ``reading``: the store as xarray, one sample as a FieldMap, one sample regenerated alone.
+- ``loader``: normalised (input, target) training batches; ``torch_data`` and ``jax_data``
+  wrap it for PyTorch and JAX (optional extras).
 """
 
-from raysim.dataset.reading import open_dataset, sample_fieldmap, sample_intensity
+from raysim.dataset.loader import Loader
+from raysim.dataset.reading import open_dataset, sample_fieldmap, sample_intensity, sample_measured
 from raysim.dataset.run import RunReport, generate
 from raysim.dataset.sampling import SampleDraw, draw_sample, sample_seed, validation_mask
 from raysim.dataset.spec import DatasetError, DatasetSpec, load_spec, parse_spec
@@ -23,6 +28,7 @@ from raysim.dataset.spec import DatasetError, DatasetSpec, load_spec, parse_spec
 __all__ = [
     "DatasetError",
     "DatasetSpec",
+    "Loader",
     "RunReport",
     "SampleDraw",
     "draw_sample",
@@ -32,6 +38,7 @@ __all__ = [
     "parse_spec",
     "sample_fieldmap",
     "sample_intensity",
+    "sample_measured",
     "sample_seed",
     "validation_mask",
 ]

@@ -232,27 +232,35 @@ class RimAstigmatism(Deformation):
     angle: float
     radius: float
 
-    def _parts(self, x, y):
+    def geometry(self, x, y) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        """(phi, rho = r / a, cos phi, sin phi) at (x, y): what a value there owes to the
+        points and the radius alone, so a caller may keep it for fixed points."""
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
         r = np.hypot(x, y)
         phi = np.arctan2(y, x)
-        rho = r / self.radius
+        return phi, r / self.radius, np.cos(phi), np.sin(phi)
+
+    def evaluate(self, x, y, gradient: bool, geometry=None):
+        """(delta, d/dx, d/dy) at (x, y) (the gradient None unless asked), from ``geometry``
+        (as :meth:`geometry` gives it at these points) when given."""
+        phi, rho, c, s = self.geometry(x, y) if geometry is None else geometry
         c2 = np.cos(2.0 * (phi - self.angle))
+        value = self.amplitude * rho**self.exponent * c2
+        if not gradient:
+            return value, None, None
         s2 = np.sin(2.0 * (phi - self.angle))
-        return phi, rho, c2, s2
-
-    def __call__(self, x, y, panel=None):
-        _, rho, c2, _ = self._parts(x, y)
-        return self.amplitude * rho**self.exponent * c2
-
-    def gradient(self, x, y, panel=None):
-        phi, rho, c2, s2 = self._parts(x, y)
         base = self.amplitude * rho ** (self.exponent - 1.0) / self.radius  # A rho^(p-1) / a
         d_dr = self.exponent * base * c2
         d_tangential = -2.0 * base * s2  # (1/r) d/dphi
-        c, s = np.cos(phi), np.sin(phi)
-        return c * d_dr - s * d_tangential, s * d_dr + c * d_tangential
+        return value, c * d_dr - s * d_tangential, s * d_dr + c * d_tangential
+
+    def __call__(self, x, y, panel=None):
+        return self.evaluate(x, y, gradient=False)[0]
+
+    def gradient(self, x, y, panel=None):
+        _, gx, gy = self.evaluate(x, y, gradient=True)
+        return gx, gy
 
     def describe(self) -> str:
         return (f"rim astigmatism {self.amplitude * 1e6:g} um (r/a)^{self.exponent:g} "

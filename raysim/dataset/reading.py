@@ -9,8 +9,10 @@ import numpy as np
 import xarray as xr
 
 from raysim.dataset.sampling import draw_sample
-from raysim.dataset.spec import DatasetSpec
+from raysim.dataset.spec import DatasetError, DatasetSpec
 from raysim.dataset.store import open_readonly
+
+SOURCES = {"clean": "intensity", "measured": "intensity_measured"}  # source -> store variable
 
 
 def open_dataset(store: str | Path) -> xr.Dataset:
@@ -24,25 +26,48 @@ def open_dataset(store: str | Path) -> xr.Dataset:
     return ds.set_coords(names)
 
 
-def sample_fieldmap(ds: xr.Dataset, index: int) -> xr.Dataset:
-    """Sample ``index`` of an opened dataset as a FieldMap (see :mod:`raysim.maps.fieldmap`)."""
+def sample_fieldmap(ds: xr.Dataset, index: int, source: str = "clean") -> xr.Dataset:
+    """Sample ``index`` of an opened dataset as a FieldMap (see :mod:`raysim.maps.fieldmap`);
+    ``source`` ``measured`` takes its ``intensity_measured`` (a store with measurement effects)."""
     from raysim.maps.fieldmap import fieldmap, grid_of
 
+    variable = _intensity_variable(ds, source)
     sample = ds.isel(sample=index)
     frequency = float(sample["frequency_hz"].values)
     ideal = ds["intensity_ideal"].sel(frequency=frequency)
     attrs = {"dataset": ds.attrs.get("name", ""), "sample": int(index),
-             "seed": str(int(sample["seed"].values)), "deformation_rms": float(sample["rms"].values)}
-    return fieldmap(grid_of(ds), sample["intensity"].values, ideal.values,
+             "seed": str(int(sample["seed"].values)), "deformation_rms": float(sample["rms"].values),
+             "dataset_intensity": variable}
+    return fieldmap(grid_of(ds), sample[variable].values, ideal.values,
                     focal_length=ds.attrs["focal_length"], diameter=ds.attrs["diameter"],
                     frequency_hz=frequency, method=ds.attrs["method"], sampling=ds.attrs["sampling"],
                     scene=ds.attrs.get("scene"), attrs=attrs)
 
 
+def _intensity_variable(ds: xr.Dataset, source: str) -> str:
+    if source not in SOURCES:
+        raise DatasetError(f"unknown intensity source {source!r}: use one of {', '.join(SOURCES)}")
+    name = SOURCES[source]
+    if name not in ds.variables:
+        raise DatasetError("this store has no measured intensity (its spec has no [measurement] table)")
+    return name
+
+
 def sample_intensity(spec: DatasetSpec, index: int, device: str = "cpu") -> tuple[np.ndarray, np.ndarray]:
     """Regenerate sample ``index`` alone, in this process: (deformation map (m), intensity)."""
-    from raysim.dataset.worker import simulate_sample
+    from raysim.dataset.engine import simulate_sample
 
     draw = draw_sample(spec, index)
     return spec.grid.evaluate(draw.deformation), simulate_sample(spec, draw.deformation,
                                                                   draw.frequency_index, device)
+
+
+def sample_measured(spec: DatasetSpec, index: int, device: str = "cpu") -> np.ndarray:
+    """Regenerate sample ``index``'s measured intensity alone (a spec with measurement effects)."""
+    from raysim.dataset.engine import ideal_intensity
+
+    if spec.measurement is None:
+        raise DatasetError("the spec has no [measurement] table")
+    draw = draw_sample(spec, index)
+    _, clean = sample_intensity(spec, index, device)
+    return draw.measured(clean, ideal_intensity(spec, draw.frequency_index, device), spec)

@@ -2,10 +2,13 @@
 
 Sample i of a spec with seed s draws everything from one 64-bit seed,
 ``SeedSequence(s, spawn_key=(i,)).generate_state(1, uint64)``, which the store records:
-``numpy.random.SeedSequence(seed).spawn(1 + n_models)`` gives one child for the sample's own
-choices (its frequency) and one per error model, so a model's draws never depend on the
-others. Any sample regenerates alone from the spec and its index (or its recorded seed),
-whatever the order, worker or number of workers that made the others.
+``numpy.random.SeedSequence(seed).spawn(2 + n_models)`` gives one child for the sample's own
+choices (its frequency), one per error model, so a model's draws never depend on the
+others, and a last one for the measurement effects (two children of its own: the effect
+values, and their realisation: noise, missing points). A child does not depend on how many
+are spawned, so a spec without effects draws what it drew before they existed. Any sample
+regenerates alone from the spec and its index (or its recorded seed), whatever the order,
+worker or number of workers that made the others.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from raysim.dataset import effects
 from raysim.dataset.spec import DatasetSpec
 from raysim.surface.deformation import Deformation, NoDeformation, Sum
 
@@ -34,6 +38,17 @@ class SampleDraw:
     frequency_index: int
     deformation: Deformation
     params: dict[str, Any]
+    effects: dict[str, Any] | None = None  # the measurement effects' values (effects.VARIABLES)
+    realisation: np.random.SeedSequence | None = None  # seeds the effects' noise and losses
+
+    def measured(self, clean, ideal, spec: DatasetSpec) -> np.ndarray | None:
+        """The measured intensity of this sample from its clean and ideal ones (no effects:
+        None)."""
+        if self.effects is None:
+            return None
+        scene = spec.scene
+        return effects.apply(clean, ideal, scene.sphere, scene.F, scene.D, self.effects,
+                             np.random.default_rng(self.realisation))
 
 
 def sample_seed(spec_seed: int, index: int) -> int:
@@ -57,17 +72,22 @@ def draw_sample(spec: DatasetSpec, index: int, seed: int | None = None) -> Sampl
     if not 0 <= index < spec.samples:
         raise IndexError(f"sample {index} is outside 0..{spec.samples - 1}")
     seed = sample_seed(spec.seed, index) if seed is None else int(seed)
-    children = np.random.SeedSequence(seed).spawn(1 + len(spec.models))
+    children = np.random.SeedSequence(seed).spawn(2 + len(spec.models))
     own = np.random.default_rng(children[0])
     f_index = int(own.integers(len(spec.frequencies))) if len(spec.frequencies) > 1 else 0
     grid = spec.grid
     parts: list[Deformation] = [] if isinstance(spec.scene.deformation, NoDeformation) \
         else [spec.scene.deformation]
     params: dict[str, Any] = {}
-    for model, child in zip(spec.models, children[1:], strict=True):
+    for model, child in zip(spec.models, children[1:-1], strict=True):
         deformation, values = model.draw(np.random.default_rng(child), grid)
         if deformation is not None:
             parts.append(deformation)
         params.update({f"{model.name}_{key}": value for key, value in values.items()})
     total: Deformation = NoDeformation() if not parts else parts[0] if len(parts) == 1 else Sum(tuple(parts))
-    return SampleDraw(index, seed, f_index, total, params)
+    values = realisation = None
+    if spec.measurement is not None:
+        draw_seq, realisation = children[-1].spawn(2)
+        values = spec.measurement.draw(np.random.default_rng(draw_seq))
+        params.update({f"{effects.PREFIX}{key}": value for key, value in values.items()})
+    return SampleDraw(index, seed, f_index, total, params, values, realisation)

@@ -4,7 +4,8 @@ A spec names the base scene (inline ``[scene]`` table with the keys of ``scenes/
 ``scene = "file.toml"`` beside the spec), how many samples to make and the seed they derive
 from, the engine (``method``) and frequencies, the train/validation split, the aperture map
 stored per sample, and a list of ``[[errors]]``: random surface errors added to the scene's
-own deformation (see :mod:`raysim.dataset.models`). Units are in key names (``rms_um``,
+own deformation (see :mod:`raysim.dataset.models`), and optionally a ``[measurement]`` table
+of measurement effects (see :mod:`raysim.dataset.effects`). Units are in key names (``rms_um``,
 ``sigma_m``, ``angle_deg``, ``frequencies_hz``) and converted here. Each defect raises
 :class:`DatasetError` with one line naming the file and key.
 
@@ -27,6 +28,7 @@ from typing import Any
 
 from raysim.dataset import toml_text
 from raysim.dataset.distributions import Distribution, parse_distribution
+from raysim.dataset.effects import Measurement, parse_measurement
 from raysim.dataset.models import (
     MODELS,
     ApertureGrid,
@@ -43,7 +45,7 @@ from raysim.simulate import METHODS
 DTYPES = ("float64", "float32")
 _TOP = {"name": str, "description": str, "samples": int, "seed": int, "method": str,
         "frequencies_hz": list, "validation_fraction": float, "grid_n": int, "dtype": str,
-        "scene": (str, dict), "errors": list}
+        "scene": (str, dict), "errors": list, "measurement": dict}
 _COMMON = ("type", "name", "rms_um", "probability")
 _ERROR_KEYS = {
     "zernike": (*_COMMON, "n_min", "n_max", "decay"),
@@ -78,6 +80,7 @@ class DatasetSpec:
     source: str
     base: Path
     fingerprint: str
+    measurement: Measurement | None = None  # the [measurement] effects (raysim.dataset.effects)
 
     @cached_property
     def grid(self) -> ApertureGrid:
@@ -150,7 +153,8 @@ def _build(raw: dict, text: str, source: str, base: Path) -> DatasetSpec:
         name=str(name), description=str(raw.get("description", "")), samples=samples, seed=seed,
         method=method, frequencies=tuple(float(f) for f in freqs), validation_fraction=fraction,
         grid_n=_int(raw, "grid_n", 128, 8, 4096), dtype=dtype, scene=scene, scene_text=scene_text,
-        models=models, text=text, source=source, base=base, fingerprint=fingerprint)
+        models=models, text=text, source=source, base=base, fingerprint=fingerprint,
+        measurement=parse_measurement(raw["measurement"]) if "measurement" in raw else None)
 
 
 def _scene_source(value: str | dict, base: Path) -> tuple[str, dict]:

@@ -7,7 +7,9 @@ Layout (Zarr format 3, every array with ``dimension_names`` and a ``units`` attr
   ``y`` (m, the N x N cell-centred aperture grid), ``frequency`` (Hz), and per model its own
   (``<model>_term_n``/``_m``, ``panel``);
 - ``intensity(sample, theta, phi)``: |E|^2 relative to the incident wave, one chunk per
-  sample; ``intensity_ideal(frequency, theta, phi)``, the ideal paraboloid once per frequency;
+  sample; with measurement effects also ``intensity_measured`` (the same with the sample's
+  effects, NaN where a point is missing) and the effects' values ``measure_*``;
+  ``intensity_ideal(frequency, theta, phi)``, the ideal paraboloid once per frequency;
 - ``deformation(sample, y, x)``: delta (m), NaN outside the aperture r < D/2;
 - ``seed``, ``split`` (0 train, 1 validation), ``frequency_hz``, ``rms``, ``peak_to_peak``
   and every model's parameters per sample; ``status`` (0 pending, 1 done, 2 failed),
@@ -152,24 +154,40 @@ class Writer:
             self._arrays[name] = self.group[name]
         return self._arrays[name]
 
+    def _put(self, index: int, items: dict[str, Any]) -> None:
+        """Write ``items`` (array name -> sample ``index``'s value) all at once: Zarr's own
+        event loop runs the chunk writes concurrently (one after the other without it)."""
+        arrays = [(self[name], value) for name, value in items.items()]
+        if all(hasattr(a, "_async_array") for a, _ in arrays):
+            import asyncio
+
+            from zarr.core.sync import sync
+
+            async def write() -> None:
+                await asyncio.gather(*(a._async_array.setitem(index, v) for a, v in arrays))
+
+            sync(write())
+            return
+        for array, value in arrays:  # pragma: no cover - a Zarr without the async layer
+            array[index] = value
+
     def params(self, index: int, params: dict[str, Any], frequency_hz: float,
                deformation: np.ndarray) -> None:
         """The sample's drawn parameters, frequency and deformation map (m)."""
-        for key, value in params.items():
-            self[key][index] = value
-        self["frequency_hz"][index] = frequency_hz
-        self["deformation"][index] = deformation
         values = deformation[np.isfinite(deformation)]
-        self["rms"][index] = float(np.sqrt(np.mean(values**2))) if values.size else math.nan
-        self["peak_to_peak"][index] = float(np.ptp(values)) if values.size else math.nan
+        self._put(index, {
+            **params, "frequency_hz": frequency_hz, "deformation": deformation,
+            "rms": float(np.sqrt(np.mean(values**2))) if values.size else math.nan,
+            "peak_to_peak": float(np.ptp(values)) if values.size else math.nan})
 
-    def done(self, index: int, intensity: np.ndarray, seconds: float, cpu_seconds: float = math.nan) -> None:
-        """The sample's intensity, then its completion marker (last)."""
-        self["intensity"][index] = intensity
-        self["seconds"][index] = seconds
-        self["cpu_seconds"][index] = cpu_seconds
-        self["error"][index] = ""
-        self["finished"][index] = time.time()
+    def done(self, index: int, intensity: np.ndarray, seconds: float, cpu_seconds: float = math.nan,
+             measured: np.ndarray | None = None) -> None:
+        """The sample's intensity (and its measured one), then its completion marker (last)."""
+        items = {"intensity": intensity, "seconds": seconds, "cpu_seconds": cpu_seconds, "error": "",
+                 "finished": time.time()}
+        if measured is not None:
+            items["intensity_measured"] = measured
+        self._put(index, items)
         self["status"][index] = DONE
 
     def failed(self, index: int, reason: str, seconds: float = math.nan) -> None:
@@ -213,6 +231,8 @@ def _attributes(spec: DatasetSpec) -> dict[str, Any]:
         "phi_max": float(grid.phi_max),
         "validation_fraction": spec.validation_fraction,
         "models": ", ".join(f"{m.name} ({m.kind})" for m in spec.models) or "none",
+        "measurement": "intensity_measured: intensity with the measure_* effects of each sample "
+                       "(raysim.dataset.effects)" if spec.measurement is not None else "none",
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
         "status_meanings": "0 pending, 1 done, 2 failed",
         **versions(),

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from raysim.dataset.effects import PREFIX, VARIABLES
 from raysim.dataset.spec import DatasetSpec
 
 FORMAT = 1
@@ -88,6 +89,15 @@ def layout(spec: DatasetSpec) -> dict[str, ArraySpec]:
         "finished": _per_sample(n, (), (), "float64", np.nan, "s",
                                 "when the sample was finished (UNIX time)"),
     }
+    if spec.measurement is not None:
+        out["intensity_measured"] = _per_sample(
+            n, ("theta", "phi"), (nt, nph), spec.dtype, np.nan, "1",
+            "intensity as measured: the clean intensity with the sample's measurement effects "
+            "(NaN: a missing point)", reference="incident plane-wave intensity")
+        for key, (units, meaning) in VARIABLES.items():
+            dtype = "int64" if key == "readings" else "float64"
+            out[f"{PREFIX}{key}"] = _per_sample(n, (), (), dtype, 0 if dtype == "int64" else np.nan,
+                                                units, f"measurement: {meaning}")
     for model in spec.models:
         p = model.name
         out[f"{p}_present"] = _per_sample(n, (), (), "int8", 0, "1", f"{p}: 1 if the sample has it")

@@ -24,22 +24,18 @@ import os
 import pkgutil
 import threading
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from raysim.dataset.memo import Memo
+from raysim.dataset.engine import ideal_intensity, simulate_sample
 from raysim.dataset.sampling import draw_sample
 from raysim.dataset.spec import DatasetError, DatasetSpec, parse_spec
 from raysim.dataset.store import Writer, open_readonly
 from raysim.optics import runtime as warp_runtime
-from raysim.surface.deformation import Deformation, NoDeformation
-from raysim.surface.mesh import Reflector, paraboloid
-from raysim.surface.panels import PanelLayout
 
 _lock = threading.Lock()
 
@@ -124,41 +120,12 @@ def context(store: str, fingerprint: str) -> Context:
     return Context(spec, Writer(zarr.open_group(store, mode="r+")))
 
 
-@lru_cache(maxsize=2)
-def _ideal_reflector(D: float, F: float, resolution: float, layout: PanelLayout | None) -> Reflector:
-    """The ideal generated reflector (D, F, resolution in m; panel layout), kept per process."""
-    return paraboloid(D, F, resolution, layout)
-
-
-def intensity(spec: DatasetSpec, deformation: Deformation | None, f_index: int,
-              device: str = "cpu") -> np.ndarray:
-    """Intensity on the spec's sphere grid, (n_theta, n_phi), relative to the incident wave.
-
-    ``deformation`` None gives the ideal paraboloid. GO traces the per-process ideal mesh
-    displaced by the deformation (one shared triangulation); other methods go through
-    :func:`raysim.simulate.simulate`.
-    """
-    scene = spec.scene.with_overrides(frequency_hz=spec.frequencies[f_index])
-    if spec.method == "go":
-        from raysim.optics import go
-
-        dish = spec.scene.dish
-        ideal = _ideal_reflector(dish.diameter, dish.focal_length, dish.resolution, spec.scene.panels)
-        reflector = ideal if deformation is None else ideal.deformed(Memo(deformation))
-        result = go.trace(reflector, scene.sphere, scene.source.direction, scene.subdivisions, device)
-        return result.intensity
-    from raysim.simulate import simulate
-
-    ds = simulate(replace(scene, deformation=deformation or NoDeformation()), spec.method, device)
-    return np.asarray(ds["intensity_ideal" if deformation is None else "intensity"].values)
-
-
 def run_ideal(store: str, fingerprint: str, f_index: int, device: str = "cpu") -> dict[str, Any]:
     """Task: the ideal intensity of frequency ``f_index``, written into the store."""
     ctx = context(store, fingerprint)
     start = time.perf_counter()
     try:
-        ctx.writer.ideal(f_index, intensity(ctx.spec, None, f_index, device))
+        ctx.writer.ideal(f_index, ideal_intensity(ctx.spec, f_index, device))
         return {"frequency": f_index, "ok": True, "error": "", "seconds": time.perf_counter() - start}
     except Exception as exc:  # recorded, never raised: the samples still go on
         reason = _reason(exc)
@@ -177,25 +144,16 @@ def run_sample(store: str, fingerprint: str, index: int, device: str = "cpu") ->
         writer.params(index, draw.params, spec.frequencies[draw.frequency_index],
                       spec.grid.evaluate(draw.deformation))
         values = simulate_sample(spec, draw.deformation, draw.frequency_index, device)
+        measured = None if draw.effects is None else \
+            draw.measured(values, ideal_intensity(spec, draw.frequency_index, device), spec)
         seconds = time.perf_counter() - start
-        writer.done(index, values, seconds, time.process_time() - cpu_start)
+        writer.done(index, values, seconds, time.process_time() - cpu_start, measured)
         return {"index": index, "ok": True, "error": "", "seconds": seconds}
     except Exception as exc:
         reason = _reason(exc)
         seconds = time.perf_counter() - start
         writer.failed(index, reason, seconds)
         return {"index": index, "ok": False, "error": reason, "seconds": seconds}
-
-
-def simulate_sample(spec: DatasetSpec, deformation: Deformation, f_index: int,
-                    device: str = "cpu") -> np.ndarray:
-    """The deformed reflector's intensity of one sample, checked to be finite and lit."""
-    values = intensity(spec, deformation, f_index, device)
-    if not np.all(np.isfinite(values)):
-        raise ValueError("the simulated intensity holds non-finite values")
-    if not np.any(values > 0):
-        raise ValueError("no power reached the sphere")
-    return values
 
 
 def _reason(exc: BaseException) -> str:

@@ -12,6 +12,7 @@ milliseconds instead of seconds.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -19,6 +20,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from raysim.surface.deformation import Deformation
+
+Factors = tuple[NDArray, NDArray, NDArray | None, NDArray | None]
 
 
 @lru_cache(maxsize=512)
@@ -48,7 +51,11 @@ class ZernikeSeries(Deformation):
             if n < 0 or abs(m) > n or (n - abs(m)) % 2:
                 raise ValueError(f"Zernike (n={n}, m={m}) does not exist: need |m| <= n, n - |m| even")
 
-    def _eval(self, x, y, gradient: bool):
+    def factors(self, x, y, gradient: bool) -> Iterator[Factors]:
+        """Per term, in order, what it contributes at (x, y) before its coefficient:
+        (R(rho), angular factor, and with ``gradient`` the brackets that d/dx and d/dy
+        multiply by coefficient * norm / radius; else None, None). They depend on the points
+        and the term's (n, m) only, so a caller may keep them for a fixed set of points."""
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
         x, y = np.broadcast_arrays(x, y)
@@ -66,32 +73,43 @@ class ZernikeSeries(Deformation):
         for _ in range(m_max):
             c, s = harmonics[-1]
             harmonics.append((c * c1 - s * s1, s * c1 + c * s1))
-        value = np.zeros_like(rho)
-        gx = np.zeros_like(rho) if gradient else None
-        gy = np.zeros_like(rho) if gradient else None
-        for n, m, coef in self.terms:
+        for n, m, _ in self.terms:
             am = abs(m)
-            scale = coef * noll_norm(n, m)
             c, s = harmonics[am]
             ang, dang = (c, -am * s) if m >= 0 else (s, am * c)
             R = sum(k * powers[p] for p, k in radial_coefficients(n, m))
+            if not gradient:
+                yield R, ang, None, None
+                continue
+            # dR/drho and R/rho (finite for m >= 1; unused for m = 0 where dang = 0)
+            dR = sum(k * p * powers[p - 1] for p, k in radial_coefficients(n, m) if p >= 1)
+            R_over = sum(k * powers[p - 1] for p, k in radial_coefficients(n, m) if p >= 1)
+            dR = dR if isinstance(dR, np.ndarray) else np.zeros_like(rho)
+            R_over = R_over if isinstance(R_over, np.ndarray) else np.zeros_like(rho)
+            yield R, ang, dR * ang * c1 - R_over * dang * s1, dR * ang * s1 + R_over * dang * c1
+
+    def evaluate(self, x, y, gradient: bool, factors: Iterable[Factors] | None = None):
+        """(value, d/dx, d/dy) at (x, y) (m; the gradient None unless asked), from the terms'
+        ``factors`` when given (as :meth:`factors` yields them at these points)."""
+        shape = np.broadcast(np.asarray(x), np.asarray(y)).shape
+        value = np.zeros(shape)
+        gx = np.zeros(shape) if gradient else None
+        gy = np.zeros(shape) if gradient else None
+        for (n, m, coef), (R, ang, bx, by) in zip(
+                self.terms, self.factors(x, y, gradient) if factors is None else factors, strict=True):
+            scale = coef * noll_norm(n, m)
             value += scale * R * ang
             if gradient:
-                # dR/drho and R/rho (finite for m >= 1; unused for m = 0 where dang = 0)
-                dR = sum(k * p * powers[p - 1] for p, k in radial_coefficients(n, m) if p >= 1)
-                R_over = sum(k * powers[p - 1] for p, k in radial_coefficients(n, m) if p >= 1)
-                dR = dR if isinstance(dR, np.ndarray) else np.zeros_like(rho)
-                R_over = R_over if isinstance(R_over, np.ndarray) else np.zeros_like(rho)
                 g = scale / self.radius
-                gx += g * (dR * ang * c1 - R_over * dang * s1)
-                gy += g * (dR * ang * s1 + R_over * dang * c1)
+                gx += g * bx
+                gy += g * by
         return value, gx, gy
 
     def __call__(self, x, y, panel=None) -> NDArray[np.float64]:
-        return self._eval(x, y, gradient=False)[0]
+        return self.evaluate(x, y, gradient=False)[0]
 
     def gradient(self, x, y, panel=None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        _, gx, gy = self._eval(x, y, gradient=True)
+        _, gx, gy = self.evaluate(x, y, gradient=True)
         return gx, gy
 
     def describe(self) -> str:

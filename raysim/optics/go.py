@@ -21,8 +21,9 @@ the cell over its area, relative to the incident intensity.
 
 from __future__ import annotations
 
+import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -140,78 +141,179 @@ def lift_to_surface(reflector: Reflector, lattice: RayLattice, k_hat: NDArray,
 
 # --- the trace ------------------------------------------------------------------------------
 def trace(reflector: Reflector, grid: SphereGrid, direction=ON_AXIS, subdivisions: int = 1,
-          device: str | None = "cpu", progress: Progress | None = None,
-          bvh: ReflectorBVH | None = None) -> GOResult:
+          device: str | None = "cpu", progress: Progress | None = None) -> GOResult:
     """GO intensity of ``reflector`` on ``grid`` for a plane wave travelling along ``direction``.
 
-    Returns cell means relative to the incident intensity (see the module docstring). ``bvh``:
-    the reflector's BVH when the caller already has it (a deformed twin's is the ideal one
-    refitted, :meth:`~raysim.optics.bvh.ReflectorBVH.refit`); built here otherwise.
+    Returns cell means relative to the incident intensity (see the module docstring).
     """
-    wp = runtime.init()
-    dev = runtime.resolve_device(device)
-    if not grid.full_circle and grid.dphi > np.pi:
-        raise RaysimError("a phi cell wider than 180 deg is only supported as the full circle")
-    from raysim.optics.kernels import go as K
-
     start = time.perf_counter()
-    report = progress or (lambda stage, fraction: None)
-    k_hat = np.asarray(direction, dtype=np.float64)
-    k_hat = k_hat / np.linalg.norm(k_hat)
-    focus = np.array([0.0, 0.0, reflector.F])
+    result = Tracer(reflector, grid, direction, subdivisions, device).trace(reflector, progress)
+    return replace(result, seconds=time.perf_counter() - start)
 
-    report("lattice", 0.0)
-    lattice = ray_lattice(reflector, subdivisions)
-    n_rays, n_tubes = len(lattice.points), len(lattice.tubes)
 
-    report("bvh", 0.1)
-    bvh = bvh if bvh is not None else ReflectorBVH.build(reflector, dev)
-    report("visibility", 0.2)
-    lit_np = bvh.lit(lattice.points, k_hat)
+class Tracer:
+    """One GO set-up (mesh topology, sphere grid, wave, lattice) traced for many vertex sets.
 
-    report("surface", 0.4)
-    hits, normals = lift_to_surface(reflector, lattice, k_hat)
+    Built from a ``template`` reflector; :meth:`trace` then takes the template or any twin
+    that shares its faces and panels and differs only in its vertices (``Reflector.deformed``),
+    and gives what :func:`trace` gives for that twin, bit for bit. Kept between traces: the
+    float32 BVH, whose bounds are refitted to each twin's vertices instead of being rebuilt
+    (the ray queries return the nearest hit whatever the tree's shape, so the lit test does
+    not change); the lattice's tubes and the device arrays of the sphere's tables; and, for a
+    wave along -z over a twin with the template's (x, y), each tube's power (its
+    cross-section normal to the wave depends on (x, y) alone there).
 
-    report("reflect", 0.5)
-    chart = wp.zeros(n_rays, dtype=wp.vec2d, device=dev)
-    ok = wp.array(lit_np.astype(np.int32), dtype=wp.int32, device=dev)
-    runtime.launch(K.reflect_to_sphere, n_rays,
-                   [wp.array(hits, dtype=wp.vec3d, device=dev),
-                    wp.array(normals, dtype=wp.vec3d, device=dev),
-                    wp.vec3d(*k_hat), wp.vec3d(*focus), float(grid.radius), ok, chart], dev)
-    ok_np = ok.numpy().astype(bool)
+    With ``footprint_shortcut``, a wave along -z and rays at the vertices (``subdivisions``
+    1), a twin with the template's (x, y) skips the BVH and its visibility test when the
+    template's vertices stand clear of the faces they are not corners of
+    (:func:`raysim.surface.footprint.vertices_clear_of_other_faces`, checked once, here): a
+    ray along -z through a vertex can then meet only that vertex's own faces, at the vertex,
+    so the test would find every ray lit.
+    """
 
-    report("deposit", 0.6)
-    power_t = tube_power(lattice, k_hat)
-    tube_lit = lit_np[lattice.tubes].all(axis=1)
-    rho_edges = 2.0 * np.sin(0.5 * grid.theta_edges)
-    power = wp.zeros((grid.n_theta, grid.n_phi), dtype=wp.float64, device=dev)
-    runtime.launch(
-        K.deposit_tubes, n_tubes,
-        [chart, ok, wp.array(lattice.tubes, dtype=wp.vec3i, device=dev),
-         wp.array(power_t, dtype=wp.float64, device=dev),
-         wp.array(rho_edges, dtype=wp.float64, device=dev),
-         float(grid.theta_min), float(grid.dtheta), grid.n_theta,
-         float(grid.phi_min), float(grid.dphi), grid.n_phi, int(grid.full_circle), power],
-        dev, private=(12,), min_chunk=2048)
-    power_np = power.numpy()
-    intensity = power_np / grid.cell_area()
-    report("done", 1.0)
-    return GOResult(
-        intensity=intensity,
-        power_lit=float(power_t[tube_lit].sum()),
-        power_on_grid=float(power_np.sum()),
-        n_rays=n_rays,
-        n_tubes=n_tubes,
-        n_shadowed=int((~lit_np).sum()),
-        n_missed=int((lit_np & ~ok_np).sum()),
-        seconds=time.perf_counter() - start,
-    )
+    def __init__(self, template: Reflector, grid: SphereGrid, direction=ON_AXIS,
+                 subdivisions: int = 1, device: str | None = "cpu",
+                 footprint_shortcut: bool = False) -> None:
+        wp = runtime.init()
+        self.device = runtime.resolve_device(device)
+        if not grid.full_circle and grid.dphi > np.pi:
+            raise RaysimError("a phi cell wider than 180 deg is only supported as the full circle")
+        self.template, self.grid, self.subdivisions = template, grid, int(subdivisions)
+        k_hat = np.asarray(direction, dtype=np.float64)
+        self.k_hat = k_hat / np.linalg.norm(k_hat)
+        dev = self.device
+        lattice = ray_lattice(template, self.subdivisions)
+        self.n_rays, self.n_tubes = len(lattice.points), len(lattice.tubes)
+        self.bvh = ReflectorBVH.build(template, dev)
+        self._bvh_of: Reflector = template  # the reflector whose vertices the BVH holds
+        self._tubes = wp.array(lattice.tubes, dtype=wp.vec3i, device=dev)
+        self._rho_edges = wp.array(2.0 * np.sin(0.5 * grid.theta_edges), dtype=wp.float64, device=dev)
+        self._lattice = lattice  # the template's
+        self._axial = bool(self.k_hat[0] == 0.0 and self.k_hat[1] == 0.0)
+        self._power = tube_power(lattice, self.k_hat) if self._axial else None
+        self._lock = threading.Lock()
+        self._clear = False  # whether the footprint shortcut holds for this template
+        if footprint_shortcut and self._axial and self.subdivisions == 1:
+            from raysim.surface.footprint import vertices_clear_of_other_faces
+
+            self._clear = vertices_clear_of_other_faces(template.vertices, template.faces)
+
+    def _check_twin(self, reflector: Reflector) -> None:
+        t = self.template
+        if reflector is t:
+            return
+        if reflector.faces is not t.faces and not np.array_equal(reflector.faces, t.faces):
+            raise RaysimError("a Tracer traces twins of its template only (the same faces)")
+        if reflector.face_panel is not t.face_panel and not np.array_equal(reflector.face_panel,
+                                                                           t.face_panel):
+            raise RaysimError("a Tracer traces twins of its template only (the same panels)")
+
+    def _twin_lattice(self, reflector: Reflector) -> RayLattice:
+        """The rays of ``reflector``: its own points and normals, the template's tubes and panels."""
+        t = self._lattice
+        if reflector is self.template:
+            return t
+        if self.subdivisions == 1:
+            return RayLattice(reflector.vertices, t.panel, reflector.vertex_normals, t.tubes)
+        return ray_lattice(reflector, self.subdivisions)
+
+    def _update_bvh(self, reflector: Reflector) -> None:
+        """Refit the BVH's bounds to ``reflector``'s vertices (float32), unless it has them."""
+        if reflector is self._bvh_of:
+            return
+        self.bvh.refit(reflector)
+        self._bvh_of = reflector
+
+    def _all_lit(self, reflector: Reflector) -> bool:
+        """Whether the footprint shortcut decides that every ray of ``reflector`` is lit."""
+        return self._clear and self._same_xy(reflector)
+
+    def _same_xy(self, reflector: Reflector) -> bool:
+        t = self.template.vertices
+        return reflector is self.template or np.array_equal(reflector.vertices[:, :2], t[:, :2])
+
+    def _tube_power(self, reflector: Reflector, lattice: RayLattice) -> NDArray[np.float64]:
+        """Power of each tube: the template's where only z moved under an axial wave."""
+        if self._power is None:
+            return tube_power(lattice, self.k_hat)
+        return self._power if self._same_xy(reflector) else tube_power(lattice, self.k_hat)
+
+    def trace(self, reflector: Reflector, progress: Progress | None = None) -> GOResult:
+        """The GO result of ``reflector`` (the template or a twin of it); see :func:`trace`.
+
+        One trace at a time: the BVH holds one twin's vertices (concurrent calls queue)."""
+        with self._lock:
+            return self._trace(reflector, progress)
+
+    def _trace(self, reflector: Reflector, progress: Progress | None) -> GOResult:
+        wp = runtime.init()
+        from raysim.optics.kernels import go as K
+
+        self._check_twin(reflector)
+        start = time.perf_counter()
+        report = progress or (lambda stage, fraction: None)
+        dev, grid, k_hat = self.device, self.grid, self.k_hat
+        focus = np.array([0.0, 0.0, reflector.F])
+
+        report("lattice", 0.0)
+        lattice = self._twin_lattice(reflector)
+        n_rays = len(lattice.points)
+
+        report("bvh", 0.1)
+        if self._all_lit(reflector):
+            report("visibility", 0.2)
+            lit_np = np.ones(n_rays, dtype=bool)
+        else:
+            self._update_bvh(reflector)
+            report("visibility", 0.2)
+            lit_np = self.bvh.lit(lattice.points, k_hat)
+
+        report("surface", 0.4)
+        hits, normals = lift_to_surface(reflector, lattice, k_hat)
+
+        report("reflect", 0.5)
+        chart = wp.zeros(n_rays, dtype=wp.vec2d, device=dev)
+        ok = wp.array(lit_np.astype(np.int32), dtype=wp.int32, device=dev)
+        runtime.launch(K.reflect_to_sphere, n_rays,
+                            [wp.array(hits, dtype=wp.vec3d, device=dev),
+                             wp.array(normals, dtype=wp.vec3d, device=dev),
+                             wp.vec3d(*k_hat), wp.vec3d(*focus), float(grid.radius), ok, chart], dev)
+        ok_np = ok.numpy().astype(bool)
+
+        report("deposit", 0.6)
+        power_t = self._tube_power(reflector, lattice)
+        tube_lit = lit_np[lattice.tubes].all(axis=1)
+        power = wp.zeros((grid.n_theta, grid.n_phi), dtype=wp.float64, device=dev)
+        runtime.launch(
+            K.deposit_tubes, self.n_tubes,
+            [chart, ok, self._tubes, wp.array(power_t, dtype=wp.float64, device=dev), self._rho_edges,
+             float(grid.theta_min), float(grid.dtheta), grid.n_theta,
+             float(grid.phi_min), float(grid.dphi), grid.n_phi, int(grid.full_circle), power],
+            dev, private=(12,), min_chunk=2048)
+        power_np = power.numpy()
+        intensity = power_np / grid.cell_area()
+        report("done", 1.0)
+        return GOResult(
+            intensity=intensity,
+            power_lit=float(power_t[tube_lit].sum()),
+            power_on_grid=float(power_np.sum()),
+            n_rays=n_rays,
+            n_tubes=self.n_tubes,
+            n_shadowed=int((~lit_np).sum()),
+            n_missed=int((lit_np & ~ok_np).sum()),
+            seconds=time.perf_counter() - start,
+        )
 
 
 @lru_cache(maxsize=4)
 def _ideal_paraboloid(D: float, F: float, resolution: float) -> Reflector:
     return paraboloid(D, F, resolution)
+
+
+@lru_cache(maxsize=2)
+def _forward_tracer(D: float, F: float, resolution: float, grid: SphereGrid, subdivisions: int,
+                    device: str) -> Tracer:
+    return Tracer(_ideal_paraboloid(D, F, resolution), grid, ON_AXIS, subdivisions, device)
 
 
 def forward_intensity(grid: SphereGrid, F: float, D: float, deformation: Deformation | None = None,
@@ -220,9 +322,12 @@ def forward_intensity(grid: SphereGrid, F: float, D: float, deformation: Deforma
     """GO cell-mean intensity on ``grid`` of the paraboloid (D, F in m) plus ``deformation``.
 
     The forward model of the inversion: it needs only what every FieldMap carries. The ideal
-    mesh is built once per (D, F, resolution) and reused; the deformed one displaces it.
+    mesh and its :class:`Tracer` are made once per (D, F, resolution, grid) and reused; the
+    deformed mesh displaces the ideal one and is traced with the BVH refitted.
     """
-    ideal = _ideal_paraboloid(float(D), float(F), float(resolution))
+    tracer = _forward_tracer(float(D), float(F), float(resolution), grid, int(subdivisions),
+                             runtime.resolve_device(device))
+    ideal = tracer.template
     reflector = ideal if deformation is None or isinstance(deformation, NoDeformation) \
         else ideal.deformed(deformation)
-    return trace(reflector, grid, ON_AXIS, subdivisions, device).intensity
+    return tracer.trace(reflector).intensity

@@ -1,0 +1,261 @@
+"""Training batches from a dataset store: (input, target) numpy arrays, normalised.
+
+A :class:`Loader` reads the samples of one split (``train``: ``split == 0``, ``validation``:
+``split == 1``, or ``all``) whose ``status`` is done, from a store at a local path or any
+fsspec URL (``file://``, ``memory://``, ``s3://`` with its fsspec package), and yields
+batches ``(input, target)``:
+
+- input, in one of three representations (:data:`REPRESENTATIONS`), of the clean
+  ``intensity`` or, with ``source="measured"``, the ``intensity_measured`` of a store made
+  with measurement effects:
+
+  - ``intensity``: |E|^2 relative to the incident wave on the sphere, (B, n_theta, n_phi);
+  - ``fa_sphere``: FA = I_ideal / I - 1 on the sphere (:func:`solver.equation.intensity_ratio_fa`),
+    (B, n_theta, n_phi), with the stored ideal of the sample's frequency;
+  - ``fa_aperture``: that FA resampled to the N x N aperture grid the solver uses
+    (:func:`solver.resample.sphere_to_aperture` on a :class:`solver.aperture.ApertureGrid`:
+    usable rows, missing points inpainted, the rim band extrapolated), (B, N, N), N the
+    stored deformation map's by default;
+
+- target: the deformation delta (m) on the store's aperture grid, (B, N, N).
+
+With ``normalise`` (default) both are standardised, (x - mean) / std, by the statistics of
+the *training* split (:class:`Statistics`: the mean and standard deviation over every finite
+value of every done training sample), computed once per representation and source and kept
+in the store's attributes (``normalisation``) when the store is writable, recomputed when the
+training samples done change. NaN (outside the aperture, beyond the rim image, a missing
+point) becomes ``fill`` after normalisation; :attr:`Loader.target_mask` marks the aperture.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass
+from functools import cached_property
+
+import numpy as np
+import zarr
+from numpy.typing import NDArray
+
+from raysim.dataset.reading import SOURCES
+from raysim.dataset.spec import DatasetError
+from raysim.dataset.store import DONE, open_readonly
+from raysim.maps.sphere import SphereGrid
+
+REPRESENTATIONS = ("intensity", "fa_sphere", "fa_aperture")
+SPLITS = {"train": 0, "validation": 1, "all": None}
+ATTRIBUTE = "normalisation"
+
+
+@dataclass(frozen=True)
+class Statistics:
+    """Mean and standard deviation (population, ddof 0) of the inputs and the targets over
+    every finite value of the training samples ``samples`` (their count) fingerprinted by
+    ``digest``; targets in m, inputs in the representation's unit."""
+
+    input_mean: float
+    input_std: float
+    target_mean: float
+    target_std: float
+    samples: int
+    digest: str
+
+
+class _Moments:
+    """Count, mean and sum of squared deviations, combined batch by batch (Chan et al.)."""
+
+    def __init__(self) -> None:
+        self.n, self.mean, self.m2 = 0, 0.0, 0.0
+
+    def add(self, values: NDArray) -> None:
+        v = np.asarray(values, dtype=np.float64)
+        v = v[np.isfinite(v)]
+        if not v.size:
+            return
+        n, mean = v.size, float(v.mean())
+        m2 = float(np.sum((v - mean) ** 2))
+        delta, total = mean - self.mean, self.n + n
+        self.mean += delta * n / total
+        self.m2 += m2 + delta * delta * self.n * n / total
+        self.n = total
+
+    @property
+    def std(self) -> float:
+        return math.sqrt(self.m2 / self.n) if self.n else math.nan
+
+
+class Loader:
+    """Batches of (input, target) arrays from a dataset store (see the module docstring).
+
+    Parameters
+    ----------
+    store : local path or fsspec URL of the store.
+    representation : one of :data:`REPRESENTATIONS`.
+    source : ``clean`` (``intensity``) or ``measured`` (``intensity_measured``).
+    split : ``train``, ``validation`` or ``all``.
+    batch_size, drop_last : samples per batch; whether a last, shorter batch is dropped.
+    shuffle, seed : a new order every epoch (``seed`` and the epoch's number) or index order.
+    normalise : standardise by the training split's :class:`Statistics`.
+    fill : the value NaN becomes (after normalisation).
+    grid_n : N of ``fa_aperture`` (default: the stored deformation map's).
+    dtype : dtype of the arrays yielded.
+    """
+
+    def __init__(self, store: str, *, representation: str = "intensity", source: str = "clean",
+                 split: str = "train", batch_size: int = 32, shuffle: bool = False, seed: int = 0,
+                 drop_last: bool = False, normalise: bool = True, fill: float = 0.0,
+                 grid_n: int | None = None, dtype: str = "float32") -> None:
+        if representation not in REPRESENTATIONS:
+            raise DatasetError(f"unknown representation {representation!r}: use one of "
+                               f"{', '.join(REPRESENTATIONS)}")
+        if split not in SPLITS:
+            raise DatasetError(f"unknown split {split!r}: use one of {', '.join(SPLITS)}")
+        if source not in SOURCES:
+            raise DatasetError(f"unknown source {source!r}: use one of {', '.join(SOURCES)}")
+        if batch_size < 1:
+            raise DatasetError(f"batch_size must be >= 1, got {batch_size}")
+        self.store = str(store)
+        self.group = open_readonly(self.store)
+        if SOURCES[source] not in self.group:
+            raise DatasetError(f"{self.store}: no {SOURCES[source]} (its spec has no [measurement] table)")
+        self.representation, self.source, self.split = representation, source, split
+        self.batch_size, self.shuffle, self.seed, self.drop_last = int(batch_size), shuffle, seed, drop_last
+        self.normalise, self.fill, self.dtype = normalise, float(fill), np.dtype(dtype)
+        self.grid_n = int(grid_n or self.group["x"].shape[0])
+        self.epoch = 0
+        self.indices = samples(self.group, split)
+
+    # --- the store's geometry ---------------------------------------------------------------
+    @cached_property
+    def sphere(self) -> SphereGrid:
+        a = self.group.attrs
+        return SphereGrid(float(a["sphere_radius"]), self.group["theta"].shape[0], self.group["phi"].shape[0],
+                          float(a["theta_min"]), float(a["theta_max"]), float(a["phi_min"]),
+                          float(a["phi_max"]))
+
+    @cached_property
+    def _ideal(self) -> tuple[NDArray, NDArray]:
+        """(frequencies in Hz, ideal intensities (n_f, n_theta, n_phi))."""
+        return np.asarray(self.group["frequency"][...]), np.asarray(self.group["intensity_ideal"][...])
+
+    @cached_property
+    def target_mask(self) -> NDArray[np.bool_]:
+        """True at the aperture points (r < D/2) of the target grid, (N, N)."""
+        x = np.asarray(self.group["x"][...])
+        X, Y = np.meshgrid(x, x, indexing="xy")
+        return np.hypot(X, Y) < 0.5 * float(self.group.attrs["diameter"])
+
+    # --- raw arrays ---------------------------------------------------------------------------
+    def raw(self, indices) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(inputs, targets) of the samples ``indices`` in the chosen representation,
+        unnormalised, NaN kept, float64."""
+        idx = np.asarray(indices, dtype=np.int64)
+        order = np.argsort(idx, kind="stable")
+        back = np.empty_like(order)
+        back[order] = np.arange(len(idx))
+        sorted_idx = idx[order]
+        intensity = np.asarray(self.group[SOURCES[self.source]].oindex[sorted_idx], dtype=np.float64)[back]
+        target = np.asarray(self.group["deformation"].oindex[sorted_idx], dtype=np.float64)[back]
+        if self.representation == "intensity":
+            return intensity, target
+        freqs, ideals = self._ideal
+        f = np.asarray(self.group["frequency_hz"].oindex[sorted_idx])[back]
+        fa = [self._fa(i, ideals[_frequency_index(freqs, fi)]) for i, fi in zip(intensity, f, strict=True)]
+        return np.stack(fa), target
+
+    def _fa(self, intensity: NDArray, ideal: NDArray) -> NDArray[np.float64]:
+        from solver.equation import intensity_ratio_fa
+
+        fa = intensity_ratio_fa(intensity, ideal)
+        if self.representation == "fa_sphere":
+            return fa
+        from solver.aperture import ApertureGrid
+        from solver.resample import sphere_to_aperture
+
+        a = self.group.attrs
+        F, D = float(a["focal_length"]), float(a["diameter"])
+        return sphere_to_aperture(fa, self.sphere, ApertureGrid(D, self.grid_n), F, D)[0]
+
+    # --- statistics -----------------------------------------------------------------------------
+    @property
+    def key(self) -> str:
+        """The statistics' key in the store's ``normalisation`` attribute."""
+        n = f"/{self.grid_n}" if self.representation == "fa_aperture" else ""
+        return f"{self.representation}/{self.source}{n}"
+
+    @cached_property
+    def statistics(self) -> Statistics:
+        """The training split's statistics: from the store's attributes when they are current,
+        else computed (once) and written there (when the store is writable)."""
+        train = samples(self.group, "train")
+        digest = hashlib.sha256(train.astype(np.int64).tobytes()).hexdigest()[:16]
+        kept = dict(self.group.attrs.get(ATTRIBUTE, {}))
+        if self.key in kept and kept[self.key].get("digest") == digest:
+            return Statistics(**kept[self.key])
+        if not len(train):
+            raise DatasetError(f"{self.store}: no training sample is done: no statistics to normalise by")
+        inputs, targets = _Moments(), _Moments()
+        for start in range(0, len(train), 64):
+            x, y = self.raw(train[start:start + 64])
+            inputs.add(x)
+            targets.add(y)
+        stats = Statistics(inputs.mean, inputs.std, targets.mean, targets.std, len(train), digest)
+        try:
+            writable = zarr.open_group(self.store, mode="r+")
+            current = dict(writable.attrs.get(ATTRIBUTE, {}))
+            current[self.key] = asdict(stats)
+            writable.attrs[ATTRIBUTE] = current
+        except Exception:  # a read-only store: the statistics live in this loader only
+            pass
+        return stats
+
+    # --- batches -------------------------------------------------------------------------------
+    def _finish(self, x: NDArray, y: NDArray) -> tuple[NDArray, NDArray]:
+        if self.normalise:
+            s = self.statistics
+            x = (x - s.input_mean) / s.input_std
+            y = (y - s.target_mean) / s.target_std
+        x = np.where(np.isfinite(x), x, self.fill).astype(self.dtype)
+        y = np.where(np.isfinite(y), y, self.fill).astype(self.dtype)
+        return x, y
+
+    def sample(self, position: int) -> tuple[NDArray, NDArray]:
+        """(input, target) of the ``position``-th sample of the split (no batch axis)."""
+        x, y = self._finish(*self.raw([self.indices[position]]))
+        return x[0], y[0]
+
+    def order(self, epoch: int) -> NDArray[np.int64]:
+        """The split's sample indices in the order of ``epoch``."""
+        if not self.shuffle:
+            return self.indices
+        rng = np.random.default_rng([self.seed, epoch])
+        return self.indices[rng.permutation(len(self.indices))]
+
+    def __len__(self) -> int:
+        n, b = len(self.indices), self.batch_size
+        return n // b if self.drop_last else -(-n // b)
+
+    def __iter__(self) -> Iterator[tuple[NDArray, NDArray]]:
+        """One epoch of batches; each pass over the loader is the next epoch."""
+        order = self.order(self.epoch)
+        self.epoch += 1
+        for k in range(len(self)):
+            yield self._finish(*self.raw(order[k * self.batch_size:(k + 1) * self.batch_size]))
+
+
+def samples(group: zarr.Group, split: str) -> NDArray[np.int64]:
+    """Indices of the done samples of ``split`` (``train``, ``validation`` or ``all``)."""
+    done = np.asarray(group["status"][...]) == DONE
+    which = SPLITS[split]
+    if which is not None:
+        done &= np.asarray(group["split"][...]) == which
+    return np.flatnonzero(done)
+
+
+def _frequency_index(frequencies: NDArray, frequency: float) -> int:
+    hit = np.flatnonzero(frequencies == frequency)
+    if not hit.size:
+        raise DatasetError(f"a sample's frequency {frequency:g} Hz is not one of the store's")
+    return int(hit[0])
