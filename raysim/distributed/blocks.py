@@ -1,0 +1,233 @@
+"""Blocks of sphere points as Dask tasks: the job on each worker, the task, the client's loop.
+
+A *job* (:class:`Job`) is one field to compute: a small, picklable description (a scene's
+text and options, or a forward model's surface) that builds the heavy context (reflectors,
+quadratures, edges, elements: a :class:`raysim.simulate.BlockContext`) in the process that
+needs it. The client registers the job on the cluster as a worker plugin (:class:`JobPlugin`):
+every worker, and every worker that joins later (a nanny's restart included), receives the
+description once; nothing heavy is pickled, and no task carries more than its job's key and
+its block's bounds. Each worker process builds the context on its first block and keeps it
+(at most :data:`CONTEXTS_KEPT` jobs per process).
+
+A task (:func:`run_block`) evaluates the points lo..hi-1 and, with a partial store the worker
+can reach, writes them there itself and returns only figures; otherwise it returns the arrays
+and the client keeps or writes them. A block already marked done in the store is skipped.
+
+Threads: a worker runs its tasks on its Dask threads; each Warp launch uses
+``RAYSIM_THREADS`` CPU threads (the job's ``threads``). Devices: each worker picks its own GPU
+for ``cuda`` (:func:`raysim.distributed.cluster.worker_device`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import threading
+import time
+import uuid
+from collections import OrderedDict
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from distributed.diagnostics.plugin import WorkerPlugin
+
+from raysim.distributed.cluster import ClusterError, worker_device
+from raysim.distributed.partial import PartialStore
+from raysim.distributed.process import load_kernels, tune_malloc
+from raysim.simulate import BlockContext
+
+CONTEXTS_KEPT = 2
+
+
+class Job(Protocol):
+    """One field computed in blocks (see the module docs). Picklable, small."""
+
+    key: str  # the job's fingerprint: one context per process per key
+    n_points: int
+    device: str  # cpu, cuda (each worker takes its own GPU) or cuda:N
+    threads: int  # CPU threads of each Warp launch in a worker
+
+    def parts(self) -> dict[str, tuple[int, ...]]:
+        """The arrays a block gives: name -> tail shape (float64, one row per point)."""
+        ...
+
+    def build(self, device: str, keep: bool) -> BlockContext:
+        """The job's context on ``device`` (``keep``: several blocks will use it)."""
+        ...
+
+
+def block_bounds(n_points: int, block_size: int) -> list[tuple[int, int]]:
+    """(lo, hi) of each block of ``block_size`` points (the last one shorter)."""
+    return [(lo, min(lo + block_size, n_points)) for lo in range(0, n_points, block_size)]
+
+
+# --- the worker side ---------------------------------------------------------------------
+_lock = threading.Lock()
+_jobs: dict[str, Job] = {}
+_contexts: OrderedDict[str, Built] = OrderedDict()
+_loaded: set[str] = set()
+
+
+@dataclass(frozen=True)
+class Built:
+    """A job's context in this process, with its digest, device and build time (s)."""
+
+    context: BlockContext
+    digest: str
+    device: str
+    seconds: float
+
+
+def plugin_name(key: str) -> str:
+    return f"raysim-job-{key[:16]}"
+
+
+class JobPlugin(WorkerPlugin):
+    """Hands a job to every worker (and to any that joins later)."""
+
+    def __init__(self, job: Job) -> None:
+        self.job = job
+        self.name = plugin_name(job.key)
+
+    def setup(self, worker: Any = None) -> None:
+        # light work only: this runs on the worker's event loop; the context is built in a task
+        os.environ["RAYSIM_THREADS"] = str(int(self.job.threads))
+        tune_malloc()
+        with _lock:
+            _jobs[self.job.key] = self.job
+
+    def teardown(self, worker: Any = None) -> None:
+        with _lock:
+            _jobs.pop(self.job.key, None)
+            _contexts.pop(self.job.key, None)
+
+
+def built(key: str, name: Any = None) -> Built:
+    """The context of job ``key`` in this process, built on first use (``name``: the worker's)."""
+    with _lock:
+        if key in _contexts:
+            _contexts.move_to_end(key)
+            return _contexts[key]
+        job = _jobs.get(key)
+        if job is None:
+            raise ClusterError(f"job {key[:12]} is not registered on this worker")
+        device = worker_device(job.device, name)
+        start = time.perf_counter()
+        if device not in _loaded:
+            load_kernels(device)  # under the kernel cache's lock: one process compiles
+            _loaded.add(device)
+        context = job.build(device, True)
+        context.attrs()  # the elements made once: counts and digest known
+        made = Built(context, context.digest(), device, time.perf_counter() - start)
+        _contexts[key] = made
+        while len(_contexts) > CONTEXTS_KEPT:
+            _contexts.popitem(last=False)
+        return made
+
+
+def _worker_name() -> Any:
+    try:
+        from distributed import get_worker
+
+        return get_worker().name
+    except ValueError:  # not in a worker: a test calling the task directly
+        return None
+
+
+def run_block(key: str, index: int, lo: int, hi: int, store: str | None = None) -> dict[str, Any]:
+    """Task: block ``index`` (points lo..hi-1) of job ``key``; see the module docs."""
+    start = time.perf_counter()
+    partial = _reachable(store, key)
+    if partial is not None and partial.marker(index) is not None:
+        return {"index": index, "skipped": True}
+    name = _worker_name()
+    made = built(key, name)
+    arrays, figures = made.context.evaluate(lo, hi)
+    record = {"figures": {k: float(v) for k, v in figures.items()}, "digest": made.digest,
+              "device": made.device, "worker": str(name), "build_seconds": made.seconds,
+              "wall": time.perf_counter() - start}
+    meta: dict[str, Any] = {"index": index, "skipped": False, "attrs": made.context.attrs(), **record}
+    if partial is not None and partial.exists():
+        partial.set_context(meta["attrs"])
+        meta["count"] = partial.write(index, arrays, record)
+    else:
+        meta["arrays"] = arrays
+    return meta
+
+
+def _reachable(store: str | None, key: str) -> PartialStore | None:
+    """The partial store at ``store`` when this process sees it (made for job ``key``)."""
+    if store is None or not os.path.isfile(os.path.join(store, "zarr.json")):
+        return None
+    partial = PartialStore.open(store)
+    if partial.fingerprint != key:
+        raise ClusterError(f"{store}: this worker sees a partial store of another run")
+    return partial
+
+
+# --- the client side ---------------------------------------------------------------------
+def run_blocks(client: Any, job: Job, blocks: Iterable[int], bounds: list[tuple[int, int]],
+               store: PartialStore | None = None,
+               on_block: Callable[[dict[str, Any]], None] | None = None) -> None:
+    """Compute ``blocks`` (indices into ``bounds``) of ``job`` on ``client``'s cluster.
+
+    Each finished block's record goes to ``on_block`` as it arrives; when the worker could not
+    write it into ``store`` the record carries its ``arrays``, which are written here (with a
+    store) or left to ``on_block``. A block that fails, or kills its worker every time Dask
+    retries it, stops the run with a ClusterError naming the block.
+    """
+    from distributed import KilledWorker, as_completed
+
+    indices = list(blocks)
+    if not indices:
+        return
+    name = plugin_name(job.key)
+    try:
+        client.register_plugin(JobPlugin(job), name=name)
+    except Exception as exc:
+        raise ClusterError(f"the Dask workers could not take the job ({_reason(exc)})") from exc
+    token = uuid.uuid4().hex[:8]
+    path = str(store.path) if store is not None else None
+    futures = {client.submit(run_block, job.key, i, *bounds[i], path, pure=False,
+                             key=f"raysim-block-{job.key[:10]}-{token}-{i}"): i for i in indices}
+    try:
+        for future in as_completed(list(futures), loop=client.loop):
+            index = futures[future]
+            try:
+                meta = future.result()
+            except KilledWorker as exc:
+                raise ClusterError(f"block {index}: its worker died each time it ran it "
+                                   "(out of memory? see the workers' logs)") from exc
+            except Exception as exc:
+                raise ClusterError(f"block {index} failed on a worker ({_reason(exc)})") from exc
+            future.release()
+            if store is not None and "arrays" in meta:
+                store.set_context(meta["attrs"])
+                meta["count"] = store.write(index, meta.pop("arrays"),
+                                            {k: meta[k] for k in RECORD_KEYS})
+            if on_block is not None:
+                on_block(meta)
+    finally:
+        client.cancel([f for f in futures if not f.done()])
+        with contextlib.suppress(Exception):
+            client.unregister_worker_plugin(name)
+
+
+RECORD_KEYS = ("figures", "digest", "device", "worker", "build_seconds", "wall")
+
+
+def assemble(parts: dict[str, tuple[int, ...]], n_points: int,
+             blocks: dict[tuple[int, int], dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """The whole grid's arrays from blocks ((lo, hi) -> arrays), copied into place."""
+    out = {name: np.full((n_points, *tail), np.nan) for name, tail in parts.items()}
+    for (lo, hi), arrays in blocks.items():
+        for name in parts:
+            out[name][lo:hi] = arrays[name]
+    return out
+
+
+def _reason(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
