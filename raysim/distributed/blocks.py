@@ -26,7 +26,7 @@ import threading
 import time
 import uuid
 from collections import OrderedDict
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -36,6 +36,7 @@ from distributed.diagnostics.plugin import WorkerPlugin
 from raysim.distributed.cluster import ClusterError, worker_device
 from raysim.distributed.partial import PartialStore
 from raysim.distributed.process import load_kernels, tune_malloc
+from raysim.optics.sources import BLOCK_ALIGN
 from raysim.simulate import BlockContext
 
 CONTEXTS_KEPT = 2
@@ -58,9 +59,24 @@ class Job(Protocol):
         ...
 
 
+DEFAULT_BLOCK = {"cpu": 1024, "cuda": 32768}  # points per block (a GPU wants many threads)
+
+
 def block_bounds(n_points: int, block_size: int) -> list[tuple[int, int]]:
     """(lo, hi) of each block of ``block_size`` points (the last one shorter)."""
     return [(lo, min(lo + block_size, n_points)) for lo in range(0, n_points, block_size)]
+
+
+def block_size_for(n_points: int, device: str, requested: int | None = None) -> int:
+    """Points per block: ``requested`` (checked), else :data:`DEFAULT_BLOCK` for the device,
+    at most the grid rounded up; always a multiple of :data:`~raysim.optics.sources.BLOCK_ALIGN`."""
+    if requested is not None:
+        if requested < BLOCK_ALIGN or requested % BLOCK_ALIGN:
+            raise ClusterError(f"block size must be a positive multiple of {BLOCK_ALIGN} points, "
+                               f"got {requested}")
+        return int(requested)
+    size = DEFAULT_BLOCK["cpu" if device == "cpu" else "cuda"]
+    return min(size, max(BLOCK_ALIGN, -(-n_points // BLOCK_ALIGN) * BLOCK_ALIGN))
 
 
 # --- the worker side ---------------------------------------------------------------------
@@ -231,3 +247,75 @@ def assemble(parts: dict[str, tuple[int, ...]], n_points: int,
 def _reason(exc: BaseException) -> str:
     text = " ".join(str(exc).split())
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+class BlockRunner:
+    """Evaluates jobs in blocks on a Dask cluster, assembled in the client's memory.
+
+    The cluster (:func:`raysim.distributed.cluster.connect` with ``connect_args``) is opened on
+    the first :meth:`evaluate` and kept until :meth:`close`: a run that never needs it starts
+    none. ``evaluate(job, progress)`` returns the whole grid's arrays (no partial store: a
+    forward model's field is short-lived); ``threads`` sets the job's CPU threads per launch.
+    """
+
+    def __init__(self, connect_args: dict[str, Any], threads: int = 1,
+                 block_size: int | None = None) -> None:
+        self.connect_args, self.threads, self.block_size = connect_args, int(threads), block_size
+        self._stack = contextlib.ExitStack()
+        self._cluster: Any = None
+        self.blocks = 0
+        self.seconds = 0.0
+
+    @property
+    def cluster(self) -> Any:
+        if self._cluster is None:
+            from raysim.distributed.cluster import connect
+
+            self._cluster = self._stack.enter_context(connect(**self.connect_args))
+        return self._cluster
+
+    def close(self) -> None:
+        self._stack.close()
+        self._cluster = None
+
+    def evaluate(self, job: Job, progress: Callable[[str, float], None] | None = None
+                 ) -> dict[str, np.ndarray]:
+        from dataclasses import replace
+
+        start = time.perf_counter()
+        job = replace(job, threads=self.threads)  # type: ignore[type-var]
+        bounds = block_bounds(job.n_points, block_size_for(job.n_points, job.device, self.block_size))
+        parts: dict[tuple[int, int], dict[str, np.ndarray]] = {}
+        report = progress or (lambda stage, fraction: None)
+
+        def keep(meta: dict[str, Any]) -> None:
+            parts[bounds[meta["index"]]] = meta["arrays"]
+            report(f"blocks {len(parts)}/{len(bounds)}", len(parts) / len(bounds))
+
+        report(f"blocks 0/{len(bounds)}", 0.0)
+        run_blocks(self.cluster.client, job, range(len(bounds)), bounds, None, keep)
+        self.blocks += len(bounds)
+        self.seconds += time.perf_counter() - start
+        return assemble(job.parts(), job.n_points, parts)
+
+
+@contextlib.contextmanager
+def block_runner(scheduler: str | None = None, *, workers: int | None = None, threads: int = 1,
+                 device: str = "cpu", block_size: int | None = None) -> Iterator[BlockRunner]:
+    """A :class:`BlockRunner` on ``scheduler`` or on a local cluster of ``workers`` (opened when
+    first needed), closed on exit. Bad addresses and devices are refused here, at once."""
+    from raysim.distributed.cluster import scheduler_address
+
+    address = scheduler_address(scheduler) if scheduler else None
+    if address is None and device != "cpu":
+        from raysim.optics import runtime
+
+        runtime.resolve_device(device)
+    if block_size is not None:
+        block_size_for(block_size, device, block_size)
+    runner = BlockRunner({"scheduler": address, "workers": workers, "threads": threads,
+                          "device": device}, threads, block_size)
+    try:
+        yield runner
+    finally:
+        runner.close()

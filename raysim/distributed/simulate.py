@@ -28,10 +28,9 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from raysim.distributed.blocks import block_bounds, run_blocks
+from raysim.distributed.blocks import block_bounds, block_size_for, run_blocks
 from raysim.distributed.cluster import ClusterError, connect
 from raysim.distributed.partial import PartialStore, partial_path
-from raysim.optics.sources import BLOCK_ALIGN
 from raysim.scene import Scene
 from raysim.scene.scene import parse_scene
 from raysim.simulate import BLOCK_ENGINES, BlockContext, Options, check_method, fieldmap_of
@@ -39,7 +38,6 @@ from raysim.surface.mesh import reflectors_for
 from raysim.version import __version__
 
 FORMAT = 1
-DEFAULT_BLOCK = {"cpu": 1024, "cuda": 32768}  # points per block
 #: FieldMap attributes that describe a run rather than its result (they differ between runs)
 RUN_ATTRS = ("created", "seconds_mesh", "seconds_total", "seconds_edges", "pair_rate", "workers",
              "scheduler", "blocks", "block_size", "blocks_reused", "blocks_computed",
@@ -91,8 +89,9 @@ def scene_job(scene: Scene, method: str, options: Options, device: str, threads:
     base = str(scene.path.resolve().parent) if scene.path is not None else str(Path.cwd())
     source = str(scene.path) if scene.path is not None else "scene"
     sphere = scene.sphere
-    made = {"format": FORMAT, "scene": scene.text, "base": base, "frequency_hz": repr(scene.source.frequency_hz),
-            "grid": f"{sphere.n_theta}x{sphere.n_phi}", "method": method,
+    made = {"format": FORMAT, "scene": scene.text, "base": base,
+            "frequency_hz": repr(scene.source.frequency_hz), "grid": f"{sphere.n_theta}x{sphere.n_phi}",
+            "method": method,
             "options": json.dumps(asdict(options), sort_keys=True), "device": device,
             "block_size": str(block_size), "versions": f"raysim {__version__}, warp {warp.__version__}"}
     key = hashlib.sha256(json.dumps(made, sort_keys=True).encode()).hexdigest()
@@ -118,12 +117,6 @@ def _check_rebuilds(scene: Scene, job: SceneJob) -> None:
                            "it from the text, with only the frequency and grid overridden")
 
 
-def default_block_size(n_points: int, device: str) -> int:
-    """Points per block: a multiple of 4, at most the grid (rounded up)."""
-    size = DEFAULT_BLOCK["cpu" if device == "cpu" else "cuda"]
-    return min(size, -(-n_points // BLOCK_ALIGN) * BLOCK_ALIGN)
-
-
 def simulate(scene: Scene, output: str | Path, method: str | None = None, device: str = "cpu",
              progress: BlockProgress | None = None, *, scheduler: str | None = None,
              workers: int | None = None, threads: int = 1, resume: bool = False,
@@ -142,8 +135,8 @@ def simulate(scene: Scene, output: str | Path, method: str | None = None, device
     options = Options(total, save_field, samples_per_wavelength, edges)
     method = check_method(scene, method, options)
     if method not in BLOCK_ENGINES:
-        raise ClusterError(f"--scheduler and --workers apply to the wave methods ({', '.join(BLOCK_ENGINES)}); "
-                           f"{method} runs in one process")
+        raise ClusterError(f"--scheduler and --workers apply to the wave methods "
+                           f"({', '.join(BLOCK_ENGINES)}); {method} runs in one process")
     if threads < 1:
         raise ClusterError(f"threads must be >= 1, got {threads}")
     if scheduler is None and device != "cpu":  # local workers see this machine's devices
@@ -151,9 +144,7 @@ def simulate(scene: Scene, output: str | Path, method: str | None = None, device
 
         runtime.resolve_device(device)
     n_points = scene.sphere.n_theta * scene.sphere.n_phi
-    size = default_block_size(n_points, device) if block_size is None else int(block_size)
-    if size < BLOCK_ALIGN or size % BLOCK_ALIGN:
-        raise ClusterError(f"block size must be a positive multiple of {BLOCK_ALIGN} points, got {size}")
+    size = block_size_for(n_points, device, block_size)
     job, description = scene_job(scene, method, options, device, threads, size)
     store = _partial(partial_path(output), job, description, resume)
     bounds = block_bounds(n_points, size)
@@ -219,7 +210,8 @@ def _fieldmap(scene: Scene, method: str, options: Options, store: PartialStore, 
     counts = np.array([records[i]["count"] for i in range(store.n_blocks)])
     build = [records[i]["build_seconds"] for i in range(store.n_blocks)]
     attrs = {**context["mesh"], **run.attrs, "device": str(device),
-             "seconds_context": float(max(build)), "seconds_blocks": float(sum(r["wall"] for r in records.values())),
+             "seconds_context": float(max(build)),
+             "seconds_blocks": float(sum(r["wall"] for r in records.values())),
              "blocks": store.n_blocks, "block_size": store.block_size,
              "blocks_computed_twice": int(np.sum(counts > 1)),
              "block_element_sets": len({r["digest"] for r in records.values()})}
