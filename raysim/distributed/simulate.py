@@ -146,16 +146,23 @@ def simulate(scene: Scene, output: str | Path, method: str | None = None, device
     n_points = scene.sphere.n_theta * scene.sphere.n_phi
     size = block_size_for(n_points, device, block_size)
     job, description = scene_job(scene, method, options, device, threads, size)
-    store = _partial(partial_path(output), job, description, resume)
+    path = partial_path(output)
+    created = not path.exists()
+    store = _partial(path, job, description, resume)
     bounds = block_bounds(n_points, size)
     run = _Run(len(bounds), len(store.markers()), progress)
     pending = [i for i in range(len(bounds)) if store.marker(i) is None]
     cluster_workers, address = 0, "none"
-    if pending:
-        with connect(scheduler, workers=workers, threads=threads, device=device,
-                     tasks=len(pending)) as cluster:
-            cluster_workers, address = cluster.workers, cluster.address
-            run_blocks(cluster.client, job, pending, bounds, store, run.block)
+    try:
+        if pending:
+            with connect(scheduler, workers=workers, threads=threads, device=device,
+                         tasks=len(pending)) as cluster:
+                cluster_workers, address = cluster.workers, cluster.address
+                run_blocks(cluster.client, job, pending, bounds, store, run.block)
+    except BaseException:
+        if created and not store.markers():  # nothing to resume: leave nothing behind
+            store.remove()
+        raise
     ds = _fieldmap(scene, method, options, store, device)
     ds.attrs.update({"seconds_total": time.perf_counter() - start, "workers": cluster_workers,
                      "scheduler": address, "blocks_reused": run.reused,
