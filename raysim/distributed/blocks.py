@@ -120,12 +120,13 @@ class JobPlugin(WorkerPlugin):
             _contexts.pop(self.job.key, None)
 
 
-def built(key: str, name: Any = None) -> Built:
-    """The context of job ``key`` in this process, built on first use (``name``: the worker's)."""
+def built(key: str, name: Any = None) -> tuple[Built, bool]:
+    """The context of job ``key`` in this process, built on first use (``name``: the worker's),
+    and whether this call built it."""
     with _lock:
         if key in _contexts:
             _contexts.move_to_end(key)
-            return _contexts[key]
+            return _contexts[key], False
         job = _jobs.get(key)
         if job is None:
             raise ClusterError(f"job {key[:12]} is not registered on this worker")
@@ -140,7 +141,7 @@ def built(key: str, name: Any = None) -> Built:
         _contexts[key] = made
         while len(_contexts) > CONTEXTS_KEPT:
             _contexts.popitem(last=False)
-        return made
+        return made, True
 
 
 def _worker_name() -> Any:
@@ -154,16 +155,16 @@ def _worker_name() -> Any:
 
 def run_block(key: str, index: int, lo: int, hi: int, store: str | None = None) -> dict[str, Any]:
     """Task: block ``index`` (points lo..hi-1) of job ``key``; see the module docs."""
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     partial = _reachable(store, key)
     if partial is not None and partial.marker(index) is not None:
         return {"index": index, "skipped": True}
     name = _worker_name()
-    made = built(key, name)
+    made, fresh = built(key, name)
     arrays, figures = made.context.evaluate(lo, hi)
     record = {"figures": {k: float(v) for k, v in figures.items()}, "digest": made.digest,
-              "device": made.device, "worker": str(name), "build_seconds": made.seconds,
-              "wall": time.perf_counter() - start}
+              "device": made.device, "worker": str(name), "build_seconds": made.seconds if fresh else 0.0,
+              "wall": time.perf_counter() - start, "cpu": time.process_time() - cpu}
     meta: dict[str, Any] = {"index": index, "skipped": False, "attrs": made.context.attrs(), **record}
     if partial is not None and partial.exists():
         partial.set_context(meta["attrs"])
@@ -231,7 +232,7 @@ def run_blocks(client: Any, job: Job, blocks: Iterable[int], bounds: list[tuple[
             client.unregister_worker_plugin(name)
 
 
-RECORD_KEYS = ("figures", "digest", "device", "worker", "build_seconds", "wall")
+RECORD_KEYS = ("figures", "digest", "device", "worker", "build_seconds", "wall", "cpu")
 
 
 def assemble(parts: dict[str, tuple[int, ...]], n_points: int,

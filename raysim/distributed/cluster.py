@@ -23,6 +23,7 @@ import os
 import re
 import socket
 import sys
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -137,9 +138,11 @@ def _local(workers: int | None, threads: int, device: str, tasks: int | None) ->
         n = max(1, usable_cores() // threads)
     n = max(1, min(n, tasks)) if tasks else n
     try:
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None, silence_logs=logging.ERROR,
-                               env={"RAYSIM_THREADS": str(threads)})
+        with warnings.catch_warnings():  # the scheduler's HTTP port taken: it picks another
+            warnings.filterwarnings("ignore", message="Port .* is already in use")
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                   dashboard_address=None, silence_logs=logging.ERROR,
+                                   env={"RAYSIM_THREADS": str(threads)})
     except (RuntimeError, OSError) as exc:
         raise ClusterError(f"could not start a local Dask cluster of {n} workers ({_reason(exc)})") from exc
     try:

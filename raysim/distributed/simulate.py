@@ -41,7 +41,8 @@ FORMAT = 1
 #: FieldMap attributes that describe a run rather than its result (they differ between runs)
 RUN_ATTRS = ("created", "seconds_mesh", "seconds_total", "seconds_edges", "pair_rate", "workers",
              "scheduler", "blocks", "block_size", "blocks_reused", "blocks_computed",
-             "blocks_computed_twice", "block_element_sets", "seconds_blocks", "seconds_context")
+             "blocks_computed_twice", "block_element_sets", "seconds_blocks", "seconds_blocks_cpu",
+             "seconds_context", "seconds_context_total")
 
 BlockProgress = Callable[[int, int], None]  # (blocks done, blocks in all)
 
@@ -217,8 +218,9 @@ def _fieldmap(scene: Scene, method: str, options: Options, store: PartialStore, 
     counts = np.array([records[i]["count"] for i in range(store.n_blocks)])
     build = [records[i]["build_seconds"] for i in range(store.n_blocks)]
     attrs = {**context["mesh"], **run.attrs, "device": str(device),
-             "seconds_context": float(max(build)),
+             "seconds_context": float(max(build)), "seconds_context_total": float(sum(build)),
              "seconds_blocks": float(sum(r["wall"] for r in records.values())),
+             "seconds_blocks_cpu": float(sum(r.get("cpu", np.nan) for r in records.values())),
              "blocks": store.n_blocks, "block_size": store.block_size,
              "blocks_computed_twice": int(np.sum(counts > 1)),
              "block_element_sets": len({r["digest"] for r in records.values()})}
