@@ -6,8 +6,9 @@ Prints, for each worker count, the wall time, the speed-up over one worker, the 
 (PO pairs per second per worker, radiation time only, and per CPU-second of the block tasks),
 the context each worker builds once (reflectors, quadrature, elements) and the overhead per
 block: the task's wall time beyond its radiation (the context's build left out), and the
-cluster's idle share (worker-seconds not spent in a task, the cluster's start included). Beside them, the single-process kernel rate on one thread (the radiator
-alone, 16 384 paper-dish elements x the 32 400 sphere points), in pairs per CPU-second.
+cluster's idle share (worker-seconds not spent in a task, the cluster's start included).
+Beside them, the single-process kernel rate on one thread (the radiator alone, 16 384
+paper-dish elements x the 32 400 sphere points), in pairs per CPU-second.
 
 Workers are local processes with one thread each (``RAYSIM_THREADS=1``), so on an idle machine
 with as many cores as workers the speed-up should be close to the worker count. The load

@@ -18,17 +18,24 @@ from raysim.distributed.partial import partial_path
 from raysim.maps.fieldmap import load
 from raysim.scene.scene import parse_scene
 from raysim.simulate import simulate
-from tests.raysim.dataset.test_run import _env, _free_port, _kill_group, _listening, _wait_until, _worker_processes
+from tests.raysim.dataset.test_run import (
+    _env,
+    _free_port,
+    _kill_group,
+    _listening,
+    _wait_until,
+    _worker_processes,
+)
 from tests.raysim.distributed.conftest import SMALL, assert_same_fieldmap
 
 pytestmark = pytest.mark.slow
 
-# the small dish at 3 GHz on 18 x 72 points: ~65 000 PO samples per reflector, 81 blocks of 16
-# points (about 0.1 s each on one idle core), long enough to kill something mid-run
-SCENE = SMALL.replace("frequency_hz = 1.0e9", "frequency_hz = 3.0e9").replace(
-    "n_theta = 9", "n_theta = 18").replace("n_phi = 36", "n_phi = 72")
+# the small dish at 2.5 GHz on 18 x 48 points: ~50 000 PO samples per reflector, 54 blocks of
+# 16 points (a few hundredths of a second each on one idle core), long enough to kill mid-run
+SCENE = SMALL.replace("frequency_hz = 1.0e9", "frequency_hz = 2.5e9").replace(
+    "n_theta = 9", "n_theta = 18").replace("n_phi = 36", "n_phi = 48")
 BLOCK = 16
-N_BLOCKS = -(-18 * 72 // BLOCK)
+N_BLOCKS = -(-18 * 48 // BLOCK)
 RUN_TIMEOUT = 300  # s
 
 
