@@ -8,6 +8,14 @@ Each method is one engine function in :data:`ENGINES`, ``(scene, ideal, deformed
 device, progress) -> Run``: the two intensities on the scene's sphere grid, how they are sampled
 (GO cell means, wave-optics cell centres) and the engine's own attributes and variables. What
 every method shares (the reflectors, the scene's attributes, the FieldMap) is done once here.
+
+Methods whose field at a sphere point does not depend on the other points (every wave engine)
+are also a :class:`BlockEngine` in :data:`BLOCK_ENGINES`: a per-process context evaluates any
+block of the grid's points on its own, and a finishing step turns the whole grid's arrays into
+the Run. A single process evaluates one block, the whole grid; :mod:`raysim.distributed`
+evaluates many on Dask workers, and the FieldMap is the same bit for bit (each point's values
+come from the same sums in the same order, and the finishing step is the same code on the same
+arrays).
 """
 
 from __future__ import annotations
@@ -16,6 +24,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import xarray as xr
@@ -27,6 +36,9 @@ from raysim.optics import go
 from raysim.optics.runtime import Progress
 from raysim.scene import Scene
 from raysim.surface.mesh import Reflector, reflectors_for
+
+if TYPE_CHECKING:
+    from raysim.optics.sources import Sources
 
 METHODS = ("go", "po", "po+ptd")
 
@@ -91,11 +103,8 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
     edges : ``po+ptd`` only: ``rim`` (the outer rim, the paper's PTD; the default) or ``all``
         (the rim and every panel edge beside a gap).
     """
-    method = scene.method if method is None else method
-    if method not in ENGINES:
-        raise RaysimError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
     options = Options(total, save_field, samples_per_wavelength, edges)
-    _check_options(method, options)
+    method = check_method(scene, method, options)
     report = progress or (lambda stage, fraction: None)
     start = time.perf_counter()
     report("mesh", 0.0)
@@ -105,9 +114,24 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
     report("done", 1.0)
     attrs = {**scene_attrs(scene, deformed), **run.attrs, "device": str(device or "cpu"),
              "seconds_mesh": mesh_seconds, "seconds_total": time.perf_counter() - start}
-    ds = fieldmap(scene.sphere, run.intensity, run.intensity_ideal, focal_length=deformed.F,
-                  diameter=deformed.D, frequency_hz=scene.source.frequency_hz, method=method,
-                  sampling=run.sampling, scene=scene.text, attrs=attrs, extra=run.extra)
+    return fieldmap_of(scene, method, run, deformed.F, deformed.D, attrs)
+
+
+def check_method(scene: Scene, method: str | None, options: Options) -> str:
+    """The method to run (``method``, else the scene's), its options checked; raises
+    RaysimError with one line."""
+    method = scene.method if method is None else method
+    if method not in ENGINES:
+        raise RaysimError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
+    _check_options(method, options)
+    return method
+
+
+def fieldmap_of(scene: Scene, method: str, run: Run, F: float, D: float, attrs: dict) -> xr.Dataset:
+    """The FieldMap of ``run`` on the scene's grid (F, D of the reflector in m; flat attrs)."""
+    ds = fieldmap(scene.sphere, run.intensity, run.intensity_ideal, focal_length=F, diameter=D,
+                  frequency_hz=scene.source.frequency_hz, method=method, sampling=run.sampling,
+                  scene=scene.text, attrs=attrs, extra=run.extra)
     return ds.assign_coords(run.coords) if run.coords else ds
 
 
@@ -153,57 +177,162 @@ def _run_go(scene: Scene, ideal: Reflector, deformed: Reflector, options: Option
     return Run(result_def.intensity, result_ideal.intensity, "cell_mean", attrs)
 
 
-def _run_po(scene: Scene, ideal: Reflector, deformed: Reflector, options: Options,
+class BlockContext(Protocol):
+    """What :meth:`BlockEngine.prepare` returns: one process's context of one simulation."""
+
+    def evaluate(self, lo: int, hi: int, progress: Progress | None = None
+                 ) -> tuple[dict[str, NDArray[np.float64]], dict[str, float]]:
+        """The engine's arrays (name -> (hi - lo, *tail) float64) at the flattened grid points
+        lo..hi-1 (C order over (theta, phi)), and figures of the work (``pairs``, ``seconds``:
+        summed over blocks, they go into the Run's attributes)."""
+        ...
+
+    def attrs(self) -> dict[str, Any]:
+        """What the FieldMap needs from the context, the same in every process (JSON-able):
+        ``mesh`` (:func:`scene_attrs`), ``focal_length``, ``diameter`` (m) and ``engine``
+        (the engine's own, handed to :meth:`BlockEngine.finish`)."""
+        ...
+
+    def digest(self) -> str:
+        """A digest of the context's inputs to the sums (equal digests: equal block values)."""
+        ...
+
+
+@dataclass(frozen=True)
+class BlockEngine:
+    """A method that computes its fields at any block of the sphere's points independently.
+
+    ``parts(options)``: the arrays a block gives, name -> tail shape (float64, one row per
+    point). ``prepare(scene, ideal, deformed, options, device, keep)``: the heavy context
+    (quadratures, edges, elements), once per process; ``keep`` asks it to keep what it makes
+    for further blocks. ``finish(scene, options, context_attrs, arrays, figures)``: the
+    context's :meth:`BlockContext.attrs`, the whole grid's arrays (n_theta * n_phi rows) and the
+    figures summed over blocks -> :class:`Run`. A point's
+    values must not depend on which other points share its block: the FieldMap from many
+    blocks is then the single-process one bit for bit.
+    """
+
+    parts: Callable[[Options], dict[str, tuple[int, ...]]]
+    prepare: Callable[[Scene, Reflector, Reflector, Options, str | None, bool], BlockContext]
+    finish: Callable[[Scene, Options, dict, dict[str, NDArray[np.float64]], dict[str, float]], Run]
+
+
+def run_one_block(method: str) -> Engine:
+    """The :data:`ENGINES` entry of a block engine: its whole grid as one block, here."""
+
+    def run(scene: Scene, ideal: Reflector, deformed: Reflector, options: Options,
             device: str | None, report: Progress) -> Run:
-    """Method ``po``: the PO currents alone."""
-    return _run_wave(scene, ideal, deformed, options, device, report, edges=None)
+        engine = BLOCK_ENGINES[method]
+        context = engine.prepare(scene, ideal, deformed, options, device, False)
+        arrays, figures = context.evaluate(0, scene.sphere.n_theta * scene.sphere.n_phi,
+                                           _stage(report, 0.05, 0.95, "blocks"))
+        return engine.finish(scene, options, context.attrs(), arrays, figures)
+
+    return run
 
 
-def _run_po_ptd(scene: Scene, ideal: Reflector, deformed: Reflector, options: Options,
-                device: str | None, report: Progress) -> Run:
-    """Method ``po+ptd``: the PO currents plus the fringe currents of ``options.edges``
-    (``rim`` unless given)."""
-    return _run_wave(scene, ideal, deformed, options, device, report, edges=options.edges or "rim")
+def _wave_edges(method: str, options: Options) -> str | None:
+    """The edge set of a wave method: None for ``po``, ``options.edges`` or ``rim`` for ``po+ptd``."""
+    return (options.edges or "rim") if method == "po+ptd" else None
 
 
-def _run_wave(scene: Scene, ideal: Reflector, deformed: Reflector, options: Options,
-              device: str | None, report: Progress, edges: str | None) -> Run:
-    """PO currents on both reflectors (:func:`raysim.optics.po.sphere_field`), with ``edges``
-    (``rim`` or ``all``) the fringe field of those edges added (:mod:`raysim.optics.ptd`):
-    intensities at the cell centres."""
-    from raysim.optics import po, ptd
+def _wave_parts(edges: str | None) -> Callable[[Options], dict[str, tuple[int, ...]]]:
+    names = ("po_ideal", "po_deformed") + (("edges_ideal", "edges_deformed") if edges else ())
+    return lambda options: {name: (6,) for name in names}
 
-    spw = options.samples_per_wavelength or po.DEFAULT_SAMPLES_PER_WAVELENGTH
-    wave = po.Illumination.plane_wave(scene.source.frequency_hz, scene.source.direction,
-                                      scene.source.e_hat)
-    result_ideal = po.sphere_field(ideal, scene.sphere, wave, spw, device,
-                                   progress=_stage(report, 0.05, 0.475, "ideal"))
-    result_def = po.sphere_field(deformed, scene.sphere, wave, spw, device,
-                                 progress=_stage(report, 0.525, 0.475, "deformed"))
-    fields = {"E": result_def.E, "E_ideal": result_ideal.E}
-    pairs = result_ideal.pairs + result_def.pairs
-    radiate_seconds = result_ideal.seconds_radiate + result_def.seconds_radiate
-    attrs = {
-        "field": "total" if options.total else "scattered",
-        "samples_per_wavelength": float(spw),
-        "samples": int(result_def.n_samples),
-        "samples_lit": int(result_def.n_lit),
-        "samples_lit_ideal": int(result_ideal.n_lit),
-        "pairs": int(pairs),
-        "pair_rate": pairs / radiate_seconds if radiate_seconds > 0 else 0.0,
-    }
+
+def _wave(scene: Scene) -> Any:
+    from raysim.optics.illumination import Illumination
+
+    return Illumination.plane_wave(scene.source.frequency_hz, scene.source.direction, scene.source.e_hat)
+
+
+class _WaveContext:
+    """PO currents (and fringe currents of the method's edges) of both reflectors."""
+
+    def __init__(self, scene: Scene, ideal: Reflector, deformed: Reflector, options: Options,
+                 device: str | None, keep: bool, method: str) -> None:
+        from raysim.optics import po
+        from raysim.optics.sources import Sources
+
+        self.edges = _wave_edges(method, options)
+        self.spw = options.samples_per_wavelength or po.DEFAULT_SAMPLES_PER_WAVELENGTH
+        wave = _wave(scene)
+        self.points = {name: scene.sphere.points(r.F).reshape(-1, 3)
+                       for name, r in (("ideal", ideal), ("deformed", deformed))}
+        self.sources: dict[str, Sources] = {
+            name: Sources(r, wave, self.spw, self.edges, device, keep)
+            for name, r in (("ideal", ideal), ("deformed", deformed))}
+        self.mesh = scene_attrs(scene, deformed)
+        self.F, self.D = float(deformed.F), float(deformed.D)
+        self.edge_note = _edge_note(self.edges, deformed, wave.wavelength)
+
+    def evaluate(self, lo: int, hi: int, progress: Progress | None = None):
+        report = progress or (lambda stage, fraction: None)
+        arrays: dict[str, NDArray[np.float64]] = {}
+        figures = {"pairs": 0.0, "seconds": 0.0, "pairs_edges": 0.0, "seconds_edges": 0.0}
+        for i, (name, sources) in enumerate(self.sources.items()):
+            out = sources.radiate(self.points[name][lo:hi], _stage(report, 0.5 * i, 0.5, name))
+            arrays[f"po_{name}"] = out.sums["electric"]
+            if self.edges:
+                arrays[f"edges_{name}"] = out.sums["fringe"]
+            for key in figures:
+                figures[key] += getattr(out, key)
+        return arrays, figures
+
+    def attrs(self) -> dict[str, Any]:
+        ideal, deformed = self.sources["ideal"], self.sources["deformed"]
+        for sources in (ideal, deformed):
+            sources.prime()
+        engine = {"samples_per_wavelength": float(self.spw), "samples": int(deformed.stats.n_samples),
+                  "samples_lit": int(deformed.stats.n_lit), "samples_lit_ideal": int(ideal.stats.n_lit)}
+        if self.edges:
+            engine.update({"edge_points": int(deformed.n_edge_points),
+                           "edge_points_lit": int(deformed.n_edge_lit), **self.edge_note})
+        return {"mesh": self.mesh, "focal_length": self.F, "diameter": self.D, "engine": engine}
+
+    def digest(self) -> str:
+        return "-".join(self.sources[name].digest() for name in ("ideal", "deformed"))
+
+
+def _finish_wave(method: str) -> Callable[..., Run]:
+    def finish(scene: Scene, options: Options, context: dict, arrays: dict[str, NDArray[np.float64]],
+               figures: dict[str, float]) -> Run:
+        return _wave_run(scene, options, context, arrays, figures, _wave_edges(method, options))
+
+    return finish
+
+
+def _wave_run(scene: Scene, options: Options, context: dict, arrays: dict[str, NDArray[np.float64]],
+              figures: dict[str, float], edges: str | None) -> Run:
+    """PO fields of both reflectors (with ``edges``, plus the fringe fields of those edges,
+    :mod:`raysim.optics.ptd`) from the raw sums: intensities at the cell centres."""
+    from raysim.optics import po
+    from raysim.optics.radiator import field_of
+
+    wave = _wave(scene)
+    shape = (scene.sphere.n_theta, scene.sphere.n_phi, 3)
+
+    def field(name: str, kind: str) -> NDArray[np.complex128]:
+        return field_of({kind: arrays[name]}, wave.k).reshape(shape)
+
+    fields = {"E": field("po_deformed", "electric"), "E_ideal": field("po_ideal", "electric")}
+    pairs, seconds = int(figures["pairs"]), float(figures["seconds"])
+    attrs = {"field": "total" if options.total else "scattered", **context["engine"], "pairs": pairs,
+             "pair_rate": pairs / seconds if seconds > 0 else 0.0}
     if edges is not None:
-        fringe = {name: ptd.sphere_edge_field(reflector, scene.sphere, wave, edges, device=device,
-                                              progress=lambda s, f, n=name: report(f"{n}: {s}", 1.0))
-                  for name, reflector in (("ideal", ideal), ("deformed", deformed))}
-        fields["E"] = fields["E"] + fringe["deformed"].E
-        fields["E_ideal"] = fields["E_ideal"] + fringe["ideal"].E
-        fields["E_edges"], fields["E_edges_ideal"] = fringe["deformed"].E, fringe["ideal"].E
-        attrs.update(_edge_attrs(edges, fringe, deformed, wave.wavelength))
+        E_edges, E_edges_ideal = field("edges_deformed", "fringe"), field("edges_ideal", "fringe")
+        fields["E"] = fields["E"] + E_edges
+        fields["E_ideal"] = fields["E_ideal"] + E_edges_ideal
+        fields["E_edges"], fields["E_edges_ideal"] = E_edges, E_edges_ideal
+        attrs.update({"edges": edges, "edge_theory": EDGE_THEORY,
+                      "edge_points_per_wavelength": float(_ptd_points_per_wavelength()),
+                      "seconds_edges": float(figures.get("seconds_edges", 0.0))})
     if options.total:
-        E_inc = po.incident_field(scene.sphere.points(deformed.F), wave.k, wave.k_hat, wave.e_hat)
-        fields["E"] = fields["E"] + E_inc.reshape(fields["E"].shape)
-        fields["E_ideal"] = fields["E_ideal"] + E_inc.reshape(fields["E"].shape)
+        E_inc = po.incident_field(scene.sphere.points(context["focal_length"]), wave.k, wave.k_hat,
+                                  wave.e_hat)
+        fields["E"] = fields["E"] + E_inc.reshape(shape)
+        fields["E_ideal"] = fields["E_ideal"] + E_inc.reshape(shape)
     run = Run(np.sum(np.abs(fields["E"]) ** 2, axis=-1), np.sum(np.abs(fields["E_ideal"]) ** 2, axis=-1),
               "centre", attrs)
     if options.save_field:
@@ -212,25 +341,24 @@ def _run_wave(scene: Scene, ideal: Reflector, deformed: Reflector, options: Opti
     return run
 
 
-def _edge_attrs(edges: str, fringe: dict, deformed: Reflector, wavelength: float) -> dict:
-    """The FieldMap attributes of the PTD edge currents."""
+EDGE_THEORY = "Michaeli fringe equivalent edge currents of a half-plane (raysim.optics.ptd)"
+
+
+def _edge_note(edges: str | None, deformed: Reflector, wavelength: float) -> dict:
+    """The FieldMap's caveat on panel-gap edges (``edges`` ``all`` with gaps), else nothing."""
+    layout = deformed.layout
+    if edges != "all" or layout is None or not layout.gap > 0:
+        return {}
+    return {"edge_gap_wavelengths": layout.gap / wavelength,
+            "edge_note": ("each panel edge is an isolated half-plane: the fringe currents of a "
+                          "gap's two edges add whatever the gap's width, which holds for gaps "
+                          "wider than about a wavelength only")}
+
+
+def _ptd_points_per_wavelength() -> float:
     from raysim.optics import ptd
 
-    attrs = {
-        "edges": edges,
-        "edge_theory": "Michaeli fringe equivalent edge currents of a half-plane (raysim.optics.ptd)",
-        "edge_points_per_wavelength": float(ptd.DEFAULT_POINTS_PER_WAVELENGTH),
-        "edge_points": int(fringe["deformed"].n_points),
-        "edge_points_lit": int(fringe["deformed"].n_lit),
-        "seconds_edges": fringe["ideal"].seconds + fringe["deformed"].seconds,
-    }
-    layout = deformed.layout
-    if edges == "all" and layout is not None and layout.gap > 0:
-        attrs["edge_gap_wavelengths"] = layout.gap / wavelength
-        attrs["edge_note"] = ("each panel edge is an isolated half-plane: the fringe currents of a "
-                              "gap's two edges add whatever the gap's width, which holds for gaps "
-                              "wider than about a wavelength only")
-    return attrs
+    return float(ptd.DEFAULT_POINTS_PER_WAVELENGTH)
 
 
 def field_variables(fields: dict[str, NDArray[np.complex128]], kind: str) -> dict:
@@ -245,7 +373,16 @@ def field_variables(fields: dict[str, NDArray[np.complex128]], kind: str) -> dic
     return extra
 
 
-ENGINES: dict[str, Engine] = {"go": _run_go, "po": _run_po, "po+ptd": _run_po_ptd}
+def _wave_engine(method: str) -> BlockEngine:
+    def prepare(scene, ideal, deformed, options, device, keep):
+        return _WaveContext(scene, ideal, deformed, options, device, keep, method)
+
+    edges = "rim" if method == "po+ptd" else None
+    return BlockEngine(_wave_parts(edges), prepare, _finish_wave(method))
+
+
+BLOCK_ENGINES: dict[str, BlockEngine] = {"po": _wave_engine("po"), "po+ptd": _wave_engine("po+ptd")}
+ENGINES: dict[str, Engine] = {"go": _run_go, "po": run_one_block("po"), "po+ptd": run_one_block("po+ptd")}
 
 
 def ideal_resolution(scene: Scene) -> float:

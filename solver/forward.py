@@ -23,14 +23,23 @@ or the total field (attribute ``field``).
 The ideal reflector's field is computed once per (model, scan geometry) and kept for the
 session. A model object reports its progress through ``progress(stage, fraction)`` when the
 refinement passes one (``reports_progress``).
+
+The wave models compute each field as a :class:`ForwardJob` of :mod:`raysim.distributed.blocks`:
+in this process as one block, or, inside ``with distributed(runner):``, in blocks of sphere
+points on a Dask cluster (:class:`raysim.distributed.BlockRunner`); the field is the same bit
+for bit either way.
 """
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import hashlib
 from collections import OrderedDict
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -129,9 +138,7 @@ class WaveForward:
                  delta: NDArray | None, progress: Progress | None = None) -> NDArray:
         if delta is None:
             return np.sum(np.abs(self.ideal_field(sphere, F, D, progress)) ** 2, axis=-1)
-        from raysim.surface.deformation import GriddedMap
-
-        E = self._field(sphere, F, D, GriddedMap(x, y, delta), progress)
+        E = self._field(sphere, F, D, (np.asarray(x), np.asarray(y), np.asarray(delta)), progress)
         return np.sum(np.abs(E) ** 2, axis=-1)
 
     def ideal_field(self, sphere: SphereGrid, F: float, D: float,
@@ -150,22 +157,27 @@ class WaveForward:
 
         return 2.0 * np.pi * self.frequency_hz / C0
 
-    def _field(self, sphere: SphereGrid, F: float, D: float, deformation,
+    def _field(self, sphere: SphereGrid, F: float, D: float, surface: tuple | None,
                progress: Progress | None) -> NDArray[np.complex128]:
+        """E (n_theta, n_phi, 3) of the paraboloid plus ``surface`` (x, y, delta grids; None:
+        the ideal one), in this process or on the runner of :func:`distributed`."""
         import time
 
         from raysim.optics import po
+        from raysim.optics.radiator import field_of
 
         start = time.perf_counter()
-        ideal = _paraboloid(float(D), float(F), float(self.face_m))
-        reflector = ideal if deformation is None else ideal.deformed(deformation)
-        e_hat = (np.cos(self.polarization), np.sin(self.polarization), 0.0)
-        wave = po.Illumination.plane_wave(self.frequency_hz, (0.0, 0.0, -1.0), e_hat)
-        spw = po.DEFAULT_SAMPLES_PER_WAVELENGTH if self.samples_per_wavelength is None \
-            else self.samples_per_wavelength
-        E = po.sphere_field(reflector, sphere, wave, spw, self.device, progress=progress).E
+        job = self.job(sphere, F, D, surface)
+        runner = _RUNNER.get()
+        if runner is None:
+            arrays, _ = job.build(self.device or "cpu", False).evaluate(0, job.n_points, progress)
+        else:
+            arrays = runner.evaluate(job, progress)
+        wave = job.wave()
+        shape = (sphere.n_theta, sphere.n_phi, 3)
+        E = field_of({"electric": arrays["po"]}, wave.k).reshape(shape)
         if self.ptd:
-            E = E + _ptd_field(reflector, sphere, wave, self.device)
+            E = E + field_of({"fringe": arrays["edges"]}, wave.k).reshape(shape)
         if self.total:
             points = sphere.points(F)
             E = E + po.incident_field(points.reshape(-1, 3), wave.k, wave.k_hat,
@@ -174,8 +186,104 @@ class WaveForward:
         self.seconds += time.perf_counter() - start
         return E
 
+    def job(self, sphere: SphereGrid, F: float, D: float, surface: tuple | None) -> ForwardJob:
+        """This model's field of the paraboloid (D, F in m) plus ``surface`` as a block job."""
+        spw = self.samples_per_wavelength
+        job = ForwardJob("", float(D), float(F), float(self.face_m), float(self.frequency_hz),
+                         float(self.polarization), spw, self.ptd, sphere, str(self.device or "cpu"),
+                         surface)
+        return replace(job, key=job.fingerprint())
+
 
 _IDEAL_WAVE: OrderedDict[tuple, NDArray[np.complex128]] = OrderedDict()
+_RUNNER: contextvars.ContextVar[Any] = contextvars.ContextVar("raysim_forward_runner", default=None)
+
+
+@contextlib.contextmanager
+def distributed(runner: Any) -> Iterator[None]:
+    """Inside the block, the wave models compute their fields on ``runner`` (an object with
+    ``evaluate(job, progress) -> arrays``, such as :class:`raysim.distributed.BlockRunner`)."""
+    token = _RUNNER.set(runner)
+    try:
+        yield
+    finally:
+        _RUNNER.reset(token)
+
+
+@dataclass(frozen=True)
+class ForwardJob:
+    """One wave-model field as a job of :mod:`raysim.distributed.blocks`: the paraboloid
+    (D, F in m) on ``face_m`` quadrature faces plus ``surface`` (x, y, delta grids in m; None
+    for the ideal), under the on-axis plane wave, at the cell centres of ``sphere``."""
+
+    key: str
+    D: float
+    F: float
+    face_m: float
+    frequency_hz: float
+    polarization: float
+    samples_per_wavelength: float | None
+    ptd: bool
+    sphere: SphereGrid
+    device: str
+    surface: tuple | None
+    threads: int = 1
+
+    @property
+    def n_points(self) -> int:
+        return self.sphere.n_theta * self.sphere.n_phi
+
+    def fingerprint(self) -> str:
+        h = hashlib.sha256(repr((self.D, self.F, self.face_m, self.frequency_hz, self.polarization,
+                                 self.samples_per_wavelength, self.ptd, self.sphere,
+                                 self.device)).encode())
+        for grid in self.surface or ():
+            h.update(np.ascontiguousarray(grid, dtype=np.float64).tobytes())
+        return h.hexdigest()
+
+    def parts(self) -> dict[str, tuple[int, ...]]:
+        return {"po": (6,), "edges": (6,)} if self.ptd else {"po": (6,)}
+
+    def wave(self) -> Any:
+        from raysim.optics.illumination import Illumination
+
+        e_hat = (np.cos(self.polarization), np.sin(self.polarization), 0.0)
+        return Illumination.plane_wave(self.frequency_hz, (0.0, 0.0, -1.0), e_hat)
+
+    def build(self, device: str, keep: bool) -> _ForwardContext:
+        from raysim.optics import po
+        from raysim.optics.sources import Sources
+
+        reflector = _paraboloid(self.D, self.F, self.face_m)
+        if self.surface is not None:
+            from raysim.surface.deformation import GriddedMap
+
+            reflector = reflector.deformed(GriddedMap(*self.surface))
+        spw = po.DEFAULT_SAMPLES_PER_WAVELENGTH if self.samples_per_wavelength is None \
+            else self.samples_per_wavelength
+        sources = Sources(reflector, self.wave(), spw, "rim" if self.ptd else None, device, keep)
+        return _ForwardContext(sources, self.sphere.points(self.F).reshape(-1, 3))
+
+
+class _ForwardContext:
+    """A forward job's elements in one process (:class:`raysim.simulate.BlockContext`)."""
+
+    def __init__(self, sources, points: NDArray[np.float64]) -> None:
+        self.sources, self.points = sources, points
+
+    def evaluate(self, lo: int, hi: int, progress: Progress | None = None):
+        out = self.sources.radiate(self.points[lo:hi], progress)
+        arrays = {"po": out.sums["electric"]}
+        if "fringe" in out.sums:
+            arrays["edges"] = out.sums["fringe"]
+        return arrays, {"pairs": float(out.pairs), "seconds": out.seconds}
+
+    def attrs(self) -> dict[str, Any]:
+        self.sources.prime()
+        return {"engine": {"samples": int(self.sources.stats.n_samples)}}
+
+    def digest(self) -> str:
+        return self.sources.digest()
 
 
 @lru_cache(maxsize=4)
@@ -183,13 +291,6 @@ def _paraboloid(D: float, F: float, face_m: float):
     from raysim.surface.mesh import paraboloid
 
     return paraboloid(D, F, face_m)
-
-
-def _ptd_field(reflector, sphere: SphereGrid, wave, device) -> NDArray[np.complex128]:
-    """The PTD fringe field (n_theta, n_phi, 3) of the reflector's rim, from :mod:`raysim.optics.ptd`."""
-    from raysim.optics import ptd
-
-    return ptd.sphere_edge_field(reflector, sphere, wave, "rim", device=device).E
 
 
 def forward_for(model: str, attrs: dict, device: str | None = "cpu",

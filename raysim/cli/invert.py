@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from pathlib import Path
 
 import typer
@@ -27,6 +29,12 @@ def invert_command(
     gain: str = typer.Option("power", help="power (estimate the scan's scale) or none."),
     iterations: int | None = typer.Option(None, help="Fixed sweeps for gauss-seidel / sor."),
     device: str = typer.Option("cpu", help="Warp device of the refinement's model: cpu or cuda."),
+    scheduler: str | None = typer.Option(
+        None, "--scheduler", help="po, po+ptd model: compute each model field in blocks of sphere "
+                                  "points on the Dask scheduler at tcp://HOST:PORT."),
+    workers: int | None = typer.Option(
+        None, "--workers", help="po, po+ptd model: blocks on a local Dask cluster of N worker "
+                                "processes (started when the model first runs)."),
 ) -> None:
     """Recover the surface deformation from an intensity scan (FieldMap -> SurfaceMap)."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -44,15 +52,29 @@ def invert_command(
         bar.update(task, completed=fraction, description=f"refine: {stage}")
 
     try:
-        result = run_invert(field, output_path(output), solver=solver, N=grid, rim_csv=rim,
-                            remove=remove, refine=refine, gain=gain, iterations=iterations,
-                            device=device, panels_csv=panels_csv, model=model, progress=report)
+        with _model_blocks(scheduler, workers, device):
+            result = run_invert(field, output_path(output), solver=solver, N=grid, rim_csv=rim,
+                                remove=remove, refine=refine, gain=gain, iterations=iterations,
+                                device=device, panels_csv=panels_csv, model=model, progress=report)
     finally:
         if bar.live.is_started:
             bar.stop()
     for line in summary(result):
         out.print(line, highlight=False, soft_wrap=True)
     out.print(f"wrote {output}", highlight=False, soft_wrap=True)
+
+
+@contextlib.contextmanager
+def _model_blocks(scheduler: str | None, workers: int | None, device: str) -> Iterator[None]:
+    """With --scheduler or --workers, the wave models run in blocks on Dask (raysim.distributed)."""
+    if not scheduler and workers is None:
+        yield
+        return
+    from raysim.distributed import block_runner
+    from solver.forward import distributed
+
+    with block_runner(scheduler, workers=workers, device=device) as runner, distributed(runner):
+        yield
 
 
 @app.command("paper")

@@ -30,6 +30,23 @@ def simulate(
     edges: str | None = typer.Option(
         None, "--edges",
         help="po+ptd: rim (the outer rim, default) or all (also every panel edge beside a gap)."),
+    scheduler: str | None = typer.Option(
+        None, "--scheduler",
+        help="po, po+ptd: compute the sphere's points in blocks on the Dask scheduler at "
+             "tcp://HOST:PORT (its workers need raysim and the output's folder)."),
+    workers: int | None = typer.Option(
+        None, "--workers",
+        help="po, po+ptd: blocks on a local Dask cluster of N worker processes (default with "
+             "--resume or --block-size: one per core, one per GPU with --device cuda)."),
+    threads: int | None = typer.Option(
+        None, "--threads", help="With --scheduler/--workers: CPU threads of each Warp launch (1)."),
+    resume: bool = typer.Option(
+        False, "--resume", help="Complete the blocks an interrupted --scheduler/--workers run left "
+                                "in OUTPUT.partial.zarr."),
+    block_size: int | None = typer.Option(
+        None, "--block-size",
+        help="With --scheduler/--workers: sphere points per block, a multiple of 4 (1024; 32768 "
+             "on cuda)."),
 ) -> None:
     """Simulate a scene: intensity of the ideal and deformed reflector on the probe sphere.
 
@@ -46,6 +63,12 @@ def simulate(
     loaded = load_scene(scene).with_overrides(frequency, n_theta, n_phi)
     method = method or loaded.method
     output_path(output)
+    if scheduler or workers or resume or block_size or threads:
+        _simulate_blocks(loaded, output, method, device, total=total, save_field=save_field,
+                         samples_per_wavelength=samples_per_wavelength, edges=edges,
+                         scheduler=scheduler, workers=workers, threads=threads or 1, resume=resume,
+                         block_size=block_size)
+        return
     with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
                   console=console, transient=True) as bar:
         task = bar.add_task(f"{method} {loaded.name}", total=1.0)
@@ -57,3 +80,24 @@ def simulate(
                  save_field=save_field, samples_per_wavelength=samples_per_wavelength, edges=edges)
     save(ds, output)
     out.print(f"{output}: {summary(ds)}", highlight=False, soft_wrap=True)
+
+
+def _simulate_blocks(scene, output: Path, method: str, device: str, **options) -> None:
+    """``simulate`` in blocks of sphere points on Dask (raysim.distributed), a bar over blocks."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from raysim.distributed import simulate as run
+    from raysim.simulate import summary
+
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=console, transient=True) as bar:
+        task = bar.add_task(f"{method} {scene.name}: blocks", total=None)
+
+        def report(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        ds = run(scene, output, method, device, report, **options)
+    a = ds.attrs
+    out.print(f"{output}: {summary(ds)}; {a['blocks']} blocks on {a['workers']} workers "
+              f"({a['blocks_reused']} reused, {a['blocks_computed_twice']} computed twice)",
+              highlight=False, soft_wrap=True)

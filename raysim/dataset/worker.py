@@ -5,23 +5,13 @@ the store (once per process), draws the sample, simulates it and writes its regi
 store itself, returning a few numbers. Any exception inside a sample is caught and the sample
 is recorded as failed with its reason, so the worker goes on with the next one.
 
-The plugin runs once per worker process: it fixes the CPU threads of each Warp launch
-(``RAYSIM_THREADS``), initialises Warp and loads every kernel module of ``raysim.optics.kernels``
-under a file lock in the kernel cache, so one process compiles and the others load. It also
-lets glibc keep freed memory for reuse: Dask starts workers with ``MALLOC_TRIM_THRESHOLD_``
-set, which makes every array over 128 KiB a fresh ``mmap`` and doubled the CPU time of a
-paper-grid sample (page faults on each of the trace's many large temporaries).
+The plugin runs once per worker process: :func:`raysim.distributed.process.prepare_process`
+fixes the CPU threads of each Warp launch, tunes malloc (Dask's setting doubled the CPU time of
+a paper-grid sample) and loads every Warp kernel under a file lock in the kernel cache.
 """
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
-import ctypes.util
-import fcntl
-import importlib
-import os
-import pkgutil
 import threading
 import time
 from dataclasses import dataclass
@@ -35,7 +25,7 @@ from raysim.dataset.engine import ideal_intensity, simulate_sample
 from raysim.dataset.sampling import draw_sample
 from raysim.dataset.spec import DatasetError, DatasetSpec, parse_spec
 from raysim.dataset.store import Writer, open_readonly
-from raysim.optics import runtime as warp_runtime
+from raysim.distributed.process import prepare_process, tune_malloc  # noqa: F401  (re-exported)
 
 _lock = threading.Lock()
 
@@ -51,51 +41,6 @@ class DatasetWorkerPlugin(WorkerPlugin):
 
     def setup(self, worker: Any = None) -> None:
         prepare_process(self.threads, self.device)
-
-
-def prepare_process(threads: int, device: str = "cpu") -> None:
-    """Set ``RAYSIM_THREADS``, tune malloc, and compile or load every Warp kernel module once."""
-    os.environ["RAYSIM_THREADS"] = str(int(threads))
-    tune_malloc()
-    wp = warp_runtime.init()
-    dev = warp_runtime.resolve_device(device)
-    import raysim.optics.kernels as kernels
-
-    cache = Path(str(wp.config.kernel_cache_dir))
-    cache.mkdir(parents=True, exist_ok=True)
-    with _file_lock(cache / ".raysim-dataset-compile.lock"):
-        for info in pkgutil.iter_modules(kernels.__path__, prefix="raysim.optics.kernels."):
-            module = importlib.import_module(info.name)
-            with contextlib.suppress(RuntimeError):  # a module without Warp code
-                wp.load_module(module, device=dev)
-
-
-M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters
-MMAP_THRESHOLD = 32 << 20  # bytes: glibc's largest; smaller arrays come from the heap
-TRIM_THRESHOLD = 256 << 20  # bytes of free heap kept before returning memory to the OS
-
-
-def tune_malloc() -> bool:
-    """Serve arrays below 32 MiB from glibc's heap and keep up to 256 MiB of it when freed.
-
-    Returns False (and changes nothing) where the C library has no ``mallopt``.
-    """
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):  # pragma: no cover - not glibc
-        return False
-    return bool(mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and bool(mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD))
-
-
-@contextlib.contextmanager
-def _file_lock(path: Path):
-    with open(path, "a+") as fh:
-        fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
 
 
 @dataclass(frozen=True)

@@ -8,5 +8,7 @@ Modules:
 - ``po``: physical-optics surface currents radiated in float64 through the full dyadic
   Green's function; the ``Radiator`` every current-based engine shares.
 - ``ptd``: Michaeli's fringe equivalent edge currents on the free edges, added to PO.
+- ``sources``: a reflector's PO (and fringe) elements made once and radiated onto any block of
+  field points, bit for bit the sums of the whole (what blocks of sphere points run).
 - ``kernels/``: the Warp kernels of these engines, one module per engine.
 """

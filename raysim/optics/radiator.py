@@ -15,6 +15,7 @@ moment J dA / I dl in A m or M dA / K dl in V m), ``fringe`` (:mod:`raysim.optic
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,16 +37,38 @@ class Kind:
     prefactor: Any  # k (rad/m) -> complex
 
 
+#: each kind's constant prefactor as a function of k (rad/m), applied once when a field is read
+PREFACTORS: dict[str, Any] = {
+    "electric": lambda k: -1j * k * ETA0 / (4.0 * np.pi),
+    "magnetic": lambda k: 1j * k / (4.0 * np.pi),
+    "fringe": lambda k: 1.0,
+}
+
+
 def _kinds() -> dict[str, Kind]:
     from raysim.optics.kernels import po, ptd
 
     return {
-        "electric": Kind(po.ROWS, (po.radiate_electric, po.radiate_electric4),
-                         lambda k: -1j * k * ETA0 / (4.0 * np.pi)),
-        "magnetic": Kind(po.ROWS, (po.radiate_magnetic, po.radiate_magnetic4),
-                         lambda k: 1j * k / (4.0 * np.pi)),
-        "fringe": Kind(ptd.ROWS, (ptd.radiate_fringe, ptd.radiate_fringe4), lambda k: 1.0),
+        "electric": Kind(po.ROWS, (po.radiate_electric, po.radiate_electric4), PREFACTORS["electric"]),
+        "magnetic": Kind(po.ROWS, (po.radiate_magnetic, po.radiate_magnetic4), PREFACTORS["magnetic"]),
+        "fringe": Kind(ptd.ROWS, (ptd.radiate_fringe, ptd.radiate_fringe4), PREFACTORS["fringe"]),
     }
+
+
+def field_of(sums: Mapping[str, NDArray[np.float64]], k: float) -> NDArray[np.complex128]:
+    """E (n, 3) complex (V/m) from a radiator's raw sums: kind -> (n, 6) float64 (Re x, y, z,
+    Im x, y, z before the kind's prefactor), as :meth:`Radiator.sums_of` gives them.
+
+    Elementwise per point: a field assembled from blocks of points is the field of the whole.
+    """
+    E: NDArray[np.complex128] | None = None
+    for kind, a in sums.items():
+        a = np.asarray(a, dtype=np.float64)
+        term = PREFACTORS[kind](k) * (a[:, :3] + 1j * a[:, 3:])
+        E = term if E is None else E + term
+    if E is None:
+        raise RaysimError("no radiator sums to make a field from")
+    return E
 
 
 @dataclass(frozen=True)
@@ -121,8 +144,13 @@ class Radiator:
             return
         self.add_packed(elements.packed(), elements.kind, progress)
 
-    def add_packed(self, src: Any, kind: str = "electric", progress: Progress | None = None) -> None:
-        """Add elements of ``kind`` already packed in its kernel layout (numpy or Warp float64)."""
+    def add_packed(self, src: Any, kind: str = "electric", progress: Progress | None = None,
+                   extent: tuple[NDArray, NDArray] | None = None) -> None:
+        """Add elements of ``kind`` already packed in its kernel layout (numpy or Warp float64).
+
+        ``extent``: the (lowest, highest) corner (m) of a box holding the elements' positions,
+        when the caller knows it; otherwise it is read from ``src`` (a copy from a GPU).
+        """
         spec = self.kinds[kind]
         wp = self.wp
         if not isinstance(src, wp.array):
@@ -132,7 +160,7 @@ class Radiator:
         n_src = src.shape[1]
         if n_src == 0 or self.n == 0:
             return
-        self._check_phase(src.numpy()[:3])
+        self._check_phase(position_extent(src) if extent is None else extent)
         if kind not in self.sums:
             self.sums[kind] = wp.zeros((6, self.n_pad), dtype=wp.float64, device=self.device)
         kernel = spec.kernels[1] if self.tile == 4 else spec.kernels[0]
@@ -147,10 +175,10 @@ class Radiator:
             if progress is not None:
                 progress(f"{self.rate() / 1e6:.0f} M pairs/s", end / n_src)
 
-    def _check_phase(self, positions: NDArray[np.float64]) -> None:
+    def _check_phase(self, extent: tuple[NDArray, NDArray]) -> None:
         """The kernels' phase reduction holds for kR < MAX_PHASE: refuse anything beyond."""
-        lo = np.minimum(positions.min(axis=1), self._bounds[0])
-        hi = np.maximum(positions.max(axis=1), self._bounds[1])
+        lo = np.minimum(extent[0], self._bounds[0])
+        hi = np.maximum(extent[1], self._bounds[1])
         reach = float(np.linalg.norm(hi - lo))  # bounds any element-to-point distance (m)
         if self.k * reach >= self.max_phase:
             raise RaysimError(f"k R up to {self.k * reach:.3g} rad exceeds the kernel's phase "
@@ -160,12 +188,23 @@ class Radiator:
         """Pairs (element x field point) per second so far."""
         return self.pairs / self.seconds if self.seconds > 0 else 0.0
 
+    def sums_of(self, kind: str) -> NDArray[np.float64]:
+        """The raw sums (n, 6) float64 of ``kind`` at the points (zeros when none was added):
+        Re and Im of x, y, z before the kind's prefactor (see :func:`field_of`)."""
+        if kind not in self.sums:
+            return np.zeros((self.n, 6))
+        return np.ascontiguousarray(self.sums[kind].numpy()[:, : self.n].T)
+
     def field(self, kinds: tuple[str, ...] | None = None) -> NDArray[np.complex128]:
         """E (n, 3) complex (V/m) of everything added so far (or of the ``kinds`` named)."""
-        E = np.zeros((self.n, 3), dtype=np.complex128)
-        for kind, acc in self.sums.items():
-            if kinds is not None and kind not in kinds:
-                continue
-            a = acc.numpy()[:, : self.n]
-            E += self.kinds[kind].prefactor(self.k) * (a[:3] + 1j * a[3:]).T
-        return E
+        chosen = [kind for kind in self.sums if kinds is None or kind in kinds]
+        if not chosen:
+            return np.zeros((self.n, 3), dtype=np.complex128)
+        return field_of({kind: self.sums_of(kind) for kind in chosen}, self.k)
+
+
+def position_extent(src: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(lowest, highest) corner (m) of the positions (rows 0-2) of packed elements ``src``
+    (numpy, or Warp on any device: read back to the host)."""
+    rows = src.numpy()[:3] if hasattr(src, "numpy") else np.asarray(src)[:3]
+    return rows.min(axis=1), rows.max(axis=1)

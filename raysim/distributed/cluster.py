@@ -1,0 +1,212 @@
+"""Reaching a Dask cluster: a running scheduler (with timeouts and one-line errors) or a local one.
+
+:func:`connect` is the one way raysim opens a Dask client: ``scheduler="tcp://host:port"``
+connects to a running scheduler within :data:`CONNECT_TIMEOUT_S` and waits up to
+:data:`WORKER_WAIT_S` for a first worker; without it a local cluster of worker processes
+(one thread each, bound to 127.0.0.1, no dashboard) is started and closed afterwards. Every
+failure a user can cause (a malformed address, nothing listening, no worker joining, a local
+cluster that cannot start) is a :class:`ClusterError` naming the address, one line.
+
+Devices: with ``device="cuda"`` a local cluster has one worker per visible GPU, and
+:func:`worker_device` gives each worker its own: ``cuda:N`` from a trailing number in the
+worker's name (a local cluster names its workers 0, 1, ...; ``dask worker --name gpu
+--nworkers 2`` gives gpu-0, gpu-1), modulo the GPUs the process sees; a worker started with
+``CUDA_VISIBLE_DEVICES=i`` sees one GPU, ``cuda:0``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gc
+import logging
+import os
+import re
+import socket
+import sys
+import warnings
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+from raysim.errors import RaysimError
+
+CONNECT_TIMEOUT_S = 20.0
+WORKER_WAIT_S = 120.0
+_ADDRESS = re.compile(r"(?:(?P<scheme>tcp|tls|ws|wss|ucx)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[\w.-]+):(?P<port>\d{1,5})")
+
+
+class ClusterError(RaysimError, RuntimeError):
+    """A Dask cluster cannot be reached or started, or its workers cannot do the work."""
+
+
+@dataclass(frozen=True)
+class Cluster:
+    """An open client: ``workers`` at the start, ``address`` of the scheduler (``local``
+    for a local cluster)."""
+
+    client: Any
+    workers: int
+    address: str
+
+
+def scheduler_address(text: str) -> str:
+    """``text`` as a scheduler address (``tcp://host:port``; a bare ``host:port`` gets
+    ``tcp://``), or ClusterError. ``inproc://`` addresses (a cluster in this process) pass."""
+    text = text.strip()
+    if text.startswith("inproc://"):
+        return text
+    match = _ADDRESS.fullmatch(text)
+    if match is None or not 0 < int(match["port"]) < 65536:
+        raise ClusterError(f"scheduler address {text!r} is not of the form tcp://HOST:PORT")
+    return text if match["scheme"] else f"tcp://{text}"
+
+
+def usable_cores() -> int:
+    """CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - non-Linux
+        return os.cpu_count() or 1
+
+
+def gpu_count() -> int:
+    """CUDA devices this process sees (0 without Warp's CUDA driver)."""
+    from raysim.optics import runtime
+
+    wp = runtime.init()
+    return int(wp.get_cuda_device_count()) if wp.is_cuda_available() else 0
+
+
+@contextlib.contextmanager
+def connect(scheduler: str | None = None, *, workers: int | None = None, threads: int = 1,
+            device: str = "cpu", tasks: int | None = None, timeout: float = CONNECT_TIMEOUT_S,
+            worker_wait: float = WORKER_WAIT_S) -> Iterator[Cluster]:
+    """A Dask client on ``scheduler`` or on a new local cluster, closed on exit.
+
+    ``workers``: local worker processes (default: one per usable core divided by ``threads``,
+    one per GPU for ``cuda``; never more than ``tasks`` when given); ignored with a scheduler.
+    ``threads``: ``RAYSIM_THREADS`` of the local workers.
+    """
+    if scheduler:
+        with _remote(scheduler_address(scheduler), timeout, worker_wait) as cluster:
+            yield cluster
+        return
+    with _local(workers, threads, device, tasks) as cluster:
+        yield cluster
+
+
+@contextlib.contextmanager
+def _remote(address: str, timeout: float, worker_wait: float) -> Iterator[Cluster]:
+    from distributed import Client
+
+    _probe(address, timeout)
+    error = ""
+    with _quiet_logs(), _quiet_unraisable():
+        try:
+            client = Client(address, timeout=f"{timeout}s", set_as_default=False)
+        except (OSError, TimeoutError) as exc:
+            error = f"no Dask scheduler answered at {address} within {timeout:g} s ({_reason(exc)})"
+        except Exception as exc:  # something else is listening there
+            error = f"{address} answered, but not as a Dask scheduler ({type(exc).__name__})"
+        gc.collect()  # the half-made client closes here, its complaints silenced
+    if error:
+        raise ClusterError(error)
+    try:
+        try:
+            client.wait_for_workers(1, timeout=worker_wait)
+        except TimeoutError as exc:
+            raise ClusterError(f"no worker joined the Dask scheduler at {address} within "
+                               f"{worker_wait:g} s") from exc
+        yield Cluster(client, len(client.scheduler_info(n_workers=-1)["workers"]), address)
+    finally:
+        client.close()
+
+
+@contextlib.contextmanager
+def _local(workers: int | None, threads: int, device: str, tasks: int | None) -> Iterator[Cluster]:
+    from distributed import Client, LocalCluster
+
+    if workers is not None and workers < 1:
+        raise ClusterError(f"workers must be >= 1, got {workers}")
+    if threads < 1:
+        raise ClusterError(f"threads must be >= 1, got {threads}")
+    if workers is not None:
+        n = workers
+    elif device.startswith("cuda"):
+        n = 1 if ":" in device else max(1, gpu_count())
+    else:
+        n = max(1, usable_cores() // threads)
+    n = max(1, min(n, tasks)) if tasks else n
+    try:
+        with warnings.catch_warnings():  # the scheduler's HTTP port taken: it picks another
+            warnings.filterwarnings("ignore", message="Port .* is already in use")
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                   dashboard_address=None, silence_logs=logging.ERROR,
+                                   env={"RAYSIM_THREADS": str(threads)})
+    except (RuntimeError, OSError) as exc:
+        raise ClusterError(f"could not start a local Dask cluster of {n} workers ({_reason(exc)})") from exc
+    try:
+        client = Client(cluster, set_as_default=False)
+        try:
+            yield Cluster(client, n, "local")
+        finally:
+            client.close()
+    finally:
+        cluster.close()
+
+
+def worker_device(device: str, name: Any) -> str:
+    """The Warp device a worker named ``name`` uses for ``device`` (see the module docs)."""
+    if device != "cuda":
+        return device
+    count = gpu_count()
+    match = re.search(r"(\d+)$", str(name))
+    index = int(match.group(1)) % count if match and count else 0
+    return f"cuda:{index}"
+
+
+def _probe(address: str, timeout: float) -> None:
+    """Fail fast, in one line, when nothing accepts a TCP connection at ``address``."""
+    match = _ADDRESS.fullmatch(address)
+    if match is None or match["scheme"] not in (None, "tcp", "tls", "ws", "wss"):
+        return  # inproc, ucx: no plain TCP port to try
+    host, port = match["host"].strip("[]"), int(match["port"])
+    try:
+        socket.create_connection((host, port), timeout=timeout).close()
+    except ConnectionRefusedError as exc:
+        raise ClusterError(f"cannot reach the Dask scheduler at {address}: connection refused "
+                           "(is the scheduler running, on that port?)") from exc
+    except TimeoutError as exc:
+        raise ClusterError(f"cannot reach the Dask scheduler at {address} within {timeout:g} s "
+                           "(no answer: host down or port filtered?)") from exc
+    except OSError as exc:
+        raise ClusterError(f"cannot reach the Dask scheduler at {address} "
+                           f"({exc.strerror or _reason(exc)})") from exc
+
+
+@contextlib.contextmanager
+def _quiet_unraisable() -> Iterator[None]:
+    """Silence errors raised in finalisers (a client that never connected, closing)."""
+    hook = sys.unraisablehook
+    sys.unraisablehook = lambda unraisable: None
+    try:
+        yield
+    finally:
+        sys.unraisablehook = hook
+
+
+@contextlib.contextmanager
+def _quiet_logs() -> Iterator[None]:
+    """Keep distributed's own connection-retry logging off the user's terminal."""
+    logger = logging.getLogger("distributed")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
+def _reason(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__

@@ -1,0 +1,191 @@
+"""The partial store of a distributed simulation: blocks of sphere points kept as they finish.
+
+``OUTPUT.partial.zarr`` beside the output, a local folder:
+
+- a Zarr (format 3) group whose attributes hold the format, the run's fingerprint and what it
+  is made of (to say what differs when a resume is refused), the grid's point count and the
+  block size; one float64 array per part of the engine, ``(n_points, *tail)``, one block per
+  chunk, so no two blocks share a chunk (Zarr writes each chunk file atomically);
+- ``context.json``: the context's attributes (the same from every worker), written before any
+  block's marker;
+- ``blocks/NNNNNN.json``: the completion marker of each block, written last (atomically, by
+  rename) with the block's figures, the digest of the elements that made it and ``count``,
+  how many times the block was computed and written (1; more only if two workers ran it at
+  once, which the FieldMap records as ``blocks_computed_twice``).
+
+A block whose marker exists is never computed again: a killed client or worker resumes
+from the markers, and a worker handed a block already marked (Dask rerunning a task whose
+result was lost with its worker) skips it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import uuid
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from raysim.distributed.cluster import ClusterError
+
+FORMAT = 1
+SUFFIX = ".partial.zarr"
+
+
+def partial_path(output: str | os.PathLike[str]) -> Path:
+    """Where the partial store of ``output`` lives: ``OUTPUT.partial.zarr`` beside it."""
+    out = Path(output).expanduser().resolve()
+    return out.with_name(out.name + SUFFIX)
+
+
+class PartialStore:
+    """An open partial store (see the module docs)."""
+
+    def __init__(self, path: Path, group: Any) -> None:
+        self.path = Path(path)
+        self.group = group
+        attrs = group.attrs
+        self.fingerprint = str(attrs["fingerprint"])
+        self.n_points = int(attrs["n_points"])
+        self.block_size = int(attrs["block_size"])
+        self.parts: dict[str, tuple[int, ...]] = {k: tuple(v) for k, v in dict(attrs["parts"]).items()}
+        self._arrays: dict[str, Any] = {}
+
+    # --- making and opening ------------------------------------------------------------------
+    @classmethod
+    def create(cls, path: Path, fingerprint: str, description: dict[str, str],
+               parts: dict[str, tuple[int, ...]], n_points: int, block_size: int) -> PartialStore:
+        """A new store at ``path`` (which must not exist), built aside and renamed into place."""
+        import zarr
+
+        path = Path(path)
+        scratch = path.parent / f".{path.name}.{uuid.uuid4().hex[:8]}.creating"
+        attrs = {"raysim_partial_format": FORMAT, "fingerprint": fingerprint,
+                 "fingerprint_parts": description, "n_points": int(n_points),
+                 "block_size": int(block_size), "parts": {k: list(v) for k, v in parts.items()},
+                 "created": datetime.now(UTC).isoformat(timespec="seconds")}
+        try:
+            group = zarr.open_group(str(scratch), mode="w-", attributes=attrs)
+            for name, tail in parts.items():
+                group.create_array(name, shape=(n_points, *tail), chunks=(block_size, *tail),
+                                   dtype="float64", fill_value=np.nan)
+            (scratch / "blocks").mkdir()
+            os.rename(scratch, path)  # fails if the target appeared meanwhile
+        except OSError as exc:
+            raise ClusterError(f"{path}: cannot create the partial store ({exc.strerror or exc})") from exc
+        finally:
+            shutil.rmtree(scratch, ignore_errors=True)
+        return cls.open(path, fingerprint)
+
+    @classmethod
+    def open(cls, path: Path, fingerprint: str | None = None,
+             description: dict[str, str] | None = None) -> PartialStore:
+        """Open an existing store; with ``fingerprint``, refuse one another run made."""
+        import zarr
+
+        try:
+            group = zarr.open_group(str(path), mode="r+")
+            made = group.attrs.get("raysim_partial_format")
+        except (FileNotFoundError, ValueError, KeyError, OSError) as exc:
+            raise ClusterError(f"{path}: not a raysim partial store ({type(exc).__name__}); "
+                               "delete it to start again") from exc
+        if made != FORMAT:
+            raise ClusterError(f"{path}: not a raysim partial store of format {FORMAT}; delete it "
+                               "to start again")
+        store = cls(path, group)
+        if fingerprint is not None and store.fingerprint != fingerprint:
+            theirs = dict(group.attrs.get("fingerprint_parts", {}))
+            ours = description or {}
+            differ = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
+            raise ClusterError(f"{path} holds blocks of another run (it differs in: "
+                               f"{', '.join(differ) or 'its fingerprint'}): delete it to start again")
+        return store
+
+    # --- blocks ------------------------------------------------------------------------------
+    @property
+    def n_blocks(self) -> int:
+        return -(-self.n_points // self.block_size)
+
+    def bounds(self, index: int) -> tuple[int, int]:
+        """Points lo..hi-1 of block ``index``."""
+        lo = index * self.block_size
+        return lo, min(lo + self.block_size, self.n_points)
+
+    def _marker(self, index: int) -> Path:
+        return self.path / "blocks" / f"{index:06d}.json"
+
+    def marker(self, index: int) -> dict | None:
+        """Block ``index``'s completion record, or None while it is not done."""
+        try:
+            return json.loads(self._marker(index).read_text())
+        except (FileNotFoundError, ValueError):
+            return None
+
+    def markers(self) -> dict[int, dict]:
+        """Every completed block's record, by index."""
+        out = {}
+        for entry in (self.path / "blocks").glob("*.json"):
+            with contextlib.suppress(ValueError):
+                out[int(entry.stem)] = json.loads(entry.read_text())
+        return out
+
+    def exists(self) -> bool:
+        """False once the store was removed (a late writer must not recreate it)."""
+        return (self.path / "zarr.json").is_file()
+
+    def write(self, index: int, arrays: dict[str, np.ndarray], record: dict) -> int:
+        """Write block ``index``'s arrays, then its marker; return its computation count."""
+        lo, hi = self.bounds(index)
+        for name, tail in self.parts.items():
+            values = np.asarray(arrays[name], dtype=np.float64)
+            if values.shape != (hi - lo, *tail):
+                raise ClusterError(f"block {index}: part {name!r} has shape {values.shape}, "
+                                   f"expected {(hi - lo, *tail)}")
+            self._array(name)[lo:hi] = values
+        previous = self.marker(index)
+        count = 1 + (int(previous["count"]) if previous else 0)
+        _write_json(self._marker(index), {**record, "index": index, "count": count})
+        return count
+
+    def _array(self, name: str) -> Any:
+        if name not in self._arrays:
+            self._arrays[name] = self.group[name]
+        return self._arrays[name]
+
+    def read(self) -> dict[str, np.ndarray]:
+        """Every part over the whole grid (NaN where a block is missing)."""
+        return {name: np.asarray(self._array(name)[...]) for name in self.parts}
+
+    # --- the context's attributes ------------------------------------------------------------
+    def context(self) -> dict | None:
+        try:
+            return json.loads((self.path / "context.json").read_text())
+        except (FileNotFoundError, ValueError):
+            return None
+
+    def set_context(self, attrs: dict) -> None:
+        """Record the context's attributes once (every writer's are the same)."""
+        if not (self.path / "context.json").is_file():
+            _write_json(self.path / "context.json", attrs)
+
+    def remove(self) -> None:
+        shutil.rmtree(self.path, ignore_errors=True)
+
+
+def _write_json(path: Path, value: dict) -> None:
+    """Write ``value`` to ``path`` atomically (a reader sees the old file or the new one)."""
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}")
+    tmp.write_text(json.dumps(value, sort_keys=True, allow_nan=True, default=_plain))
+    os.replace(tmp, path)
+
+
+def _plain(value: Any) -> Any:
+    """numpy scalars as Python numbers for JSON."""
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")

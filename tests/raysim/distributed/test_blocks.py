@@ -1,0 +1,173 @@
+"""Wave-optics FieldMaps in blocks of sphere points on Dask (a cluster in this process): the
+single-process FieldMap bit for bit whatever the split, resumable, and one-line refusals."""
+
+from __future__ import annotations
+
+import itertools
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from raysim.distributed import ClusterError, connect, scheduler_address
+from raysim.distributed import blocks as dblocks
+from raysim.distributed.blocks import block_bounds, run_blocks
+from raysim.distributed.partial import PartialStore, partial_path
+from raysim.distributed.simulate import scene_job
+from raysim.distributed.simulate import simulate as simulate_blocks
+from raysim.maps.fieldmap import load
+from raysim.optics.illumination import Illumination
+from raysim.optics.sources import Sources
+from raysim.scene.scene import parse_scene
+from raysim.simulate import Options, simulate
+from raysim.surface.mesh import reflectors_for
+from tests.raysim.distributed.conftest import SMALL, assert_same_fieldmap
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return parse_scene(SMALL)
+
+
+@pytest.fixture(scope="module")
+def single(scene):
+    """The single-process FieldMaps: po, and po+ptd with the complex fields saved."""
+    return {"po": simulate(scene, "po"), "po+ptd": simulate(scene, "po+ptd", save_field=True)}
+
+
+def test_each_point_sums_the_same_elements_whatever_the_split(scene):
+    """Sources radiated onto uneven blocks (starts at multiples of 4) give the sums of the whole
+    grid bit for bit, and the elements kept after the first pass are the ones streamed."""
+    _, deformed = reflectors_for(scene)
+    wave = Illumination.plane_wave(scene.source.frequency_hz, scene.source.direction, scene.source.e_hat)
+    points = scene.sphere.points(deformed.F).reshape(-1, 3)
+    whole = Sources(deformed, wave, 1.5, "rim", keep=False).radiate(points)
+    kept = Sources(deformed, wave, 1.5, "rim", keep=True)
+    cuts = [0, 4, 12, 100, 204, 320, len(points)]
+    parts = [kept.radiate(points[lo:hi]) for lo, hi in itertools.pairwise(cuts)]
+    assert kept._kept is not None  # the second and later blocks reuse the first pass's elements
+    for kind in ("electric", "fringe"):
+        joined = np.concatenate([p.sums[kind] for p in parts])
+        assert np.array_equal(joined, whole.sums[kind]), kind
+        assert np.abs(whole.sums[kind]).max() > 0
+    assert sum(p.pairs for p in parts) == whole.pairs == kept.n_elements * len(points)
+
+
+@pytest.mark.parametrize(("method", "block_size"), [("po", 40), ("po+ptd", 16), ("po+ptd", 100)])
+def test_blocks_give_the_single_process_fieldmap(scene, single, inproc, tmp_path, method, block_size):
+    out = tmp_path / "field.nc"
+    seen = []
+    ds = simulate_blocks(scene, out, method, scheduler=inproc, block_size=block_size,
+                         save_field=method == "po+ptd", progress=lambda done, total: seen.append((done, total)))
+    n_blocks = -(-scene.sphere.n_theta * scene.sphere.n_phi // block_size)
+    assert_same_fieldmap(single[method], ds)
+    assert_same_fieldmap(single[method], load(out))
+    a = ds.attrs
+    assert (a["blocks"], a["blocks_computed"], a["blocks_reused"], a["blocks_computed_twice"]) == \
+        (n_blocks, n_blocks, 0, 0)
+    assert a["block_element_sets"] == 1 and a["workers"] == 2
+    assert seen[0] == (0, n_blocks) and seen[-1] == (n_blocks, n_blocks)
+    assert not partial_path(out).exists()
+
+
+def test_an_interrupted_run_resumes_without_computing_a_block_twice(scene, single, inproc, tmp_path):
+    """Blocks 0, 3 and 5 computed by a first client that then stopped; the resumed run computes
+    the rest only, and the FieldMap is the single-process one."""
+    out = tmp_path / "field.nc"
+    options = Options()
+    job, description = scene_job(scene, "po", options, "cpu", 1, 40)
+    path = partial_path(out)
+    store = PartialStore.create(path, job.key, description, job.parts(), job.n_points, 40)
+    bounds = block_bounds(job.n_points, 40)
+    with connect(inproc) as cluster:
+        run_blocks(cluster.client, job, [0, 3, 5], bounds, store)
+    assert sorted(store.markers()) == [0, 3, 5]
+    with pytest.raises(ClusterError, match="add --resume"):
+        simulate_blocks(scene, out, "po", scheduler=inproc, block_size=40)
+    with pytest.raises(ClusterError, match=r"differs in: frequency_hz"):
+        simulate_blocks(scene.with_overrides(frequency_hz=1.1e9), out, "po", scheduler=inproc,
+                        block_size=40, resume=True)
+    ds = simulate_blocks(scene, out, "po", scheduler=inproc, block_size=40, resume=True)
+    assert_same_fieldmap(single["po"], ds)
+    a = ds.attrs
+    assert (a["blocks_reused"], a["blocks_computed"], a["blocks_computed_twice"]) == (3, len(bounds) - 3, 0)
+
+
+def test_a_block_already_marked_is_not_computed_again(scene, inproc, tmp_path):
+    """A worker handed a block whose marker exists (Dask rerunning a task whose result died with
+    its worker) skips it; the count of computations stays one."""
+    job, description = scene_job(scene, "po", Options(), "cpu", 1, 64)
+    store = PartialStore.create(tmp_path / "p.partial.zarr", job.key, description, job.parts(),
+                                job.n_points, 64)
+    bounds = block_bounds(job.n_points, 64)
+    seen = []
+    with connect(inproc) as cluster:
+        run_blocks(cluster.client, job, [1], bounds, store, seen.append)
+        run_blocks(cluster.client, job, [1, 2], bounds, store, seen.append)
+    by_index = {(m["index"], m["skipped"]) for m in seen}
+    assert by_index == {(1, False), (1, True), (2, False)}
+    assert store.marker(1)["count"] == 1 and store.marker(2)["count"] == 1
+
+
+def test_blocks_the_workers_cannot_store_are_written_by_the_client(scene, single, inproc, tmp_path,
+                                                                   monkeypatch):
+    """Workers without the output's file system return their blocks: same FieldMap."""
+    monkeypatch.setattr(dblocks, "_reachable", lambda store, key: None)
+    ds = simulate_blocks(scene, tmp_path / "f.nc", "po", scheduler=inproc, block_size=64)
+    assert_same_fieldmap(single["po"], ds)
+    assert ds.attrs["blocks_computed_twice"] == 0
+
+
+def test_a_scene_changed_in_python_is_refused(scene, tmp_path, inproc):
+    from dataclasses import replace
+
+    changed = replace(scene, source=replace(scene.source, polarization=0.5))
+    with pytest.raises(ClusterError, match="differs from its TOML text"):
+        simulate_blocks(changed, tmp_path / "f.nc", "po", scheduler=inproc)
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"method": "go", "workers": 2}, "apply to the wave methods"),
+    ({"method": "po", "workers": 1, "block_size": 10}, "multiple of 4"),
+    ({"method": "po", "scheduler": "nowhere"}, "not of the form tcp://HOST:PORT"),
+    ({"method": "po", "workers": 0}, "workers must be >= 1"),
+])
+def test_bad_options_are_refused(scene, tmp_path, kwargs, message):
+    with pytest.raises(ClusterError, match=message):
+        simulate_blocks(scene, tmp_path / "f.nc", **kwargs)
+    assert list(tmp_path.iterdir()) == []  # no output, no partial store left behind
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_an_unreachable_scheduler_is_one_line_naming_it(tmp_path):
+    port = _closed_port()
+    with pytest.raises(ClusterError, match=rf"tcp://127.0.0.1:{port}: connection refused"):
+        with connect(f"tcp://127.0.0.1:{port}", timeout=5):
+            pass
+    scene_path = tmp_path / "small.toml"
+    scene_path.write_text(SMALL)
+    run = subprocess.run([sys.executable, "-m", "raysim.cli", "simulate", str(scene_path), "-o",
+                          str(tmp_path / "f.nc"), "--scheduler", f"127.0.0.1:{port}"],
+                         capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert run.returncode == 2, run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1 and f"tcp://127.0.0.1:{port}" in run.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["small.toml"]
+
+
+def test_scheduler_addresses():
+    assert scheduler_address("10.0.0.5:8786") == "tcp://10.0.0.5:8786"
+    assert scheduler_address("tls://head.example.org:8786") == "tls://head.example.org:8786"
+    assert scheduler_address("[::1]:8786") == "tcp://[::1]:8786"
+    for bad in ("head", "tcp://head", "head:0", "head:70000", "http://head:80"):
+        with pytest.raises(ClusterError):
+            scheduler_address(bad)
