@@ -35,7 +35,9 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import NDArray
 
+from raysim.constants import wavenumber
 from raysim.maps.sphere import SphereGrid
+from raysim.progress import Progress
 from solver.errors import SolverError
 
 MODELS = ("go", "po", "po+ptd")
@@ -46,7 +48,6 @@ IDEAL_CACHE_SIZE = 4
 # forward(sphere, F, D, x, y, delta) -> intensity (n_theta, n_phi); delta None for the ideal
 # reflector, else (N, N) in m on the aperture grid x, y (finite everywhere).
 Forward = Callable[[SphereGrid, float, float, NDArray, NDArray, NDArray | None], NDArray]
-Progress = Callable[[str, float], None]
 
 
 def model_for_method(method: str) -> str:
@@ -146,9 +147,7 @@ class WaveForward:
 
     def wavenumber(self) -> float:
         """k = 2 pi f / c (rad/m)."""
-        from raysim.optics.po import C0
-
-        return 2.0 * np.pi * self.frequency_hz / C0
+        return wavenumber(self.frequency_hz)
 
     def _field(self, sphere: SphereGrid, F: float, D: float, deformation,
                progress: Progress | None) -> NDArray[np.complex128]:

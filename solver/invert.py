@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from raysim.maps.fieldmap import grid_of
 from raysim.maps.fieldmap import validate as validate_fieldmap
 from raysim.maps.sphere import SphereGrid
+from raysim.progress import Progress
 from solver import boundary, metrics
 from solver.aperture import ApertureGrid
 from solver.equation import (
@@ -36,7 +37,7 @@ from solver.equation import (
 )
 from solver.errors import SolverError
 from solver.fit import parse_terms, remove_terms
-from solver.forward import MODELS, Progress
+from solver.forward import MODELS
 from solver.nonlinear import Forward, extend_outside, refine
 from solver.poisson import SOLVERS, SolveInfo, solve_poisson
 from solver.refinement import choose_model, refinement_setup

@@ -46,9 +46,10 @@ import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
 from raysim.maps.sphere import SphereGrid
+from raysim.progress import Progress, silent, within
 from solver.aperture import ApertureGrid
 from solver.equation import intensity_ratio_fa
-from solver.forward import Forward, Progress, go_forward
+from solver.forward import Forward, go_forward
 
 __all__ = ["Correct", "Forward", "RefineHistory", "anderson_step", "extend_outside", "go_forward",
            "refine"]
@@ -141,18 +142,15 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
     history = RefineHistory()
     if iterations <= 0:
         return delta, history
-    report = progress or (lambda stage, fraction: None)
+    report = progress or silent
     n_calls = iterations + 1
 
     def model_of(index: int, label: str, surface: NDArray | None) -> NDArray[np.float64]:
         report(label, index / n_calls)
         if not getattr(forward, "reports_progress", False):
             return forward(sphere, F, D, grid.x, grid.y, surface)
-
-        def within(stage: str, fraction: float) -> None:
-            report(f"{label}: {stage}", (index + min(max(fraction, 0.0), 1.0)) / n_calls)
-
-        return forward(sphere, F, D, grid.x, grid.y, surface, progress=within)
+        return forward(sphere, F, D, grid.x, grid.y, surface,
+                       progress=within(report, index / n_calls, (index + 1) / n_calls, label))
 
     ideal = model_of(0, "ideal reflector", None)
     w = 1.0 if weight is None else weight

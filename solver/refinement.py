@@ -15,7 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solver.forward import WAVE_MODELS, Forward, Progress, forward_for, model_for_method
+from raysim.progress import Progress, monotone
+from solver.forward import WAVE_MODELS, Forward, forward_for, model_for_method
 from solver.nonlinear import Correct
 
 
@@ -75,7 +76,7 @@ def refinement_setup(inverse, chosen: ModelChoice, iterations: int, fit_gain: bo
     fits it with the surface. A wave model's ideal field is computed here (``progress``).
     """
     scan = inverse.scan
-    progress = _monotone(progress) if progress is not None else None
+    progress = monotone(progress) if progress is not None else None
     forward, name = chosen.forward, chosen.name
     if iterations == 0 or not chosen.wave or not hasattr(forward, "ideal_field"):
         text = "GO inversion (resample, divide by G, Poisson solve)" if iterations else "none"
@@ -98,13 +99,3 @@ def refinement_setup(inverse, chosen: ModelChoice, iterations: int, fit_gain: bo
     return RefinementSetup(forward, correct, fit_gain, progress, name, chosen.choice,
                            chosen.description, text)
 
-
-def _monotone(progress: Progress) -> Progress:
-    """``progress`` with fractions that never go back (stages report from several places)."""
-    done = [0.0]
-
-    def report(stage: str, fraction: float) -> None:
-        done[0] = max(done[0], float(fraction))
-        progress(stage, done[0])
-
-    return report

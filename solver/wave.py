@@ -44,10 +44,10 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
+from raysim.constants import C0, wavenumber
 from raysim.maps.sphere import SphereGrid, aperture_radius, ideal_go_cell_mean, ideal_go_intensity
 from solver.aperture import ApertureGrid
 
-C0 = 299_792_458.0  # speed of light in vacuum (m/s)
 P_MIN = 0.2         # p is kept within [P_MIN, 1 / P_MIN] where it divides
 
 
@@ -186,7 +186,7 @@ class WaveCorrection:
     def __init__(self, inverse, E0: NDArray[np.complex128], frequency_hz: float,
                  polarization: float, weight: NDArray[np.float64], fit_gain: bool) -> None:
         scan, grid = inverse.scan, inverse.grid
-        k = 2.0 * np.pi * frequency_hz / C0
+        k = wavenumber(frequency_hz)
         p, q = interference(E0, scan.sphere, scan.F, k, polarization)
         mask = grid.mask
         self.inverse, self.fit_gain = inverse, fit_gain
