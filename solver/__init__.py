@@ -5,7 +5,8 @@ Modules, in the order the data flow through them:
 
 - ``errors``: the solver's user errors (SolverError, RimTargetsError, SurfaceMapError), all
   :class:`raysim.errors.RaysimError`, so the CLI prints one line and exits 2.
-- ``aperture``: the N x N cell-centred aperture grid and its disk mask r < D/2.
+- ``aperture``: the aperture grid (:mod:`raysim.maps.aperture`, re-exported) and the smallest
+  N the solvers accept.
 - ``equation``: FA = I_ideal / I_def - 1, G = -2 F d / R, the power gain, the noise bias.
 - ``resample``: sphere (theta, phi) -> aperture (x, y) through r = 2F tan(theta/2), with
   inpainting of missing samples and the continuation to the rim.
@@ -15,7 +16,7 @@ Modules, in the order the data flow through them:
 - ``nonlinear``: GO model-based refinement (defect correction with Anderson acceleration).
 - ``fit``: piston / tilt / focus removal and the per-panel adjustment table.
 - ``metrics``: the paper's RMS and RRMS over the aperture's grid points.
-- ``surface``: the SurfaceMap NetCDF contract.
+- ``surface``: the SurfaceMap NetCDF contract (:mod:`raysim.maps.surfacemap`, re-exported).
 - ``invert``: the pipeline, :func:`invert` (FieldMap dataset -> SurfaceMap dataset).
 - ``run``: file in, file out (what ``raysim invert`` calls). The paper's tables, which run the
   engines and this package end to end, are in :mod:`raysim.pipeline.paper`.

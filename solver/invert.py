@@ -23,9 +23,10 @@ from numpy.typing import NDArray
 from raysim.maps.fieldmap import grid_of
 from raysim.maps.fieldmap import validate as validate_fieldmap
 from raysim.maps.sphere import SphereGrid
+from raysim.maps.surfacemap import surfacemap
 from raysim.progress import Progress
 from solver import boundary, metrics
-from solver.aperture import ApertureGrid
+from solver.aperture import ApertureGrid, solver_grid
 from solver.equation import (
     GAIN_MODES,
     G,
@@ -42,7 +43,6 @@ from solver.nonlinear import Forward, extend_outside, refine
 from solver.poisson import SOLVERS, SolveInfo, solve_poisson
 from solver.refinement import choose_model, refinement_setup
 from solver.resample import Coverage, fill_missing, sphere_to_aperture, usable_rows
-from solver.surface import surfacemap
 from solver.wave import amplitude_weight
 
 DEFAULT_SOLVER = "multigrid"
@@ -209,7 +209,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         raise SolverError(f"unknown weights {weights!r}: choose one of {', '.join(WEIGHTS)}")
     terms = parse_terms(remove)
     scan = Scan.from_fieldmap(field)
-    grid = ApertureGrid(scan.D, N)
+    grid = solver_grid(scan.D, N)
     if rim is not None:
         if solver == "fft":
             raise SolverError("the fft solver works on the enclosing square and cannot use rim "

@@ -280,6 +280,6 @@ def _folder(out_dir: str | os.PathLike[str]) -> Path:
 
 def _save_surface(surface: xr.Dataset, path: Path) -> None:
     """Write the SurfaceMap through its contract's writer (checked, atomic)."""
-    from solver.surface import save
+    from raysim.maps.surfacemap import save
 
     save(surface, path)

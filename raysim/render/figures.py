@@ -19,6 +19,7 @@ import xarray as xr
 from scipy.interpolate import RegularGridInterpolator
 
 from raysim.errors import RaysimError
+from raysim.maps.aperture import ApertureGrid
 from raysim.render import backend, charts
 from raysim.render.backend import RenderError
 from raysim.render.data import Quantity, fa, field_title, symmetric_limit
@@ -67,7 +68,6 @@ def fa_on_aperture(field: xr.Dataset, x: np.ndarray) -> np.ndarray:
     """FA of the FieldMap resampled by the solver onto the aperture grid with cell centres ``x``
     (= y, m, N of them spanning D), indexed [y, x]; NaN outside the aperture."""
     from raysim.maps.fieldmap import grid_of
-    from solver.aperture import ApertureGrid
     from solver.resample import sphere_to_aperture
 
     D, F = float(field.attrs["diameter"]), float(field.attrs["focal_length"])
@@ -183,8 +183,7 @@ def aperture_x(field: xr.Dataset, surface: xr.Dataset | None, N: int = 256) -> n
     """Aperture grid coordinates (m): the SurfaceMap's x, else N cell centres across D."""
     if surface is not None:
         return surface["x"].values
-    D = float(field.attrs["diameter"])
-    return -0.5 * D + (np.arange(N) + 0.5) * D / N
+    return ApertureGrid(float(field.attrs["diameter"]), N).x
 
 
 def truth_dataset(field: xr.Dataset, surface: xr.Dataset | None, truth: Delta | None) -> xr.Dataset | None:
@@ -195,8 +194,8 @@ def truth_dataset(field: xr.Dataset, surface: xr.Dataset | None, truth: Delta | 
     if surface is not None and "truth" in surface.data_vars:
         values = surface["truth"].values
     elif truth is not None:
-        X, Y = np.meshgrid(x, x, indexing="xy")
-        values = np.where(np.hypot(X, Y) < 0.5 * float(field.attrs["diameter"]), truth(X, Y), np.nan)
+        grid = ApertureGrid(float(field.attrs["diameter"]), len(x))
+        values = grid.masked(truth(*grid.XY))
     else:
         return None
     attrs = {k: field.attrs[k] for k in ("focal_length", "diameter", "sphere_radius")}
