@@ -70,7 +70,7 @@ def go_forward(device: str | None = "cpu") -> Forward:
         if delta is None:
             return _ideal_go(sphere, float(F), float(D), device).copy()
         from raysim.optics.go import forward_intensity
-        from raysim.surface.deformation import GriddedMap
+        from raysim.surface.gridded import GriddedMap
 
         return forward_intensity(sphere, F, D, GriddedMap(x, y, delta), device=device)
 
@@ -130,7 +130,7 @@ class WaveForward:
                  delta: NDArray | None, progress: Progress | None = None) -> NDArray:
         if delta is None:
             return np.sum(np.abs(self.ideal_field(sphere, F, D, progress)) ** 2, axis=-1)
-        from raysim.surface.deformation import GriddedMap
+        from raysim.surface.gridded import GriddedMap
 
         E = self._field(sphere, F, D, GriddedMap(x, y, delta), progress)
         return np.sum(np.abs(E) ** 2, axis=-1)

@@ -41,12 +41,11 @@ from functools import lru_cache
 from itertools import pairwise
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
 from raysim.maps.sphere import SphereGrid
 from raysim.progress import Progress, silent, within
+from raysim.surface.gridded import HarmonicFill
 from solver.aperture import ApertureGrid
 from solver.equation import intensity_ratio_fa
 from solver.forward import Forward, go_forward
@@ -68,44 +67,19 @@ class RefineHistory:
 
 
 @lru_cache(maxsize=4)
-def _outside_operator(D: float, N: int):
-    grid = ApertureGrid(D, N)
-    out = ~grid.mask
-    index = np.full((N, N), -1, dtype=np.int64)
-    index[out] = np.arange(np.count_nonzero(out))
-    jj, ii = np.nonzero(out)
-    rows, cols, vals = [], [], []
-    count = np.zeros(jj.size)
-    known = []
-    for dj, di in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-        nj, ni = jj + dj, ii + di
-        ok = (nj >= 0) & (nj < N) & (ni >= 0) & (ni < N)
-        count += ok
-        k = np.flatnonzero(ok)
-        nb = index[nj[k], ni[k]]
-        rows.append(k[nb >= 0])
-        cols.append(nb[nb >= 0])
-        vals.append(-np.ones(np.count_nonzero(nb >= 0)))
-        known.append((k[nb < 0], nj[k[nb < 0]], ni[k[nb < 0]]))
-    n = jj.size
-    A = sp.csc_matrix((np.concatenate([count, *vals]),
-                       (np.concatenate([np.arange(n), *rows]),
-                        np.concatenate([np.arange(n), *cols]))), shape=(n, n))
-    return out, spla.splu(A), known
+def _outside_fill(D: float, N: int) -> HarmonicFill:
+    """The Laplace continuation into the points outside the disk of the grid (D, N), factorised
+    once per grid (the refinement calls it every iteration)."""
+    return HarmonicFill(~ApertureGrid(D, N).mask)
 
 
 def extend_outside(grid: ApertureGrid, delta: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``delta`` (m) with the points outside the aperture filled by a discrete Laplace equation.
+    """``delta`` (m) with the points outside the aperture filled by a discrete Laplace equation
+    (:class:`raysim.surface.gridded.HarmonicFill`).
 
     Gives the forward model a continuous surface up to the corners of the square grid.
     """
-    out, lu, known = _outside_operator(grid.D, grid.N)
-    rhs = np.zeros(np.count_nonzero(out))
-    for k, nj, ni in known:
-        np.add.at(rhs, k, delta[nj, ni])
-    filled = np.array(delta, dtype=np.float64, copy=True)
-    filled[out] = lu.solve(rhs)
-    return filled
+    return _outside_fill(float(grid.D), int(grid.N))(delta)
 
 
 Correct = Callable[[NDArray[np.float64], NDArray[np.float64]],

@@ -12,7 +12,7 @@ from raysim.dataset import draw_sample, load_spec, parse_spec, sample_seed, vali
 from raysim.dataset.memo import Memo
 from raysim.dataset.models import RimAstigmatism
 from raysim.dataset.zernike import ZernikeSeries
-from raysim.surface.deformation import zernike_radial
+from tests.reference_zernike import radial, zernike_sum
 
 ROOT = Path(__file__).resolve().parents[3]
 DEMO_TEXT = (ROOT / "scenes" / "dataset_demo.toml").read_text()
@@ -58,12 +58,14 @@ def test_zernike_series_is_noll_normalised_orthogonal_and_has_exact_slopes():
     values = np.array([ZernikeSeries(((n, m, 1.0),), a)(X, Y) for n, m in terms])
     gram = np.einsum("ikl,jkl,kl->ij", values, values, w)
     assert np.allclose(gram, np.eye(len(terms)), atol=1e-12)  # RMS = coefficient, orthogonal
-    # against the radial polynomial of raysim.surface.deformation with its own angular factor
+    # against the Jacobi-polynomial reference, one term and a whole random series
     n, m = 5, -3
-    radial = zernike_radial(n, m, R / a)[0]
-    assert np.allclose(values[terms.index((n, m))], np.sqrt(2 * (n + 1)) * radial * np.sin(3 * P))
+    assert np.allclose(values[terms.index((n, m))], np.sqrt(2 * (n + 1)) * radial(n, m, R / a) * np.sin(3 * P))
+    assert np.allclose(radial(5, 3, R / a), 5 * (R / a) ** 5 - 4 * (R / a) ** 3)  # the reference itself
     rng = np.random.default_rng(2)
-    series = ZernikeSeries(tuple((n, m, rng.normal() * 1e-4) for n, m in terms), a)
+    rows = tuple((n, m, rng.normal() * 1e-4) for n, m in terms)
+    series = ZernikeSeries(rows, a)
+    assert np.allclose(series(X, Y), zernike_sum(rows, a, X, Y), rtol=0, atol=1e-15)
     x, y = np.append(rng.uniform(-50, 50, 200), 0.0), np.append(rng.uniform(-50, 50, 200), 0.0)
     h = 1e-3
     gx, gy = series.gradient(x, y)

@@ -10,7 +10,8 @@ import pytest
 
 from raysim.errors import RaysimError, SceneError
 from raysim.scene.scene import load_scene, parse_scene
-from raysim.surface.deformation import GaussianBumps, GriddedMap, PanelRigid, PaperDeformation, Sum, Zernike
+from raysim.surface.deformation import GaussianBumps, PanelRigid, PaperDeformation, Sum, Zernike
+from raysim.surface.gridded import GriddedMap
 
 BASE = """
 [dish]

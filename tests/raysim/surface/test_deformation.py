@@ -11,12 +11,12 @@ import xarray as xr
 from raysim.errors import SceneError
 from raysim.surface.deformation import (
     GaussianBumps,
-    GriddedMap,
     PanelRigid,
     PaperDeformation,
     Zernike,
     paper_peak_to_peak,
 )
+from raysim.surface.gridded import GriddedMap
 from raysim.surface.panels import PanelLayout
 
 D, F = 110.0, 33.0
