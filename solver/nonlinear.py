@@ -48,10 +48,10 @@ from raysim.progress import Progress, silent, within
 from raysim.surface.gridded import HarmonicFill
 from solver.aperture import ApertureGrid
 from solver.equation import intensity_ratio_fa
-from solver.forward import Forward, go_forward
+from solver.forward import Forward, ForwardModel, as_model, go_forward
 
-__all__ = ["Correct", "Forward", "RefineHistory", "anderson_step", "extend_outside", "go_forward",
-           "refine"]
+__all__ = ["Correct", "Forward", "ForwardModel", "RefineHistory", "anderson_step", "extend_outside",
+           "go_forward", "refine"]
 
 
 @dataclass
@@ -88,7 +88,7 @@ Correct = Callable[[NDArray[np.float64], NDArray[np.float64]],
 
 def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere: SphereGrid,
            F: float, D: float, grid: ApertureGrid, n_rows: int, correct: Correct,
-           iterations: int, forward: Forward | None = None, device: str | None = "cpu",
+           iterations: int, forward: ForwardModel | Forward | None = None, device: str | None = "cpu",
            memory: int = 3, weight: NDArray[np.float64] | None = None, fit_gain: bool = False,
            progress: Progress | None = None) -> tuple[NDArray[np.float64], RefineHistory]:
     """Refine ``delta`` (m, (N, N)) by defect correction against the measured FA on the sphere.
@@ -104,15 +104,17 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
         misfit, with the rim handling of the caller (zero rim change, or a rim-target refit);
         with ``fit_gain`` it returns ``(update, gain_step)``, the relative change of the scale.
     iterations : number of forward evaluations and updates.
-    forward : the forward model; None uses the project's GO engine on ``device``.
+    forward : the forward model (:class:`solver.forward.ForwardModel`, or a plain function
+        wrapped by :func:`solver.forward.as_model`); None uses the project's GO engine on
+        ``device``.
     memory : depth of the Anderson acceleration (0: plain defect correction).
     weight : per-cell factor on the misfit (n_theta, n_phi), dimensionless; None for 1.
     fit_gain : estimate the scan's scale with the surface (see the module docstring).
-    progress : ``progress(stage, fraction)`` over the whole refinement (fraction 0..1); a
-        forward with ``reports_progress`` also reports within each call.
+    progress : ``progress(stage, fraction)`` over the whole refinement (fraction 0..1); the
+        model reports within each of its calls.
     """
     start = time.perf_counter()
-    forward = forward or go_forward(device)
+    model = as_model(forward) if forward is not None else go_forward(device)
     history = RefineHistory()
     if iterations <= 0:
         return delta, history
@@ -121,10 +123,8 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
 
     def model_of(index: int, label: str, surface: NDArray | None) -> NDArray[np.float64]:
         report(label, index / n_calls)
-        if not getattr(forward, "reports_progress", False):
-            return forward(sphere, F, D, grid.x, grid.y, surface)
-        return forward(sphere, F, D, grid.x, grid.y, surface,
-                       progress=within(report, index / n_calls, (index + 1) / n_calls, label))
+        return model(sphere, F, D, grid.x, grid.y, surface,
+                     progress=within(report, index / n_calls, (index + 1) / n_calls, label))
 
     ideal = model_of(0, "ideal reflector", None)
     w = 1.0 if weight is None else weight
@@ -134,10 +134,10 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
     iterates: list[NDArray[np.float64]] = []
     updates: list[NDArray[np.float64]] = []
     for k in range(iterations):
-        model = model_of(k + 1, f"iteration {k + 1}/{iterations}",
-                         extend_outside(grid, delta))
+        modelled = model_of(k + 1, f"iteration {k + 1}/{iterations}",
+                            extend_outside(grid, delta))
         history.gain_factor.append(gamma)
-        misfit = ((1.0 + fa_measured) * gamma - 1.0 - intensity_ratio_fa(model, ideal)) * w
+        misfit = ((1.0 + fa_measured) * gamma - 1.0 - intensity_ratio_fa(modelled, ideal)) * w
         misfit[n_rows:] = np.nan
         history.misfit_rms.append(float(np.sqrt(np.nanmean(misfit[:n_rows] ** 2))))
         step = correct(misfit, delta)
