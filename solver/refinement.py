@@ -25,6 +25,7 @@ from solver.forward import (
     forward_for,
     model_for_method,
 )
+from solver.linear import LinearInverse
 from solver.nonlinear import Correct
 
 
@@ -79,9 +80,9 @@ def choose_model(attrs: dict, iterations: int, model: str | None,
                        f"from the data's method {data_method!r}", description)
 
 
-def refinement_setup(inverse, chosen: ModelChoice, iterations: int, fit_gain: bool,
+def refinement_setup(inverse: LinearInverse, chosen: ModelChoice, iterations: int, fit_gain: bool,
                      progress: Progress | None = None) -> RefinementSetup:
-    """The preconditioner for ``chosen`` on a scan; ``inverse`` is its LinearInverse.
+    """The preconditioner for ``chosen`` on a scan; ``inverse`` is its linear inversion.
 
     ``fit_gain``: the scan's scale is not trusted (gain mode ``power``); a wave model then
     fits it with the surface. A wave model's ideal field is computed here (``progress``).

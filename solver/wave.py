@@ -47,6 +47,7 @@ from numpy.typing import NDArray
 from raysim.constants import C0, wavenumber
 from raysim.maps.sphere import SphereGrid, aperture_radius, ideal_go_cell_mean, ideal_go_intensity
 from solver.aperture import ApertureGrid
+from solver.linear import LinearInverse
 
 P_MIN = 0.2         # p is kept within [P_MIN, 1 / P_MIN] where it divides
 
@@ -176,14 +177,14 @@ def interference(E0: NDArray[np.complex128], sphere: SphereGrid, F: float, k: fl
 class WaveCorrection:
     """The wave refinement's preconditioner: weighted FA misfit on the sphere -> surface update.
 
-    ``inverse`` supplies the GO pieces (duck-typed: :class:`solver.invert.LinearInverse`):
+    ``inverse`` (:class:`solver.linear.LinearInverse`) supplies the GO pieces:
     ``to_aperture(values_on_sphere)``, ``poisson(fa_on_aperture)`` (zero rim) and
     ``rim_update(delta)``. ``E0`` is the ideal reflector's complex field (n_theta, n_phi, 3),
     ``weight`` the amplitude weight the misfits carry. Calling it with (misfit, delta) returns
     the update (m, (N, N)) and, with ``fit_gain``, the relative step of the scan's scale.
     """
 
-    def __init__(self, inverse, E0: NDArray[np.complex128], frequency_hz: float,
+    def __init__(self, inverse: LinearInverse, E0: NDArray[np.complex128], frequency_hz: float,
                  polarization: float, weight: NDArray[np.float64], fit_gain: bool) -> None:
         scan, grid = inverse.scan, inverse.grid
         k = wavenumber(frequency_hz)
