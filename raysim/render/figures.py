@@ -23,11 +23,16 @@ from raysim.maps.aperture import ApertureGrid
 from raysim.render import backend, charts
 from raysim.render.backend import RenderError
 from raysim.render.data import Quantity, fa, field_title, symmetric_limit
-from raysim.render.samples import laplacian
 from solver.equation import G
 
 Delta = Callable[[np.ndarray, np.ndarray], np.ndarray]
 SIZE = (1400, 1050)
+
+
+def laplacian(delta: Delta, x: np.ndarray, y: np.ndarray, h: float = 1e-2) -> np.ndarray:
+    """Laplacian of delta(x, y) (1/m) by central differences of step ``h`` (m)."""
+    return (delta(x + h, y) + delta(x - h, y) + delta(x, y + h) + delta(x, y - h)
+            - 4.0 * delta(x, y)) / (h * h)
 
 
 @dataclass(frozen=True)

@@ -15,8 +15,8 @@ from matplotlib.image import imread
 
 from raysim.pipeline import report as report_module
 from raysim.render.backend import RenderError, colour_count
-from raysim.render.samples import equation_fieldmap, surfacemap
 from raysim.surface.deformation import PaperDeformation
+from tests.examples import equation_fieldmap, surfacemap
 
 ROOT = Path(__file__).resolve().parents[3]
 D, F = 110.0, 33.0
