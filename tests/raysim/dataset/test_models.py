@@ -13,6 +13,7 @@ from raysim.dataset.memo import Memo
 from raysim.dataset.models import RimAstigmatism
 from raysim.dataset.zernike import ZernikeSeries
 from tests.reference_zernike import radial, zernike_sum
+from tests.surfaces import disk_rms
 
 ROOT = Path(__file__).resolve().parents[3]
 DEMO_TEXT = (ROOT / "scenes" / "dataset_demo.toml").read_text()
@@ -71,17 +72,6 @@ def test_zernike_series_is_noll_normalised_orthogonal_and_has_exact_slopes():
     gx, gy = series.gradient(x, y)
     assert np.allclose(gx, (series(x + h, y) - series(x - h, y)) / (2 * h), rtol=1e-6, atol=1e-12)
     assert np.allclose(gy, (series(x, y + h) - series(x, y - h)) / (2 * h), rtol=1e-6, atol=1e-12)
-
-
-def disk_rms(deformation, a: float, layout) -> float:
-    """RMS (m) of delta over the disk r < a by polar midpoint quadrature (area-weighted), each
-    point on the panel under it: independent of the aperture grid the models scale on."""
-    r = (np.arange(600) + 0.5) / 600 * a
-    phi = (np.arange(900) + 0.5) / 900 * 2 * np.pi
-    R, P = np.meshgrid(r, phi)
-    x, y = R * np.cos(P), R * np.sin(P)
-    values = deformation(x, y, layout.panel_at(x, y) if layout is not None else None)
-    return float(np.sqrt(np.sum(values**2 * R) / np.sum(R)))
 
 
 def test_each_model_reaches_its_drawn_rms_over_the_disk():

@@ -73,7 +73,6 @@ def test_report_states_the_runs_numbers_and_the_scene(written):
     assert "zero on the rim (the paper&#x27;s assumption)" in text
     assert "time: simulate</th><td>8.0 s" in text and "time: invert</th><td>1.5 s" in text
     assert "time: draw the figures" in text
-    assert "RRMS 4.06 %" in text  # the paper's own figure, quoted for its own case
     assert "[[deformation]]" in text and 'type = &quot;paper&quot;' in text
 
 
