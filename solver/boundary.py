@@ -84,11 +84,6 @@ class RimSeries:
         return RimSeries(self.a, pad(self.cos) + pad(other.cos), pad(self.sin) + pad(other.sin))
 
 
-def zero_rim(a: float) -> RimSeries:
-    """The paper's boundary assumption: delta = 0 on the rim."""
-    return RimSeries(float(a), np.zeros(1), np.zeros(1))
-
-
 def read_rim_csv(path: str | os.PathLike[str]) -> RimTargets:
     """Read rim targets from a CSV with header ``x,y,dz`` (metres); one target per row.
 
