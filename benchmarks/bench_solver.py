@@ -12,7 +12,7 @@ The noise section (issue 4: under 20 um RMS with 0.01 dB on every sample) pertur
 intensity with independent log-normal power-meter noise of 0.001, 0.01 and 0.05 dB and inverts
 with the default settings, over ``--noise-seeds`` seeds. It reports the error raw and after
 removing piston, tilt and focus from map and truth alike: a measured scan's unknown gain makes
-focus a term that must be removed anyway (DESIGN.md), and the lowest Dirichlet mode of the disk,
+focus a term that must be removed anyway (docs/physics.md), and the lowest Dirichlet mode of the disk,
 which collects most of the noise, is nearly a focus shape.
 """
 

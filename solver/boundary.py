@@ -1,6 +1,6 @@
 """Boundary data on the rim r = D/2: the paper's zero, or rim targets from a CSV ``x,y,dz`` (m).
 
-Frame (DESIGN.md): aperture plane x, y (m), phi = atan2(y, x) (rad), dz along z (m).
+Frame (docs/physics.md): aperture plane x, y (m), phi = atan2(y, x) (rad), dz along z (m).
 
 The interior intensity data fix delta only up to a harmonic function (Laplacian zero: piston,
 tilt, astigmatism, any r^n cos(n phi)), which the rim values decide. Rim targets measured by a

@@ -1,12 +1,12 @@
 """Forward models of the refinement: a surface estimate on the aperture -> intensity on the sphere.
 
-Frame and units (DESIGN.md): the estimate delta (m) on the aperture grid x, y (m), the sphere
+Frame and units (docs/physics.md): the estimate delta (m) on the aperture grid x, y (m), the sphere
 grid (theta, phi in rad) of the scan, centred at the focus (0, 0, F); intensities relative to
 the incident plane wave (dimensionless).
 
 Every model needs only what a FieldMap carries: F, D, R and the grid, and for the wave models
 the frequency, the incident polarisation (attribute ``polarization`` in rad; a scan without
-one was taken with E along x, DESIGN.md) and whether the probe saw the scattered field alone
+one was taken with E along x, docs/physics.md) and whether the probe saw the scattered field alone
 or the total field (attribute ``field``).
 
 - ``go``: the project's GO engine (:func:`raysim.optics.go.forward_intensity`): cell means, no

@@ -1,6 +1,6 @@
 """The inversion pipeline: FieldMap (intensity on the sphere) -> SurfaceMap (delta on the aperture).
 
-Frame and units (DESIGN.md): sphere angles in rad, aperture x, y and delta in m.
+Frame and units (docs/physics.md): sphere angles in rad, aperture x, y and delta in m.
 
 Steps, each a function of what the previous ones returned: gain (power ratio or none) -> FA
 on the sphere with the noise bias removed (:func:`measured_fa`) -> the linear answer

@@ -1,6 +1,6 @@
 """The linear inversion: FA on the sphere -> delta on the aperture, with one rim treatment.
 
-Frame and units (DESIGN.md): sphere angles in rad, aperture x, y and delta in m, FA
+Frame and units (docs/physics.md): sphere angles in rad, aperture x, y and delta in m, FA
 dimensionless, G in m. The steps of the paper's method (Eqs. 28-34): FA is resampled onto the
 aperture grid through the ideal GO mapping r = 2F tan(theta/2) (:mod:`solver.resample`),
 divided by G = -2 F d / R (:mod:`solver.equation`), and the Poisson equation

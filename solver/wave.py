@@ -1,6 +1,6 @@
 """How wave-optics intensity responds to a surface deformation: weights and a preconditioner.
 
-Frame and units (DESIGN.md): sphere cells (theta, phi in rad) around the focus (0, 0, F), the
+Frame and units (docs/physics.md): sphere cells (theta, phi in rad) around the focus (0, 0, F), the
 aperture grid (x, y in m), delta in m, FA dimensionless, wavelength and distances in m, spatial
 frequencies kappa in cycles per metre. Time convention exp(+j w t), E_inc = e exp(+j k z).
 

@@ -2,7 +2,7 @@
 and the report: a FieldMap from the linear deformation-intensity equation and a SurfaceMap on
 an aperture grid.
 
-Frame (DESIGN.md): reflector vertex at the origin, axis +z, focus (0, 0, F); sphere angles in
+Frame (docs/physics.md): reflector vertex at the origin, axis +z, focus (0, 0, F); sphere angles in
 rad; lengths and delta in m. The FieldMap's deformed intensity is I_ideal / (1 + FA) with
 FA = G Laplacian(delta), G = -2 F d / R, d = F + z - R, at the aperture point r = 2F tan(theta/2)
 of each cell centre: the paper's Eq. 28, not a ray trace.

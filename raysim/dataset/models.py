@@ -5,7 +5,7 @@ coefficients, bump positions, panel pistons and tilts, the exponent of a rim ast
 then scales the shape's linear parameters so that its RMS over the aperture grid
 (:class:`raysim.maps.aperture.ApertureGrid`, re-exported here: the points r < D/2 of the map
 the dataset stores, with the scene's panel layout) equals an RMS drawn from the spec's law. All lengths
-are metres in the reflector frame of DESIGN.md (aperture coordinates x, y; delta along +z),
+are metres in the reflector frame of docs/physics.md (aperture coordinates x, y; delta along +z),
 angles radians. Every model returns its parameters as a flat dict of numbers and arrays of
 fixed length, so that the Zarr store holds them per sample.
 """

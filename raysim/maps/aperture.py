@@ -1,6 +1,6 @@
 """The aperture grid: N x N cell-centred points over the square [-D/2, D/2]^2 in the z = 0 plane.
 
-Frame (DESIGN.md): x, y in metres in the aperture plane, the axis at the origin. Point (i, j)
+Frame (docs/physics.md): x, y in metres in the aperture plane, the axis at the origin. Point (i, j)
 sits at x_i = -D/2 + (i + 1/2) h, y_j = -D/2 + (j + 1/2) h with h = D / N; arrays are indexed
 ``[j, i]`` (y first, as SurfaceMaps and datasets store them). The aperture is the open disk
 r < D/2. One grid serves every layer: the solver's Poisson problem, the SurfaceMap contract,

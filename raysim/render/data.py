@@ -1,6 +1,6 @@
 """What a picture shows: reading FieldMaps and SurfaceMaps, the quantities, their labels.
 
-Frames and units (DESIGN.md): a FieldMap holds intensities relative to the incident plane
+Frames and units (docs/physics.md): a FieldMap holds intensities relative to the incident plane
 wave on (theta, phi) cells of the sphere of radius R about the focus (rad); a SurfaceMap holds
 delta along z (m) on the aperture grid (x, y) (m), NaN outside the aperture. Pictures show
 angles in degrees and deformations in micrometres; these conversions happen here.

@@ -1,6 +1,6 @@
 """The paper's figure set (Figs. 8a-d, 9, 10) for one run: a FieldMap and its SurfaceMap.
 
-Frames and units (DESIGN.md): sphere angles in rad (shown in deg), aperture x, y in m, delta in
+Frames and units (docs/physics.md): sphere angles in rad (shown in deg), aperture x, y in m, delta in
 m (shown in µm). The aperture sees the sphere through the ideal GO mapping theta = 2 atan(r/2F),
 phi = atan2(y, x) (paper Eq. 34); FA = I_ideal / I_def - 1 and G = -2 F d / R, d = F + z - R
 (paper Eqs. 28-29). Figs. 8d and 9 show FA resampled onto the aperture grid by the solver's own

@@ -1,7 +1,7 @@
 """Surface errors delta(x, y) of the main reflector, in metres along +z, with their slopes.
 
 Every deformation is a callable on aperture coordinates (x, y) in metres (reflector frame of
-DESIGN.md: vertex at the origin, axis +z) and returns delta in metres; ``gradient`` returns
+docs/physics.md: vertex at the origin, axis +z) and returns delta in metres; ``gradient`` returns
 (d delta / dx, d delta / dy), dimensionless. Panel rigid errors depend on the panel a point
 belongs to, so every call takes an optional ``panel`` array of panel ids (-1: in a gap); when
 it is omitted, the panel is found from (x, y). Deformations add: ``a + b``.

@@ -1,7 +1,7 @@
 """Acceptance on the paper's GO case with the project's own GO engine as data and model.
 
 Issue 4: raw RRMS <= 2 % with the default refinement (the paper: 4.06 %); the linear answer
-errs by about 9 % (DESIGN.md).
+errs by about 9 % (docs/physics.md).
 """
 
 import pytest

@@ -39,11 +39,11 @@ def test_paper_scene_is_the_papers_table_2(paper_scene):
     assert (s.D, s.F, s.sphere.radius) == (110.0, 33.0, 10.0)
     assert s.source.frequency_hz == 0.3e9
     assert (s.sphere.n_theta, s.sphere.n_phi) == (90, 360)
-    # cell centres 0.5 .. 89.5 deg in 1 deg steps (DESIGN.md)
+    # cell centres 0.5 .. 89.5 deg in 1 deg steps (docs/physics.md)
     assert np.allclose(np.degrees(s.sphere.theta[[0, -1]]), [0.5, 89.5])
     assert np.allclose(np.degrees(s.sphere.phi[[0, -1]]), [0.5, 359.5])
     assert isinstance(s.deformation, PaperDeformation) and s.deformation.scale == 1.0
-    # the source travels along -z with E along x (DESIGN.md's PO convention)
+    # the source travels along -z with E along x (docs/physics.md's PO convention)
     assert np.allclose(s.source.direction, [0, 0, -1])
     assert np.allclose(s.source.e_hat, [1, 0, 0])
     assert "Eq. 8" in s.text or "deformation" in s.text

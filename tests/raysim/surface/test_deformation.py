@@ -33,7 +33,7 @@ def aperture_grid(n: int = 256):
 
 
 def test_paper_deformation_matches_the_papers_magnitudes():
-    # DESIGN.md: peak-to-peak M = 1.2 mm, RMS 327.65 um over the aperture
+    # docs/physics.md: peak-to-peak M = 1.2 mm, RMS 327.65 um over the aperture
     assert paper_peak_to_peak(D, F) == pytest.approx(1.2e-3, rel=0.02)
     x, y = aperture_grid()
     rms = np.sqrt(np.mean(PaperDeformation(D, F)(x, y) ** 2))
