@@ -7,8 +7,8 @@ machine the wall time includes waiting for the CPU.
 
     python benchmarks/bench_render.py [FIELD.nc] [--size WxH] [--repeat N]
 
-Without a file the map is made from the linear equation for the paper's deformation (Eq. 8)
-on the paper's 90 x 360 grid.
+Without a file the map is the paper's GO case (Eq. 8 on the 90 x 360 grid) traced by the
+project's GO engine (:func:`raysim.pipeline.paper.paper_fieldmap`, a few seconds).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ TARGET_S = 5.0
 
 def main(argv: list[str] | None = None) -> dict[str, dict[str, float]]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("field", nargs="?", help="FieldMap NetCDF (default: the paper's case, linear)")
+    parser.add_argument("field", nargs="?", help="FieldMap NetCDF (default: the paper's GO case)")
     parser.add_argument("--size", default=None, help="picture size WxH (default: each kind's default)")
     parser.add_argument("--repeat", type=int, default=2, help="pictures per kind after the first")
     args = parser.parse_args(argv)
@@ -40,10 +40,9 @@ def main(argv: list[str] | None = None) -> dict[str, dict[str, float]]:
 
         _, ds = open_map(args.field)
     else:
-        from raysim.render.samples import equation_fieldmap
-        from raysim.surface.deformation import PaperDeformation
+        from raysim.pipeline.paper import paper_fieldmap
 
-        ds = equation_fieldmap(PaperDeformation(110.0, 33.0), 110.0, 33.0, 10.0, 90, 360)
+        ds = paper_fieldmap()
     print(f"import and map: {time.perf_counter() - start:.2f} s; map {ds.sizes['theta']} x "
           f"{ds.sizes['phi']}; {os.cpu_count()} CPUs; load average {os.getloadavg()[0]:.1f}")
     results: dict[str, dict[str, float]] = {}

@@ -12,7 +12,7 @@ The noise section (issue 4: under 20 um RMS with 0.01 dB on every sample) pertur
 intensity with independent log-normal power-meter noise of 0.001, 0.01 and 0.05 dB and inverts
 with the default settings, over ``--noise-seeds`` seeds. It reports the error raw and after
 removing piston, tilt and focus from map and truth alike: a measured scan's unknown gain makes
-focus a term that must be removed anyway (DESIGN.md), and the lowest Dirichlet mode of the disk,
+focus a term that must be removed anyway (docs/physics.md), and the lowest Dirichlet mode of the disk,
 which collects most of the noise, is nearly a focus shape.
 """
 
@@ -123,9 +123,11 @@ def main() -> None:
 def noise_section(field, N: int, seeds: int, device: str) -> None:
     """Error of the default inversion against power-meter noise (dB, one reading per cell)."""
     from raysim.surface.deformation import PaperDeformation
+    from solver.forward import GOForward
     from solver.invert import invert
 
     truth = PaperDeformation(110.0, 33.0)
+    model = GOForward(device)  # one model for every draw: it traces the ideal dish once
     clean = field["intensity"].values
     print(f"noise: default invert (multigrid, refine 3), {seeds} seeds per level; "
           "RMS error raw | after piston, tilt, focus removal")
@@ -137,8 +139,8 @@ def noise_section(field, N: int, seeds: int, device: str) -> None:
             noisy["intensity"] = (field["intensity"].dims,
                                   clean * 10.0 ** (db * rng.standard_normal(clean.shape) / 10.0),
                                   field["intensity"].attrs)
-            raw.append(invert(noisy, N=N, truth=truth, device=device).attrs["rms_m"])
-            removed.append(invert(noisy, N=N, truth=truth, device=device,
+            raw.append(invert(noisy, N=N, truth=truth, forward=model).attrs["rms_m"])
+            removed.append(invert(noisy, N=N, truth=truth, forward=model,
                                   remove="piston,tilt,focus").attrs["rms_m"])
         raw_um, removed_um = np.array(raw) * 1e6, np.array(removed) * 1e6
         print(f"  {db:5.3f} dB: raw {raw_um.mean():7.1f} um (seeds {raw_um.min():.1f}.."

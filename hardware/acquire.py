@@ -18,8 +18,7 @@ from hardware.instruments.power_meter import PowerMeter
 from hardware.journal import Journal, Record
 from hardware.plan import REFERENCE, ScanPlan
 from hardware.rig import Rig
-
-Progress = Callable[[int, int], None]
+from raysim.progress import Progress
 
 
 @dataclass
@@ -50,18 +49,24 @@ def move_to(motion: MotionController, rig: Rig, slider: float,
     return readback[rig.slider_axis], readback[rig.rotation_axis]
 
 
+def step_progress(progress: Progress | None, done: int, total: int) -> None:
+    """Report ``done`` of ``total`` steps: stage ``step <done> of <total>``, fraction done/total."""
+    if progress is not None:
+        progress(f"step {done} of {total}", done / total if total else 1.0)
+
+
 def acquire(plan: ScanPlan, instruments: Instruments, journal: Journal, *,
             progress: Progress | None = None,
             before_step: Callable[[int], None] | None = None) -> None:
     """Take every step of ``plan`` after the journal's last record, journaling each one.
 
-    ``progress(done, total)`` is called after each step; ``before_step(index)`` before it
-    (a simulator keys its noise and drift on the index).
+    ``progress(stage, fraction)`` (:mod:`raysim.progress`) is called after each step (see
+    :func:`step_progress`); ``before_step(index)`` before it (a simulator keys its noise and
+    drift on the index).
     """
     steps = plan.steps()
     start = len(journal.records)
-    if progress is not None:
-        progress(start, len(steps))
+    step_progress(progress, start, len(steps))
     if start >= len(steps):
         return
     prepare(instruments, plan)
@@ -80,8 +85,7 @@ def acquire(plan: ScanPlan, instruments: Instruments, journal: Journal, *,
             power = tuple(meter.read_power() for _ in range(count))
             journal.append(Record(step.index, step.kind, step.i, step.j, command, readback,
                                   power, stamp))
-            if progress is not None:
-                progress(step.index + 1, len(steps))
+            step_progress(progress, step.index + 1, len(steps))
     except BaseException:
         motion.stop((rig.slider_axis, rig.rotation_axis))
         raise

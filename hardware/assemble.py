@@ -1,4 +1,4 @@
-"""From journal records to a measured FieldMap (DESIGN.md data contract, method ``measured``).
+"""From journal records to a measured FieldMap (docs/physics.md data contract, method ``measured``).
 
 Per cell: intensity = mean power / ``power_unit`` / g(n) * (r / R)^2 (the last factor only
 with ``refer_to_sphere``). g(n) is the receiver gain at step n relative to the first

@@ -1,6 +1,6 @@
 """The scanning rig's kinematics and calibration, read from ``rig.toml``.
 
-Frame (DESIGN.md): reflector vertex at the origin, axis +z, focus at (0, 0, F); every vector
+Frame (docs/physics.md): reflector vertex at the origin, axis +z, focus at (0, 0, F); every vector
 here is taken from the focus, in metres. A semicircular track of radius R is centred at the
 track centre C = focus + ``centre_offset``; the slider moves the probe along the track by the
 geometric angle s (rad, s = 0 at the bottom of the track, facing the vertex), and the track

@@ -20,7 +20,7 @@ import numpy as np
 import pyvisa
 import xarray as xr
 
-from hardware.acquire import Instruments, Progress, acquire, move_to
+from hardware.acquire import Instruments, acquire, move_to, step_progress
 from hardware.assemble import build_fieldmap
 from hardware.errors import JournalError, PlanError
 from hardware.instruments.motion import MotionController
@@ -32,6 +32,7 @@ from hardware.rig import Rig
 from hardware.sim.rig import Faults, SimulatedRig
 from hardware.sim.settings import SimSettings
 from raysim.maps import fieldmap as fieldmaps
+from raysim.progress import Progress
 
 ROLES = ("meter", "motion")
 
@@ -82,7 +83,7 @@ def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
     faults : faults the simulated instruments inject (tests).
     resume : continue the journal after its last complete step; without it an existing
         journal with records is an error.
-    progress : called with (steps done, steps total).
+    progress : ``progress(stage, fraction)`` after each step (:func:`hardware.acquire.step_progress`).
     rm : PyVISA resource manager (default: pyvisa-py).
     """
     output = Path(output)
@@ -108,8 +109,8 @@ def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
                             before_step=sim_rig.set_sample if sim_rig else None)
                 finally:
                     inst.close()
-            elif progress is not None:
-                progress(start, len(steps))
+            else:
+                step_progress(progress, start, len(steps))
     ds = fieldmap_from_journal(plan, jpath, attrs)
     fieldmaps.save(ds, output)
     return ScanResult(ds, output, jpath, len(steps), len(steps) - start)

@@ -24,3 +24,11 @@ class DeviceError(RaysimError, RuntimeError):
 class InstrumentError(RaysimError, RuntimeError):
     """An instrument is unreachable, silent, not the expected model, reports an error in its
     queue, or a motion does not reach its target."""
+
+
+class GridError(RaysimError, ValueError):
+    """A grid cannot be built as asked (an aperture grid of fewer than 2 points, D <= 0)."""
+
+
+class SurfaceMapError(RaysimError, ValueError):
+    """A SurfaceMap file breaks the data contract (missing variable, attribute or unit)."""

@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from raysim.errors import RaysimError
 from raysim.maps.fieldmap import fieldmap
 from raysim.optics import go
-from raysim.optics.runtime import Progress
+from raysim.progress import Progress
 from raysim.scene import Scene
 from raysim.surface.mesh import Reflector, reflectors_for
 

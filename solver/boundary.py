@@ -1,6 +1,6 @@
 """Boundary data on the rim r = D/2: the paper's zero, or rim targets from a CSV ``x,y,dz`` (m).
 
-Frame (DESIGN.md): aperture plane x, y (m), phi = atan2(y, x) (rad), dz along z (m).
+Frame (docs/physics.md): aperture plane x, y (m), phi = atan2(y, x) (rad), dz along z (m).
 
 The interior intensity data fix delta only up to a harmonic function (Laplacian zero: piston,
 tilt, astigmatism, any r^n cos(n phi)), which the rim values decide. Rim targets measured by a
@@ -82,11 +82,6 @@ class RimSeries:
         k = max(self.order, other.order) + 1
         pad = lambda c: np.pad(c, (0, k - c.size))  # noqa: E731
         return RimSeries(self.a, pad(self.cos) + pad(other.cos), pad(self.sin) + pad(other.sin))
-
-
-def zero_rim(a: float) -> RimSeries:
-    """The paper's boundary assumption: delta = 0 on the rim."""
-    return RimSeries(float(a), np.zeros(1), np.zeros(1))
 
 
 def read_rim_csv(path: str | os.PathLike[str]) -> RimTargets:

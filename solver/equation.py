@@ -1,6 +1,6 @@
 """The deformation-intensity equation FA = G Laplacian(delta) (paper Eqs. 28-29) and its inputs.
 
-Frame and units (DESIGN.md): F, R, r, z, d in m; intensities relative to the incident wave
+Frame and units (docs/physics.md): F, R, r, z, d in m; intensities relative to the incident wave
 (dimensionless); FA dimensionless; G in m, so Laplacian(delta) = FA / G is in 1/m.
 
 - FA = I_ideal / I_def - 1, from the FieldMap's ``intensity_ideal`` and ``intensity``;

@@ -3,7 +3,7 @@
 The ``raysim`` command turns any of them into one line on stderr and exit status 2.
 """
 
-from raysim.errors import RaysimError
+from raysim.errors import RaysimError, SurfaceMapError
 
 
 class SolverError(RaysimError, ValueError):
@@ -14,5 +14,4 @@ class RimTargetsError(RaysimError, ValueError):
     """A rim-target CSV (header ``x,y,dz``, metres) is unreadable, malformed or too sparse."""
 
 
-class SurfaceMapError(RaysimError, ValueError):
-    """A SurfaceMap file breaks the data contract (missing variable, attribute or unit)."""
+__all__ = ["RimTargetsError", "SolverError", "SurfaceMapError"]

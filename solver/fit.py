@@ -1,6 +1,6 @@
 """Best-fit removal of piston, tilt and focus, and per-panel adjustments from a surface map.
 
-Frame (DESIGN.md): aperture plane x, y (m), delta along z (m). The terms, fitted by least
+Frame (docs/physics.md): aperture plane x, y (m), delta along z (m). The terms, fitted by least
 squares over the grid points inside the aperture:
 
 - ``piston``: a constant (m);

@@ -1,12 +1,12 @@
 """Forward models of the refinement: a surface estimate on the aperture -> intensity on the sphere.
 
-Frame and units (DESIGN.md): the estimate delta (m) on the aperture grid x, y (m), the sphere
+Frame and units (docs/physics.md): the estimate delta (m) on the aperture grid x, y (m), the sphere
 grid (theta, phi in rad) of the scan, centred at the focus (0, 0, F); intensities relative to
 the incident plane wave (dimensionless).
 
 Every model needs only what a FieldMap carries: F, D, R and the grid, and for the wave models
 the frequency, the incident polarisation (attribute ``polarization`` in rad; a scan without
-one was taken with E along x, DESIGN.md) and whether the probe saw the scattered field alone
+one was taken with E along x, docs/physics.md) and whether the probe saw the scattered field alone
 or the total field (attribute ``field``).
 
 - ``go``: the project's GO engine (:func:`raysim.optics.go.forward_intensity`): cell means, no
@@ -20,9 +20,12 @@ or the total field (attribute ``field``).
 - ``po+ptd``: PO plus the fringe field of the rim from :mod:`raysim.optics.ptd` (a few per cent of
   PO's cost).
 
-The ideal reflector's field is computed once per (model, scan geometry) and kept for the
-session. A model object reports its progress through ``progress(stage, fraction)`` when the
-refinement passes one (``reports_progress``).
+Every model is a :class:`ForwardModel` and owns its caches: the ideal reflector's map (or
+complex field) per scan geometry, kept for the model's life, so an inversion that passes one
+model to several calls (``invert(..., forward=model)``) computes the ideal once; a fresh model
+(the default of :func:`solver.invert.invert`) computes it once per inversion. A plain
+function ``forward(sphere, F, D, x, y, delta)`` still works: :func:`as_model` wraps it.
+Models report progress through ``progress(stage, fraction)`` (:mod:`raysim.progress`).
 
 The wave models compute each field as a :class:`ForwardJob` of :mod:`raysim.distributed.blocks`:
 in this process as one block, or, inside ``with distributed(runner):``, in blocks of sphere
@@ -35,16 +38,18 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import hashlib
+from abc import ABC, abstractmethod
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from raysim.constants import wavenumber
 from raysim.maps.sphere import SphereGrid
+from raysim.progress import Progress
 from solver.errors import SolverError
 
 MODELS = ("go", "po", "po+ptd")
@@ -55,7 +60,54 @@ IDEAL_CACHE_SIZE = 4
 # forward(sphere, F, D, x, y, delta) -> intensity (n_theta, n_phi); delta None for the ideal
 # reflector, else (N, N) in m on the aperture grid x, y (finite everywhere).
 Forward = Callable[[SphereGrid, float, float, NDArray, NDArray, NDArray | None], NDArray]
-Progress = Callable[[str, float], None]
+
+
+class ForwardModel(ABC):
+    """A forward model of the refinement: the intensity on the sphere of a surface estimate.
+
+    Calling it with (sphere, F, D, x, y, delta) returns the intensity (n_theta, n_phi) of the
+    paraboloid of focal length F and diameter D (m) plus ``delta`` (m, (N, N) on the aperture
+    grid x, y, finite everywhere), or of the ideal reflector for ``delta`` None; ``progress``
+    (optional) follows the call. ``name`` says what physics it is (go, po, po+ptd, or the
+    caller's word) and :meth:`describe` says it in a line for the SurfaceMap.
+    """
+
+    name: str = "caller"
+
+    @abstractmethod
+    def __call__(self, sphere: SphereGrid, F: float, D: float, x: NDArray, y: NDArray,
+                 delta: NDArray | None, progress: Progress | None = None) -> NDArray: ...
+
+    def describe(self) -> str:
+        return f"caller's ({self.name})"
+
+
+class WaveModel(ForwardModel):
+    """A wave-optics model: also gives the ideal reflector's complex field, which the wave
+    preconditioner (:class:`solver.wave.WaveCorrection`) is built from."""
+
+    frequency_hz: float
+    polarization: float
+
+    @abstractmethod
+    def ideal_field(self, sphere: SphereGrid, F: float, D: float,
+                    progress: Progress | None = None) -> NDArray[np.complex128]: ...
+
+
+@dataclass(frozen=True)
+class CallableModel(ForwardModel):
+    """A plain function ``forward(sphere, F, D, x, y, delta)`` as a model (no progress)."""
+
+    function: Forward
+    name: str = "caller"
+
+    def __call__(self, sphere, F, D, x, y, delta, progress=None):
+        return self.function(sphere, F, D, x, y, delta)
+
+
+def as_model(forward: ForwardModel | Forward) -> ForwardModel:
+    """``forward`` as a :class:`ForwardModel` (a plain function is wrapped)."""
+    return forward if isinstance(forward, ForwardModel) else CallableModel(forward)
 
 
 def model_for_method(method: str) -> str:
@@ -67,33 +119,39 @@ def model_for_method(method: str) -> str:
     return method if method in MODELS else "go"
 
 
-def go_forward(device: str | None = "cpu") -> Forward:
-    """The project's GO engine as the refinement's forward model (imported on first use).
+@dataclass
+class GOForward(ForwardModel):
+    """The project's GO engine (:func:`raysim.optics.go.forward_intensity`): cell means of the
+    ray-tube intensity, no diffraction. The ideal reflector's map depends only on (sphere
+    grid, F, D) and is kept per geometry for the model's life (the engine keeps its mesh)."""
 
-    The ideal reflector's map depends only on (sphere grid, F, D, device) and is kept for the
-    session, so repeated inversions of one scan geometry trace it once.
-    """
+    device: str | None = "cpu"
+    name = "go"
+    _ideal: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
-    def forward(sphere, F, D, x, y, delta):
-        if delta is None:
-            return _ideal_go(sphere, float(F), float(D), device).copy()
+    def __call__(self, sphere, F, D, x, y, delta, progress=None):
         from raysim.optics.go import forward_intensity
-        from raysim.surface.deformation import GriddedMap
 
-        return forward_intensity(sphere, F, D, GriddedMap(x, y, delta), device=device)
+        if delta is None:
+            key = (sphere, float(F), float(D))
+            if key not in self._ideal:
+                self._ideal[key] = forward_intensity(sphere, float(F), float(D), None, device=self.device)
+            return self._ideal[key].copy()
+        from raysim.surface.gridded import GriddedMap
 
-    return forward
+        return forward_intensity(sphere, F, D, GriddedMap(x, y, delta), device=self.device)
+
+    def describe(self) -> str:
+        return "raysim.optics.go GO engine (cell means, no diffraction)"
 
 
-@lru_cache(maxsize=IDEAL_CACHE_SIZE)
-def _ideal_go(sphere: SphereGrid, F: float, D: float, device: str | None) -> NDArray:
-    from raysim.optics.go import forward_intensity
-
-    return forward_intensity(sphere, F, D, None, device=device)
+def go_forward(device: str | None = "cpu") -> GOForward:
+    """The project's GO engine as the refinement's forward model (a new :class:`GOForward`)."""
+    return GOForward(device)
 
 
 @dataclass
-class WaveForward:
+class WaveForward(WaveModel):
     """PO (optionally + PTD) intensity of the paraboloid plus a gridded delta, at cell centres.
 
     Parameters
@@ -116,16 +174,12 @@ class WaveForward:
     device: str | None = "cpu"
     calls: int = field(default=0, compare=False)
     seconds: float = field(default=0.0, compare=False)
-    reports_progress = True
+    _ideal: OrderedDict = field(default_factory=OrderedDict, init=False, repr=False, compare=False)
+    _meshes: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def name(self) -> str:
         return "po+ptd" if self.ptd else "po"
-
-    def key(self) -> tuple:
-        """What the ideal field depends on besides the scan geometry."""
-        return (self.name, float(self.frequency_hz), float(self.polarization), self.total,
-                self.samples_per_wavelength, float(self.face_m), self.device)
 
     def describe(self) -> str:
         spw = self.samples_per_wavelength
@@ -143,19 +197,27 @@ class WaveForward:
 
     def ideal_field(self, sphere: SphereGrid, F: float, D: float,
                     progress: Progress | None = None) -> NDArray[np.complex128]:
-        """Complex E (n_theta, n_phi, 3) of the ideal reflector (V/m per V/m incident), cached."""
-        key = (self.key(), sphere, float(F), float(D))
-        if key not in _IDEAL_WAVE:
-            _IDEAL_WAVE[key] = self._field(sphere, F, D, None, progress)
-            while len(_IDEAL_WAVE) > IDEAL_CACHE_SIZE:
-                _IDEAL_WAVE.popitem(last=False)
-        return _IDEAL_WAVE[key].copy()
+        """Complex E (n_theta, n_phi, 3) of the ideal reflector (V/m per V/m incident), kept
+        per scan geometry (the last :data:`IDEAL_CACHE_SIZE`)."""
+        key = (sphere, float(F), float(D))
+        if key not in self._ideal:
+            self._ideal[key] = self._field(sphere, F, D, None, progress)
+            while len(self._ideal) > IDEAL_CACHE_SIZE:
+                self._ideal.popitem(last=False)
+        return self._ideal[key].copy()
+
+    def paraboloid(self, D: float, F: float):
+        """The smooth ideal paraboloid on the model's quadrature faces, built once per dish."""
+        key = (float(D), float(F))
+        if key not in self._meshes:
+            from raysim.surface.mesh import paraboloid
+
+            self._meshes[key] = paraboloid(key[0], key[1], float(self.face_m))
+        return self._meshes[key]
 
     def wavenumber(self) -> float:
         """k = 2 pi f / c (rad/m)."""
-        from raysim.optics.po import C0
-
-        return 2.0 * np.pi * self.frequency_hz / C0
+        return wavenumber(self.frequency_hz)
 
     def _field(self, sphere: SphereGrid, F: float, D: float, surface: tuple | None,
                progress: Progress | None) -> NDArray[np.complex128]:
@@ -170,7 +232,8 @@ class WaveForward:
         job = self.job(sphere, F, D, surface)
         runner = _RUNNER.get()
         if runner is None:
-            arrays, _ = job.build(self.device or "cpu", False).evaluate(0, job.n_points, progress)
+            context = job.build(self.device or "cpu", False, self.paraboloid(D, F))
+            arrays, _ = context.evaluate(0, job.n_points, progress)
         else:
             arrays = runner.evaluate(job, progress)
         wave = job.wave()
@@ -195,7 +258,6 @@ class WaveForward:
         return replace(job, key=job.fingerprint())
 
 
-_IDEAL_WAVE: OrderedDict[tuple, NDArray[np.complex128]] = OrderedDict()
 _RUNNER: contextvars.ContextVar[Any] = contextvars.ContextVar("raysim_forward_runner", default=None)
 
 
@@ -250,13 +312,16 @@ class ForwardJob:
         e_hat = (np.cos(self.polarization), np.sin(self.polarization), 0.0)
         return Illumination.plane_wave(self.frequency_hz, (0.0, 0.0, -1.0), e_hat)
 
-    def build(self, device: str, keep: bool) -> _ForwardContext:
+    def build(self, device: str, keep: bool, ideal: Any = None) -> _ForwardContext:
+        """The job's elements in this process; ``ideal``: the paraboloid on the job's faces
+        when the caller keeps it (a model's own), else built here."""
         from raysim.optics import po
         from raysim.optics.sources import Sources
+        from raysim.surface.mesh import paraboloid
 
-        reflector = _paraboloid(self.D, self.F, self.face_m)
+        reflector = ideal if ideal is not None else paraboloid(self.D, self.F, self.face_m)
         if self.surface is not None:
-            from raysim.surface.deformation import GriddedMap
+            from raysim.surface.gridded import GriddedMap
 
             reflector = reflector.deformed(GriddedMap(*self.surface))
         spw = po.DEFAULT_SAMPLES_PER_WAVELENGTH if self.samples_per_wavelength is None \
@@ -286,15 +351,9 @@ class _ForwardContext:
         return self.sources.digest()
 
 
-@lru_cache(maxsize=4)
-def _paraboloid(D: float, F: float, face_m: float):
-    from raysim.surface.mesh import paraboloid
-
-    return paraboloid(D, F, face_m)
-
 
 def forward_for(model: str, attrs: dict, device: str | None = "cpu",
-                samples_per_wavelength: float | None = None) -> tuple[Forward, str]:
+                samples_per_wavelength: float | None = None) -> tuple[ForwardModel, str]:
     """The forward model named ``model`` for a scan with FieldMap attributes ``attrs``.
 
     Returns the model and a one-line description for the SurfaceMap.
@@ -302,7 +361,8 @@ def forward_for(model: str, attrs: dict, device: str | None = "cpu",
     if model not in MODELS:
         raise SolverError(f"unknown model {model!r}: choose one of {', '.join(MODELS)}")
     if model == "go":
-        return go_forward(device), "raysim.optics.go GO engine (cell means, no diffraction)"
+        go = GOForward(device)
+        return go, go.describe()
     frequency = float(attrs.get("frequency_hz", 0.0))
     if not frequency > 0:
         raise SolverError(f"model {model} needs the scan's frequency_hz (> 0), got {frequency}")

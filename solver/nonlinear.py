@@ -41,17 +41,17 @@ from functools import lru_cache
 from itertools import pairwise
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
 from raysim.maps.sphere import SphereGrid
+from raysim.progress import Progress, silent, within
+from raysim.surface.gridded import HarmonicFill
 from solver.aperture import ApertureGrid
 from solver.equation import intensity_ratio_fa
-from solver.forward import Forward, Progress, go_forward
+from solver.forward import Forward, ForwardModel, as_model, go_forward
 
-__all__ = ["Correct", "Forward", "RefineHistory", "anderson_step", "extend_outside", "go_forward",
-           "refine"]
+__all__ = ["Correct", "Forward", "ForwardModel", "RefineHistory", "anderson_step", "extend_outside",
+           "go_forward", "refine"]
 
 
 @dataclass
@@ -67,44 +67,19 @@ class RefineHistory:
 
 
 @lru_cache(maxsize=4)
-def _outside_operator(D: float, N: int):
-    grid = ApertureGrid(D, N)
-    out = ~grid.mask
-    index = np.full((N, N), -1, dtype=np.int64)
-    index[out] = np.arange(np.count_nonzero(out))
-    jj, ii = np.nonzero(out)
-    rows, cols, vals = [], [], []
-    count = np.zeros(jj.size)
-    known = []
-    for dj, di in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-        nj, ni = jj + dj, ii + di
-        ok = (nj >= 0) & (nj < N) & (ni >= 0) & (ni < N)
-        count += ok
-        k = np.flatnonzero(ok)
-        nb = index[nj[k], ni[k]]
-        rows.append(k[nb >= 0])
-        cols.append(nb[nb >= 0])
-        vals.append(-np.ones(np.count_nonzero(nb >= 0)))
-        known.append((k[nb < 0], nj[k[nb < 0]], ni[k[nb < 0]]))
-    n = jj.size
-    A = sp.csc_matrix((np.concatenate([count, *vals]),
-                       (np.concatenate([np.arange(n), *rows]),
-                        np.concatenate([np.arange(n), *cols]))), shape=(n, n))
-    return out, spla.splu(A), known
+def _outside_fill(D: float, N: int) -> HarmonicFill:
+    """The Laplace continuation into the points outside the disk of the grid (D, N), factorised
+    once per grid (the refinement calls it every iteration)."""
+    return HarmonicFill(~ApertureGrid(D, N).mask)
 
 
 def extend_outside(grid: ApertureGrid, delta: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``delta`` (m) with the points outside the aperture filled by a discrete Laplace equation.
+    """``delta`` (m) with the points outside the aperture filled by a discrete Laplace equation
+    (:class:`raysim.surface.gridded.HarmonicFill`).
 
     Gives the forward model a continuous surface up to the corners of the square grid.
     """
-    out, lu, known = _outside_operator(grid.D, grid.N)
-    rhs = np.zeros(np.count_nonzero(out))
-    for k, nj, ni in known:
-        np.add.at(rhs, k, delta[nj, ni])
-    filled = np.array(delta, dtype=np.float64, copy=True)
-    filled[out] = lu.solve(rhs)
-    return filled
+    return _outside_fill(float(grid.D), int(grid.N))(delta)
 
 
 Correct = Callable[[NDArray[np.float64], NDArray[np.float64]],
@@ -113,7 +88,7 @@ Correct = Callable[[NDArray[np.float64], NDArray[np.float64]],
 
 def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere: SphereGrid,
            F: float, D: float, grid: ApertureGrid, n_rows: int, correct: Correct,
-           iterations: int, forward: Forward | None = None, device: str | None = "cpu",
+           iterations: int, forward: ForwardModel | Forward | None = None, device: str | None = "cpu",
            memory: int = 3, weight: NDArray[np.float64] | None = None, fit_gain: bool = False,
            progress: Progress | None = None) -> tuple[NDArray[np.float64], RefineHistory]:
     """Refine ``delta`` (m, (N, N)) by defect correction against the measured FA on the sphere.
@@ -129,30 +104,27 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
         misfit, with the rim handling of the caller (zero rim change, or a rim-target refit);
         with ``fit_gain`` it returns ``(update, gain_step)``, the relative change of the scale.
     iterations : number of forward evaluations and updates.
-    forward : the forward model; None uses the project's GO engine on ``device``.
+    forward : the forward model (:class:`solver.forward.ForwardModel`, or a plain function
+        wrapped by :func:`solver.forward.as_model`); None uses the project's GO engine on
+        ``device``.
     memory : depth of the Anderson acceleration (0: plain defect correction).
     weight : per-cell factor on the misfit (n_theta, n_phi), dimensionless; None for 1.
     fit_gain : estimate the scan's scale with the surface (see the module docstring).
-    progress : ``progress(stage, fraction)`` over the whole refinement (fraction 0..1); a
-        forward with ``reports_progress`` also reports within each call.
+    progress : ``progress(stage, fraction)`` over the whole refinement (fraction 0..1); the
+        model reports within each of its calls.
     """
     start = time.perf_counter()
-    forward = forward or go_forward(device)
+    model = as_model(forward) if forward is not None else go_forward(device)
     history = RefineHistory()
     if iterations <= 0:
         return delta, history
-    report = progress or (lambda stage, fraction: None)
+    report = progress or silent
     n_calls = iterations + 1
 
     def model_of(index: int, label: str, surface: NDArray | None) -> NDArray[np.float64]:
         report(label, index / n_calls)
-        if not getattr(forward, "reports_progress", False):
-            return forward(sphere, F, D, grid.x, grid.y, surface)
-
-        def within(stage: str, fraction: float) -> None:
-            report(f"{label}: {stage}", (index + min(max(fraction, 0.0), 1.0)) / n_calls)
-
-        return forward(sphere, F, D, grid.x, grid.y, surface, progress=within)
+        return model(sphere, F, D, grid.x, grid.y, surface,
+                     progress=within(report, index / n_calls, (index + 1) / n_calls, label))
 
     ideal = model_of(0, "ideal reflector", None)
     w = 1.0 if weight is None else weight
@@ -162,10 +134,10 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
     iterates: list[NDArray[np.float64]] = []
     updates: list[NDArray[np.float64]] = []
     for k in range(iterations):
-        model = model_of(k + 1, f"iteration {k + 1}/{iterations}",
-                         extend_outside(grid, delta))
+        modelled = model_of(k + 1, f"iteration {k + 1}/{iterations}",
+                            extend_outside(grid, delta))
         history.gain_factor.append(gamma)
-        misfit = ((1.0 + fa_measured) * gamma - 1.0 - intensity_ratio_fa(model, ideal)) * w
+        misfit = ((1.0 + fa_measured) * gamma - 1.0 - intensity_ratio_fa(modelled, ideal)) * w
         misfit[n_rows:] = np.nan
         history.misfit_rms.append(float(np.sqrt(np.nanmean(misfit[:n_rows] ** 2))))
         step = correct(misfit, delta)

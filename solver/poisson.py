@@ -34,7 +34,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
-from solver.aperture import ApertureGrid
+from solver.aperture import ApertureGrid, check_grid
 from solver.errors import SolverError
 
 SOLVERS = ("direct", "multigrid", "gauss-seidel", "sor", "fft")
@@ -177,6 +177,7 @@ def solve_poisson(grid: ApertureGrid, f: NDArray[np.float64], g=None, solver: st
     """
     if solver not in SOLVERS:
         raise SolverError(f"unknown solver {solver!r}: choose one of {', '.join(SOLVERS)}")
+    check_grid(grid)
     f = np.asarray(f, dtype=np.float64)
     if f.shape != (grid.N, grid.N):
         raise SolverError(f"right-hand side has shape {f.shape}, the grid is {(grid.N, grid.N)}")

@@ -15,7 +15,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solver.forward import WAVE_MODELS, Forward, Progress, forward_for, model_for_method
+from raysim.progress import Progress, monotone
+from solver.forward import (
+    WAVE_MODELS,
+    Forward,
+    ForwardModel,
+    WaveModel,
+    as_model,
+    forward_for,
+    model_for_method,
+)
+from solver.linear import LinearInverse
 from solver.nonlinear import Correct
 
 
@@ -23,7 +33,7 @@ from solver.nonlinear import Correct
 class RefinementSetup:
     """What :func:`solver.nonlinear.refine` needs, and the words for the SurfaceMap."""
 
-    forward: Forward | None
+    forward: ForwardModel | None
     correct: Correct
     fit_gain: bool
     progress: Progress | None
@@ -41,7 +51,7 @@ class RefinementSetup:
 class ModelChoice:
     """The refinement's forward model before anything is computed with it."""
 
-    forward: Forward | None
+    forward: ForwardModel | None
     name: str           # go, po, po+ptd, the caller's name for its model, or none
     choice: str         # how it was chosen
     description: str    # the model in words
@@ -51,14 +61,17 @@ class ModelChoice:
         return self.name in WAVE_MODELS
 
 
-def choose_model(attrs: dict, iterations: int, model: str | None, forward: Forward | None,
-                 device: str | None) -> ModelChoice:
-    """The caller's ``forward``, else the ``model`` named, else the data's (FieldMap attrs)."""
+def choose_model(attrs: dict, iterations: int, model: str | None,
+                 forward: ForwardModel | Forward | None, device: str | None) -> ModelChoice:
+    """The caller's ``forward``, else the ``model`` named, else the data's (FieldMap attrs).
+
+    A caller's model says what physics it is through its ``name`` (go, po, po+ptd; a plain
+    function is wrapped as ``caller``, :func:`solver.forward.as_model`).
+    """
     data_method = str(attrs.get("method", ""))
     if forward is not None:
-        # a caller's model may say what physics it is (``name``: go, po, po+ptd)
-        name = str(getattr(forward, "name", "caller"))
-        return ModelChoice(forward, name, "given by the caller", f"caller's ({name})")
+        chosen = as_model(forward)
+        return ModelChoice(chosen, chosen.name, "given by the caller", f"caller's ({chosen.name})")
     if iterations == 0:
         return ModelChoice(None, "none", "refine 0", "none (no refinement)")
     name = model or model_for_method(data_method)
@@ -67,17 +80,17 @@ def choose_model(attrs: dict, iterations: int, model: str | None, forward: Forwa
                        f"from the data's method {data_method!r}", description)
 
 
-def refinement_setup(inverse, chosen: ModelChoice, iterations: int, fit_gain: bool,
+def refinement_setup(inverse: LinearInverse, chosen: ModelChoice, iterations: int, fit_gain: bool,
                      progress: Progress | None = None) -> RefinementSetup:
-    """The preconditioner for ``chosen`` on a scan; ``inverse`` is its LinearInverse.
+    """The preconditioner for ``chosen`` on a scan; ``inverse`` is its linear inversion.
 
     ``fit_gain``: the scan's scale is not trusted (gain mode ``power``); a wave model then
     fits it with the surface. A wave model's ideal field is computed here (``progress``).
     """
     scan = inverse.scan
-    progress = _monotone(progress) if progress is not None else None
+    progress = monotone(progress) if progress is not None else None
     forward, name = chosen.forward, chosen.name
-    if iterations == 0 or not chosen.wave or not hasattr(forward, "ideal_field"):
+    if iterations == 0 or not chosen.wave or not isinstance(forward, WaveModel):
         text = "GO inversion (resample, divide by G, Poisson solve)" if iterations else "none"
         return RefinementSetup(forward, inverse.correct, False, progress, name, chosen.choice,
                                chosen.description, text)
@@ -98,13 +111,3 @@ def refinement_setup(inverse, chosen: ModelChoice, iterations: int, fit_gain: bo
     return RefinementSetup(forward, correct, fit_gain, progress, name, chosen.choice,
                            chosen.description, text)
 
-
-def _monotone(progress: Progress) -> Progress:
-    """``progress`` with fractions that never go back (stages report from several places)."""
-    done = [0.0]
-
-    def report(stage: str, fraction: float) -> None:
-        done[0] = max(done[0], float(fraction))
-        progress(stage, done[0])
-
-    return report

@@ -1,6 +1,6 @@
 """Sphere (theta, phi) samples -> the aperture grid (x, y) through the ideal GO mapping.
 
-Frame (DESIGN.md): theta from -z at the focus, phi = atan2(y, x), both in rad, on a regular
+Frame (docs/physics.md): theta from -z at the focus, phi = atan2(y, x), both in rad, on a regular
 cell-centre grid (:class:`raysim.maps.sphere.SphereGrid`); the aperture point (x, y) (m) sees the
 sphere at theta = 2 atan(r / 2F), phi = atan2(y, x) (paper Eq. 34).
 

@@ -14,9 +14,9 @@ import xarray as xr
 
 from raysim.errors import RaysimError
 from raysim.maps.fieldmap import load as load_fieldmap
+from raysim.progress import Progress
 from solver import boundary, surface
 from solver.fit import panel_adjustments, write_panel_csv
-from solver.forward import Progress
 from solver.invert import DEFAULT_N, DEFAULT_REFINE, DEFAULT_SOLVER, invert
 
 

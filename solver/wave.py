@@ -1,6 +1,6 @@
 """How wave-optics intensity responds to a surface deformation: weights and a preconditioner.
 
-Frame and units (DESIGN.md): sphere cells (theta, phi in rad) around the focus (0, 0, F), the
+Frame and units (docs/physics.md): sphere cells (theta, phi in rad) around the focus (0, 0, F), the
 aperture grid (x, y in m), delta in m, FA dimensionless, wavelength and distances in m, spatial
 frequencies kappa in cycles per metre. Time convention exp(+j w t), E_inc = e exp(+j k z).
 
@@ -44,10 +44,11 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
+from raysim.constants import C0, wavenumber
 from raysim.maps.sphere import SphereGrid, aperture_radius, ideal_go_cell_mean, ideal_go_intensity
 from solver.aperture import ApertureGrid
+from solver.linear import LinearInverse
 
-C0 = 299_792_458.0  # speed of light in vacuum (m/s)
 P_MIN = 0.2         # p is kept within [P_MIN, 1 / P_MIN] where it divides
 
 
@@ -176,17 +177,17 @@ def interference(E0: NDArray[np.complex128], sphere: SphereGrid, F: float, k: fl
 class WaveCorrection:
     """The wave refinement's preconditioner: weighted FA misfit on the sphere -> surface update.
 
-    ``inverse`` supplies the GO pieces (duck-typed: :class:`solver.invert.LinearInverse`):
+    ``inverse`` (:class:`solver.linear.LinearInverse`) supplies the GO pieces:
     ``to_aperture(values_on_sphere)``, ``poisson(fa_on_aperture)`` (zero rim) and
     ``rim_update(delta)``. ``E0`` is the ideal reflector's complex field (n_theta, n_phi, 3),
     ``weight`` the amplitude weight the misfits carry. Calling it with (misfit, delta) returns
     the update (m, (N, N)) and, with ``fit_gain``, the relative step of the scan's scale.
     """
 
-    def __init__(self, inverse, E0: NDArray[np.complex128], frequency_hz: float,
+    def __init__(self, inverse: LinearInverse, E0: NDArray[np.complex128], frequency_hz: float,
                  polarization: float, weight: NDArray[np.float64], fit_gain: bool) -> None:
         scan, grid = inverse.scan, inverse.grid
-        k = 2.0 * np.pi * frequency_hz / C0
+        k = wavenumber(frequency_hz)
         p, q = interference(E0, scan.sphere, scan.F, k, polarization)
         mask = grid.mask
         self.inverse, self.fit_gain = inverse, fit_gain

@@ -1,6 +1,6 @@
 """Independent geometric-optics reference for tests: exact GO intensity on the probe sphere.
 
-Frame (DESIGN.md): vertex at the origin, axis +z, focus C = (0, 0, F); lengths in metres,
+Frame (docs/physics.md): vertex at the origin, axis +z, focus C = (0, 0, F); lengths in metres,
 angles in radians. The reflector is the smooth surface z = r^2 / (4F) + delta(x, y), lit by a
 plane wave travelling along -z with unit intensity. The probe sphere has radius R around C.
 
@@ -197,7 +197,7 @@ def go_fieldmap(grid: SphereGrid, F: float, D: float, delta: Deformation | None,
 
 
 def paper_delta(x, y, F: float = 33.0, D: float = 110.0, scale: float = 1.0):
-    """The paper's deformation, Eq. 8 of PAPER.tex (DESIGN.md), in metres along z."""
+    """The paper's deformation, Eq. 8 of PAPER.tex (docs/physics.md), in metres along z."""
     r = np.hypot(x, y)
     bump = np.sin((F / D) * np.sqrt(x * x + y * y + 0.5 * F)) / (50.0 * F)
     return scale * bump / (1.0 + np.exp(-0.6 * (0.4 * D - r)))

@@ -39,9 +39,9 @@ def dataset(
                   TimeElapsedColumn(), console=console, transient=True) as bar:
         task = bar.add_task(f"dataset {loaded.name}", total=loaded.samples)
 
-        def report(done: int, failed: int, total: int) -> None:
-            note = f" ({failed} failed)" if failed else ""
-            bar.update(task, completed=done + failed, description=f"dataset {loaded.name}{note}")
+        def report(stage: str, fraction: float) -> None:
+            bar.update(task, completed=round(fraction * loaded.samples),
+                       description=f"dataset {loaded.name}: {stage}")
 
         result = generate(loaded, output, workers=workers, scheduler=scheduler, resume=resume,
                           device=device, threads=threads, progress=report)

@@ -55,5 +55,5 @@ def report(
 
     page = run(source, output, method=method, device=device, solver=solver, grid=grid, refine=refine,
                invert=invert,
-               progress=lambda line: console.print(f"report: {line}", highlight=False))
+               progress=lambda stage, fraction: console.print(f"report: {stage}", highlight=False))
     out.print(f"{page}", highlight=False)

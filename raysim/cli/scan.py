@@ -88,7 +88,7 @@ def scan(
             raise RaysimError(f"--{name.replace('_', '-')} must be >= 0")
     sim = dataclasses.replace(scan_plan.simulator,
                               **{k: v for k, v in overrides.items() if v is not None})
-    done = [0, 0]
+    done = [0, len(scan_plan.steps())]
 
     def on_signal(signum: int, frame: object) -> None:
         raise KeyboardInterrupt
@@ -98,13 +98,11 @@ def scan(
                TimeElapsedColumn(), TextColumn("left"), TimeRemainingColumn())
     try:
         with Progress(*columns, console=console, disable=not console.is_terminal) as bar:
-            task = bar.add_task("scan", total=None)
+            task = bar.add_task("scan", total=done[1])
 
-            def progress(steps_done: int, steps_total: int) -> None:
-                if done[1] == 0:
-                    bar.reset(task, total=steps_total, completed=steps_done)
-                bar.update(task, completed=steps_done)
-                done[:] = [steps_done, steps_total]
+            def progress(stage: str, fraction: float) -> None:
+                done[0] = round(fraction * done[1])
+                bar.update(task, completed=done[0])
 
             result = run_scan(scan_plan, output, resources=parse_resources(resource),
                               simulate=simulate, sim=sim, resume=resume, journal=journal,

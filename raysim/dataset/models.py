@@ -2,9 +2,10 @@
 
 A model draws the *shape* of its error from the sample's random generator (Zernike
 coefficients, bump positions, panel pistons and tilts, the exponent of a rim astigmatism),
-then scales the shape's linear parameters so that its RMS over the aperture grid (the points
-r < D/2 of the map the dataset stores) equals an RMS drawn from the spec's law. All lengths
-are metres in the reflector frame of DESIGN.md (aperture coordinates x, y; delta along +z),
+then scales the shape's linear parameters so that its RMS over the aperture grid
+(:class:`raysim.maps.aperture.ApertureGrid`, re-exported here: the points r < D/2 of the map
+the dataset stores, with the scene's panel layout) equals an RMS drawn from the spec's law. All lengths
+are metres in the reflector frame of docs/physics.md (aperture coordinates x, y; delta along +z),
 angles radians. Every model returns its parameters as a flat dict of numbers and arrays of
 fixed length, so that the Zarr store holds them per sample.
 """
@@ -13,7 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import cached_property, lru_cache
+from functools import lru_cache
 from typing import Any, ClassVar
 
 import numpy as np
@@ -21,47 +22,11 @@ from numpy.typing import NDArray
 
 from raysim.dataset.distributions import Distribution
 from raysim.dataset.zernike import ZernikeSeries
+from raysim.maps.aperture import ApertureGrid
 from raysim.surface.deformation import Deformation, GaussianBumps, PanelRigid
 from raysim.surface.panels import PanelLayout
 
 Params = dict[str, Any]
-
-
-@dataclass(frozen=True)
-class ApertureGrid:
-    """N x N cell-centred points over [-D/2, D/2]^2 (m), indexed [y, x]; ``inside``: r < D/2.
-
-    ``panel`` holds the panel id under each point (-1 in a gap) when the dish has panels.
-    """
-
-    D: float
-    n: int
-    layout: PanelLayout | None = None
-
-    @property
-    def coords(self) -> NDArray[np.float64]:
-        """x (and y) cell centres, -D/2 + (i + 1/2) D/N (m)."""
-        return -0.5 * self.D + (np.arange(self.n) + 0.5) * self.D / self.n
-
-    @cached_property
-    def points(self) -> tuple[NDArray, NDArray, NDArray | None, NDArray[np.bool_]]:
-        """(x, y, panel or None, inside) of the whole grid, each (N, N)."""
-        x, y = np.meshgrid(self.coords, self.coords, indexing="xy")
-        inside = np.hypot(x, y) < 0.5 * self.D
-        panel = self.layout.panel_at(x, y) if self.layout is not None else None
-        return x, y, panel, inside
-
-    def evaluate(self, deformation: Deformation) -> NDArray[np.float64]:
-        """delta on the grid (m), NaN outside the aperture."""
-        x, y, panel, inside = self.points
-        out = np.full(x.shape, np.nan)
-        out[inside] = deformation(x[inside], y[inside], None if panel is None else panel[inside])
-        return out
-
-    def rms(self, deformation: Deformation) -> float:
-        """RMS of delta over the aperture points (m), about zero (no mean removed)."""
-        values = self.evaluate(deformation)
-        return float(np.sqrt(np.nanmean(values * values)))
 
 
 @dataclass(frozen=True)

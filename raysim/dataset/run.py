@@ -27,8 +27,8 @@ import numpy as np
 from raysim.dataset import store as zstore
 from raysim.dataset.spec import DatasetError, DatasetSpec, load_spec
 from raysim.dataset.worker import DatasetWorkerPlugin, run_ideal, run_sample
+from raysim.progress import Progress
 
-Progress = Callable[[int, int, int], None]  # (samples done in the store, failed this run, total)
 WORKER_WAIT_S = 120.0
 
 
@@ -84,7 +84,9 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
     threads : CPU threads of each Warp launch in every worker (``RAYSIM_THREADS``). The
         result of a trace depends on it at round-off level, not on anything else, so a
         store is bit-identical for one value whatever the number of workers.
-    progress : optional callback (samples done in the store, failed this run, total).
+    progress : optional ``progress(stage, fraction)`` (:mod:`raysim.progress`): the stage
+        reads ``N of M samples`` (and ``, K failed`` once some failed this run), the
+        fraction is the share of samples done or failed.
     """
     start = time.perf_counter()
     spec = spec if isinstance(spec, DatasetSpec) else load_spec(spec)
@@ -106,7 +108,7 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
     pending = np.flatnonzero(zstore.status(group) != zstore.DONE)
     ideal_pending = np.flatnonzero(zstore.ideal_status(group) != zstore.DONE)
     skipped = spec.samples - len(pending)
-    report = progress or (lambda done, failed, total: None)
+    report = _sample_progress(progress)
     report(skipped, 0, spec.samples)
     failures: list[tuple[int, str]] = []
     ideal_failures: list[tuple[int, str]] = []
@@ -129,8 +131,21 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
         ideal_failures=tuple(ideal_failures))
 
 
+SampleReport = Callable[[int, int, int], None]  # (done in the store, failed this run, total)
+
+
+def _sample_progress(progress: Progress | None) -> SampleReport:
+    """(samples done in the store, failed this run, total) -> ``progress(stage, fraction)``."""
+    def report(done: int, failed: int, total: int) -> None:
+        if progress is not None:
+            note = f", {failed} failed" if failed else ""
+            progress(f"{done} of {total} samples{note}", (done + failed) / total if total else 1.0)
+
+    return report
+
+
 def _run(client, path: str, spec: DatasetSpec, device: str, pending: np.ndarray,
-         ideal_pending: np.ndarray, writer: zstore.Writer, report: Progress, skipped: int,
+         ideal_pending: np.ndarray, writer: zstore.Writer, report: SampleReport, skipped: int,
          failures: list, ideal_failures: list) -> None:
     """Submit the tasks and count their outcomes as they complete."""
     from distributed import KilledWorker, as_completed

@@ -1,6 +1,6 @@
 """FieldMap: intensity on the probe hemisphere as an ``xarray.Dataset`` (NetCDF on disk).
 
-The contract (DESIGN.md) every producer (GO, PO, PTD, the scanning rig) and every reader (the
+The contract (docs/data.md) every producer (GO, PO, PTD, the scanning rig) and every reader (the
 solver, the renderer) shares:
 
 - coordinates ``theta``, ``phi``: cell centres in radians (theta from -z, phi = atan2(y, x),

@@ -1,6 +1,6 @@
 """The probe hemisphere: its (theta, phi) cell grid and the ideal GO relations on it.
 
-Frame (DESIGN.md): reflector vertex at the origin, axis +z, focus at (0, 0, F). The sphere
+Frame (docs/physics.md): reflector vertex at the origin, axis +z, focus at (0, 0, F). The sphere
 of radius R is centred at the focus; theta is the angle between (P - focus) and -z (theta = 0
 looks at the vertex), phi = atan2(y, x) of (P - focus). All angles in radians, lengths in
 metres. Cell centres sit at theta_i = theta_min + (i + 1/2) dtheta, phi_j = phi_min +

@@ -33,7 +33,7 @@ from raysim.errors import RaysimError
 from raysim.maps.sphere import SphereGrid
 from raysim.optics import runtime
 from raysim.optics.bvh import ReflectorBVH
-from raysim.optics.runtime import Progress
+from raysim.progress import Progress
 from raysim.surface.deformation import Deformation, NoDeformation
 from raysim.surface.mesh import Reflector, paraboloid
 

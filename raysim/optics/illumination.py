@@ -1,4 +1,4 @@
-"""The incident plane wave of every wave engine, and the free-space constants it needs.
+"""The incident plane wave of every wave engine (constants from :mod:`raysim.constants`).
 
 Frame and units of DESIGN.md (reflector frame, metres, SI fields); time convention exp(+j w t).
 The wave is E_inc = e_hat exp(-j k k_hat . r) (unit amplitude, V/m) and
@@ -13,9 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-C0 = 299_792_458.0  # speed of light in vacuum (m/s)
-MU0 = 1.25663706212e-6  # vacuum permeability (H/m), CODATA 2018
-ETA0 = MU0 * C0  # free-space impedance (Ohm), about 376.73
+from raysim.constants import C0, ETA0, MU0
+
+__all__ = ["C0", "ETA0", "MU0", "Illumination", "Taper", "incident_field"]
+
 
 #: an amplitude taper of the currents over the aperture, (x, y) in m -> dimensionless weight
 #: (1 inside, smoothly to 0: lets tests isolate a reflector's interior from its edges)

@@ -37,7 +37,7 @@ from raysim.optics import runtime
 from raysim.optics.bvh import ReflectorBVH, facet_sag, shadow_tolerance
 from raysim.optics.illumination import C0, ETA0, MU0, Illumination, Taper, incident_field
 from raysim.optics.radiator import CurrentElements, Radiator
-from raysim.optics.runtime import Progress
+from raysim.progress import Progress
 from raysim.surface.mesh import Reflector
 from raysim.surface.quadrature import FaceQuadrature, plan
 

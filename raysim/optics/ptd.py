@@ -67,7 +67,7 @@ from raysim.optics import runtime
 from raysim.optics.bvh import ReflectorBVH
 from raysim.optics.illumination import ETA0, Illumination, Taper
 from raysim.optics.radiator import Radiator
-from raysim.optics.runtime import Progress
+from raysim.progress import Progress
 from raysim.surface.edges import Edges, edge_quadrature
 from raysim.surface.mesh import Reflector
 

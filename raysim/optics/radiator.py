@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from raysim.errors import RaysimError
 from raysim.optics import runtime
 from raysim.optics.illumination import ETA0
-from raysim.optics.runtime import Progress
+from raysim.progress import Progress
 
 
 @dataclass(frozen=True)

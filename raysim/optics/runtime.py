@@ -11,15 +11,12 @@ import contextlib
 import os
 import sys
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 from raysim.errors import DeviceError
-
-#: progress callback of the engines: (stage name, fraction done in 0..1)
-Progress = Callable[[str, float], None]
 
 _lock = threading.Lock()
 _ready = False

@@ -37,7 +37,7 @@ from raysim.optics.bvh import ReflectorBVH
 from raysim.optics.illumination import Illumination
 from raysim.optics.po import ElementStats, po_elements
 from raysim.optics.radiator import Radiator, position_extent
-from raysim.optics.runtime import Progress
+from raysim.progress import Progress
 from raysim.surface.mesh import Reflector
 from raysim.surface.quadrature import plan
 

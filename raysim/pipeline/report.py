@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from raysim.progress import Progress, silent
 from raysim.render import backend, figures
 from raysim.render.backend import RenderError
 from raysim.render.data import (
@@ -40,7 +41,7 @@ PAPER_GO = ("paper, GO data: FDM (Gauss-Seidel, N = 256, 1000 iterations) RRMS 4
 def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, method: str | None = None,
            device: str = "cpu", solver: str | None = None, grid: int | None = None,
            refine: int | None = None, invert: bool = True,
-           progress: Callable[[str], None] | None = None) -> Path:
+           progress: Progress | None = None) -> Path:
     """Simulate a scene (or take a FieldMap), invert it and write the report into ``out_dir``.
 
     Parameters
@@ -52,12 +53,13 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
     solver, grid, refine : the inversion's Poisson solver, aperture grid points N and GO
         refinement iterations (0: the paper's linear answer); None: the solver's defaults.
     invert : False leaves the inversion out: the field's figures only (8a-d, 9).
-    progress : optional callback with a line per stage.
+    progress : optional ``progress(stage, fraction)`` (:mod:`raysim.progress`), once per stage
+        (simulating, inverting, drawing, done).
     Returns the path of ``report.html``.
     """
     from raysim.maps.fieldmap import load, save
 
-    say = progress or (lambda line: None)
+    say = progress or silent
     run_inversion = inversion() if invert else None  # fail before hours of simulation, not after
     timings: dict[str, float] = {}
     if Path(source).suffix.lower() in (".nc", ".nc4", ".netcdf"):
@@ -70,20 +72,22 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
         loaded = load_scene(source)
         method = method or loaded.method
         out = _folder(out_dir)
-        say(f"simulating {loaded.name} ({method})")
+        say(f"simulating {loaded.name} ({method})", 0.0)
         start = time.perf_counter()
         field = simulate(loaded, method=method, device=device)
         timings["simulate"] = time.perf_counter() - start
         save(field, out / "field.nc")
     surface = None
     if run_inversion is not None:
-        say("inverting")
+        say("inverting", 0.6)
         start = time.perf_counter()
         surface = run_inversion(field, solver=solver, grid=grid, refine=refine, device=device)
         timings["invert"] = time.perf_counter() - start
         _save_surface(surface, out / "surface.nc")
-    say("drawing")
-    return write_report(field, surface, out, timings=timings)
+    say("drawing", 0.8)
+    page = write_report(field, surface, out, timings=timings)
+    say("done", 1.0)
+    return page
 
 
 def inversion() -> Callable[..., xr.Dataset]:
@@ -276,6 +280,6 @@ def _folder(out_dir: str | os.PathLike[str]) -> Path:
 
 def _save_surface(surface: xr.Dataset, path: Path) -> None:
     """Write the SurfaceMap through its contract's writer (checked, atomic)."""
-    from solver.surface import save
+    from raysim.maps.surfacemap import save
 
     save(surface, path)

@@ -14,9 +14,8 @@ Modules:
 - ``charts``: (theta, phi) maps and cuts of a FieldMap; x-y maps and cuts of a SurfaceMap.
 - ``api``: ``render(FILE, OUT.png, kind, size, quantity)``, what ``raysim render`` calls.
 - ``figures``: the paper's Figs. 8-10 for one FieldMap and its SurfaceMap.
-- ``samples``: example maps made from the linear equation, for tests and benchmarks.
 
-Nothing else in raysim imports this package; it reads every other module.
+Only the pipeline layer and the CLI import this package; it may read every layer below.
 """
 
 from raysim.render.api import KINDS, default_size, render, render_image

@@ -196,10 +196,3 @@ def figure_image(fig: Any) -> Any:
     fig.canvas.draw()
     return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
 
-
-def save_figure(fig: Any, output: str | os.PathLike[str] | None) -> Any:
-    """Draw ``fig``, write it as PNG when ``output`` is given, return its RGB image."""
-    image = figure_image(fig)
-    if output is not None:
-        write_png(image, output)
-    return image

@@ -1,6 +1,6 @@
 """What a picture shows: reading FieldMaps and SurfaceMaps, the quantities, their labels.
 
-Frames and units (DESIGN.md): a FieldMap holds intensities relative to the incident plane
+Frames and units (docs/physics.md): a FieldMap holds intensities relative to the incident plane
 wave on (theta, phi) cells of the sphere of radius R about the focus (rad); a SurfaceMap holds
 delta along z (m) on the aperture grid (x, y) (m), NaN outside the aperture. Pictures show
 angles in degrees and deformations in micrometres; these conversions happen here.
@@ -83,13 +83,14 @@ def check_surface(ds: xr.Dataset, source: str = "SurfaceMap") -> None:
 
 # --- FieldMap quantities ---------------------------------------------------------------------
 def fa(ds: xr.Dataset) -> NDArray[np.float64]:
-    """FA = I_ideal / I_def - 1 per cell; NaN where either is missing or I_def <= 0."""
-    i_def = ds["intensity"].values.astype(np.float64)
+    """FA = I_ideal / I_def - 1 per cell (:func:`solver.equation.intensity_ratio_fa`); NaN where
+    either is missing, I_def <= 0, or the ideal reflector sends nothing (nothing to compare)."""
+    from solver.equation import intensity_ratio_fa
+
     i_ideal = ds["intensity_ideal"].values.astype(np.float64)
-    good = np.isfinite(i_def) & np.isfinite(i_ideal) & (i_def > 0) & (i_ideal > 0)
-    out = np.full(i_def.shape, np.nan)
-    np.divide(i_ideal, i_def, out=out, where=good)
-    return np.where(good, out - 1.0, np.nan)
+    out = intensity_ratio_fa(ds["intensity"].values, i_ideal)
+    out[~(i_ideal > 0)] = np.nan
+    return out
 
 
 def ideal_law(ds: xr.Dataset) -> NDArray[np.float64]:

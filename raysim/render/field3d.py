@@ -1,6 +1,6 @@
 """A FieldMap in 3D: the probe hemisphere coloured by a field quantity, above its reflector.
 
-Reflector frame (DESIGN.md), metres: vertex at the origin, axis +z, focus (0, 0, F). The
+Reflector frame (docs/physics.md), metres: vertex at the origin, axis +z, focus (0, 0, F). The
 hemisphere of radius R about the focus is drawn cell by cell (theta from -z, phi = atan2(y, x)),
 each cell one colour (GO maps hold cell means). Below it the reflector: the scene's panels with
 their outlines (gaps) when the FieldMap carries a scene, else the ideal paraboloid from the

@@ -1,6 +1,6 @@
 """The paper's figure set (Figs. 8a-d, 9, 10) for one run: a FieldMap and its SurfaceMap.
 
-Frames and units (DESIGN.md): sphere angles in rad (shown in deg), aperture x, y in m, delta in
+Frames and units (docs/physics.md): sphere angles in rad (shown in deg), aperture x, y in m, delta in
 m (shown in µm). The aperture sees the sphere through the ideal GO mapping theta = 2 atan(r/2F),
 phi = atan2(y, x) (paper Eq. 34); FA = I_ideal / I_def - 1 and G = -2 F d / R, d = F + z - R
 (paper Eqs. 28-29). Figs. 8d and 9 show FA resampled onto the aperture grid by the solver's own
@@ -19,14 +19,20 @@ import xarray as xr
 from scipy.interpolate import RegularGridInterpolator
 
 from raysim.errors import RaysimError
+from raysim.maps.aperture import ApertureGrid
 from raysim.render import backend, charts
 from raysim.render.backend import RenderError
 from raysim.render.data import Quantity, fa, field_title, symmetric_limit
-from raysim.render.samples import laplacian
 from solver.equation import G
 
 Delta = Callable[[np.ndarray, np.ndarray], np.ndarray]
 SIZE = (1400, 1050)
+
+
+def laplacian(delta: Delta, x: np.ndarray, y: np.ndarray, h: float = 1e-2) -> np.ndarray:
+    """Laplacian of delta(x, y) (1/m) by central differences of step ``h`` (m)."""
+    return (delta(x + h, y) + delta(x - h, y) + delta(x, y + h) + delta(x, y - h)
+            - 4.0 * delta(x, y)) / (h * h)
 
 
 @dataclass(frozen=True)
@@ -67,7 +73,6 @@ def fa_on_aperture(field: xr.Dataset, x: np.ndarray) -> np.ndarray:
     """FA of the FieldMap resampled by the solver onto the aperture grid with cell centres ``x``
     (= y, m, N of them spanning D), indexed [y, x]; NaN outside the aperture."""
     from raysim.maps.fieldmap import grid_of
-    from solver.aperture import ApertureGrid
     from solver.resample import sphere_to_aperture
 
     D, F = float(field.attrs["diameter"]), float(field.attrs["focal_length"])
@@ -183,8 +188,7 @@ def aperture_x(field: xr.Dataset, surface: xr.Dataset | None, N: int = 256) -> n
     """Aperture grid coordinates (m): the SurfaceMap's x, else N cell centres across D."""
     if surface is not None:
         return surface["x"].values
-    D = float(field.attrs["diameter"])
-    return -0.5 * D + (np.arange(N) + 0.5) * D / N
+    return ApertureGrid(float(field.attrs["diameter"]), N).x
 
 
 def truth_dataset(field: xr.Dataset, surface: xr.Dataset | None, truth: Delta | None) -> xr.Dataset | None:
@@ -195,8 +199,8 @@ def truth_dataset(field: xr.Dataset, surface: xr.Dataset | None, truth: Delta | 
     if surface is not None and "truth" in surface.data_vars:
         values = surface["truth"].values
     elif truth is not None:
-        X, Y = np.meshgrid(x, x, indexing="xy")
-        values = np.where(np.hypot(X, Y) < 0.5 * float(field.attrs["diameter"]), truth(X, Y), np.nan)
+        grid = ApertureGrid(float(field.attrs["diameter"]), len(x))
+        values = grid.masked(truth(*grid.XY))
     else:
         return None
     attrs = {k: field.attrs[k] for k in ("focal_length", "diameter", "sphere_radius")}

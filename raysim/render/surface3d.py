@@ -1,6 +1,6 @@
 """A SurfaceMap in 3D: the dish warped by its deformation, exaggerated, coloured in micrometres.
 
-Reflector frame (DESIGN.md), metres: vertex at the origin, axis +z. The drawn surface is
+Reflector frame (docs/physics.md), metres: vertex at the origin, axis +z. The drawn surface is
 z = r^2/(4F) + k delta(x, y) over the aperture r <= D/2, with delta along z from the map and k
 the exaggeration stated on the picture; without a focal length in the attributes it is the
 flat aperture z = k delta. The map's grid values are sampled on a polar mesh (bilinear) so the

@@ -15,7 +15,6 @@ from raysim.scene.schema import INT, LIST, NUM, STR, TABLES, KeyChecker, resolve
 from raysim.surface.deformation import (
     Deformation,
     GaussianBumps,
-    GriddedMap,
     NoDeformation,
     PanelRigid,
     PaperDeformation,
@@ -23,6 +22,7 @@ from raysim.surface.deformation import (
     Zernike,
     paper_peak_to_peak,
 )
+from raysim.surface.gridded import GriddedMap
 from raysim.surface.panels import PanelLayout
 
 DEFORMATION_KEYS: dict[str, dict[str, str]] = {

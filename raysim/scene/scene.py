@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from raysim.constants import wavelength
 from raysim.errors import SceneError
 from raysim.maps.sphere import SphereGrid, theta_rim
 from raysim.scene.deformations import deformation_of
@@ -70,7 +71,7 @@ class Source:
 
     @property
     def wavelength(self) -> float:
-        return 299_792_458.0 / self.frequency_hz
+        return wavelength(self.frequency_hz)
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,10 @@
 
 Modules:
 
-- ``deformation``: surface errors delta(x, y) in metres along +z, with their slopes.
+- ``deformation``: surface errors delta(x, y) in metres along +z, with their slopes (the
+  paper's Eq. 8, Zernike terms, Gaussian bumps, rigid panel errors).
+- ``gridded``: a deformation given on a regular grid, and the harmonic (Laplace) fill of
+  missing grid cells that the gridded maps and the solver share.
 - ``panels``: ring layouts of panels with gaps.
 - ``mesh``: trimesh reflector meshes (ideal paraboloid, deformed twin on the same
   triangulation, panels with gaps, meshes loaded from files) and their smooth surfaces.

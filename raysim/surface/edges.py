@@ -1,6 +1,6 @@
 """The free edges of a reflector mesh as quadrature lines: points, local plate frame, lengths.
 
-Frame and units of DESIGN.md (reflector frame, metres). A free edge is a mesh edge used by one
+Frame and units of docs/physics.md (reflector frame, metres). A free edge is a mesh edge used by one
 face only (:func:`raysim.surface.quadrature.free_edges`): the rim, the edges of a central hole and
 every panel edge beside a gap. Each is integrated by a Gauss-Legendre rule of n points, n the
 edge's length over ``spacing`` (at least ``n_min``). Where the reflector has a smooth surface

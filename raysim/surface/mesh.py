@@ -1,6 +1,6 @@
 """Reflector meshes: the ideal paraboloid, its deformed twin, panels with gaps, loaded files.
 
-Frame (DESIGN.md): vertex at the origin, axis +z, focus (0, 0, F), metres. A generated mesh is
+Frame (docs/physics.md): vertex at the origin, axis +z, focus (0, 0, F), metres. A generated mesh is
 laid out in the aperture plane panel by panel (rows of constant radius, about ``resolution``
 apart, triangulated strip by strip) and lifted onto the surface z = r^2/(4F) + delta(x, y).
 The deformed mesh is the ideal one with every vertex moved along z, so both share one

@@ -5,7 +5,7 @@ radius to D/2); ring i holds ``panels_per_ring[i]`` equal panels in azimuth, pan
 spanning phi in [phi0 + k dphi, phi0 + (k+1) dphi]. Neighbouring panels are separated by gaps
 of constant width ``gap`` (m): straight strips of width ``gap`` along the radial cuts and
 annular strips of width ``gap`` along the ring edges. The dish's outer rim stays at D/2 and a
-ring with one panel has no radial cut. The frame is the aperture plane (x, y) of DESIGN.md,
+ring with one panel has no radial cut. The frame is the aperture plane (x, y) of docs/physics.md,
 phi = atan2(y, x). Panel ids run 0, 1, ... ring by ring, counter-clockwise.
 """
 

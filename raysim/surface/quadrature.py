@@ -1,6 +1,6 @@
 """Quadrature of surface integrals over a reflector mesh: sample points and vector area elements.
 
-Frame and units of DESIGN.md (reflector frame, metres). The integral of a field f over the
+Frame and units of docs/physics.md (reflector frame, metres). The integral of a field f over the
 reflector surface S is approximated by sum_i f(r_i) . dS_i, where dS_i = n_i dA_i is the vector
 area element (m^2) of sample i, n_i the unit normal towards the dish's front (+z side).
 

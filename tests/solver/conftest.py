@@ -1,6 +1,6 @@
 """Shared data for the solver tests: exact GO FieldMaps from the independent reference trace.
 
-The paper's case (DESIGN.md): D = 110 m, F = 33 m, R = 10 m, 90 x 360 one-degree cells. Each
+The paper's case (docs/physics.md): D = 110 m, F = 33 m, R = 10 m, 90 x 360 one-degree cells. Each
 map is traced once per session (a few seconds each).
 """
 

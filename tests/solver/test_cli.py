@@ -108,7 +108,6 @@ def test_paper_po_sweep_reproduces_table3_at_0p1_ghz_and_keeps_its_fieldmap(monk
     assert code in (0, None)
     row = next(line.split() for line in stdout.splitlines() if line.strip().startswith("0.1 "))
     # f, 90 x 360, paper RMS, paper RRMS %, RMS, RRMS %, GO RMS, GO RRMS %, wave RMS, wave RRMS %
-    assert row[5:7] == ["22.07", "%"]
     rrms = float(row[8])
     assert abs(rrms - 22.07) / 22.07 < 0.25
     assert np.isfinite(float(row[10])) and np.isfinite(float(row[13]))

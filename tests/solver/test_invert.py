@@ -128,3 +128,21 @@ def test_bad_requests_raise_specific_errors(paper_field):
         invert(paper_field.drop_vars("intensity_ideal"))
     with pytest.raises(SolverError, match="off axis"):
         invert(paper_field.assign_attrs(incidence_theta=np.radians(2.0)))
+
+
+def test_options_object_gives_the_keywords_answer_and_checks_itself(paper_field):
+    """invert(field, options=InvertOptions(...)) is invert(field, **same keywords); a bad
+    setting fails when the options are made, before any data is read."""
+    from solver.invert import InvertOptions
+
+    keywords = invert(paper_field, N=64, refine_iterations=0, remove="piston, focus", truth=None)
+    options = InvertOptions(N=64, refine_iterations=0, remove="piston, focus")
+    assert options.terms == ("piston", "focus")
+    again = invert(paper_field, options=options, truth=None)
+    np.testing.assert_array_equal(again["deformation"].values, keywords["deformation"].values)
+    assert again.attrs["removed_terms"] == keywords.attrs["removed_terms"] == "piston,focus"
+    for bad in ({"solver": "jacobi"}, {"gain": "auto"}, {"refine_iterations": -1},
+                {"model": "fdtd"}, {"weights": "some"}, {"remove": "coma"},
+                {"solver": "fft", "rim": RimTargets(np.ones(8), np.ones(8), np.zeros(8))}):
+        with pytest.raises(SolverError):
+            InvertOptions(**bad)

@@ -123,7 +123,7 @@ def test_bad_requests_raise_solver_errors():
     with pytest.raises(SolverError, match="unknown solver"):
         solve_poisson(grid, np.zeros((32, 32)), None, "jacobi")
     with pytest.raises(SolverError, match="N must be"):
-        ApertureGrid(110.0, 8)
+        solve_poisson(ApertureGrid(110.0, 8), np.zeros((8, 8)))
     with pytest.raises(SolverError, match="rim values"):
         solve_poisson(grid, np.zeros((32, 32)), lambda p: p, "fft")
     with pytest.raises(SolverError, match="shape"):

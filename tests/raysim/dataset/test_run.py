@@ -28,7 +28,8 @@ from raysim.dataset import worker as dataset_worker
 from raysim.dataset.models import RimAstigmatism
 from raysim.maps.fieldmap import validate
 from raysim.maps.sphere import ideal_go_cell_mean
-from raysim.surface.deformation import GaussianBumps, PanelRigid, zernike_radial
+from raysim.surface.deformation import GaussianBumps, PanelRigid
+from tests.reference_zernike import zernike_sum
 
 pytestmark = pytest.mark.slow
 
@@ -106,18 +107,13 @@ def _markers(path: Path) -> set[int]:
 
 
 class _ZernikeReference:
-    """Zernike sum written out from the radial polynomial: Noll norm sqrt((2 - d_m0)(n + 1))."""
+    """Zernike sum from the tests' Jacobi-polynomial reference (tests/reference_zernike.py)."""
 
     def __init__(self, terms, a):
         self.terms, self.a = terms, a
 
     def __call__(self, x, y):
-        rho, phi = np.hypot(x, y) / self.a, np.arctan2(y, x)
-        out = np.zeros_like(rho)
-        for n, m, c in self.terms:
-            angular = np.cos(m * phi) if m >= 0 else np.sin(-m * phi)
-            out += c * np.sqrt((2 - (m == 0)) * (n + 1)) * zernike_radial(n, m, rho)[0] * angular
-        return out
+        return zernike_sum(self.terms, self.a, x, y)
 
 
 def _rebuild(ds, i: int, spec) -> dict[str, object]:

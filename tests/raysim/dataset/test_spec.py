@@ -49,7 +49,7 @@ def test_demo_spec_loads_in_si_units():
     assert bumps.sigma.support == (1.5, 4.0) and bumps.probability == 0.75
     assert gravity.angle.a == pytest.approx(math.pi / 2)  # deg -> rad
     assert spec.n_validation == 2
-    assert spec.grid.coords[0] == pytest.approx(-55.0 + 110.0 / 48 / 2)
+    assert spec.grid.x[0] == pytest.approx(-55.0 + 110.0 / 48 / 2)
 
 
 def test_inline_scene_and_scene_file_are_the_same_scene(tmp_path):

@@ -22,16 +22,18 @@ from tests.raysim.distributed.conftest import SMALL
 D, F, FREQUENCY = 10.0, 4.0, 1.0e9
 
 
-def test_the_wave_model_in_blocks_is_the_wave_model(inproc, monkeypatch):
+def test_the_wave_model_in_blocks_is_the_wave_model(inproc):
     """PO + PTD, total field: the ideal and a deformed field, in 7 blocks, bit for bit."""
     sphere = SphereGrid(2.0, 9, 24)
     grid = ApertureGrid(D, 32)
     X, Y = grid.XY
     delta = GaussianBumps(((1.0, -0.5, 2e-3, 1.5),))(X, Y)
-    model = forward.WaveForward(FREQUENCY, polarization=0.3, total=True, ptd=True)
-    monkeypatch.setattr(forward, "_IDEAL_WAVE", type(forward._IDEAL_WAVE)())
-    plain = model.ideal_field(sphere, F, D), model(sphere, F, D, grid.x, grid.y, delta)
-    monkeypatch.setattr(forward, "_IDEAL_WAVE", type(forward._IDEAL_WAVE)())
+    def model():  # a fresh model each time: it keeps its ideal field for its life
+        return forward.WaveForward(FREQUENCY, polarization=0.3, total=True, ptd=True)
+
+    here = model()
+    plain = here.ideal_field(sphere, F, D), here(sphere, F, D, grid.x, grid.y, delta)
+    model = model()
     with block_runner(inproc, block_size=32) as runner, forward.distributed(runner):
         blocks = model.ideal_field(sphere, F, D), model(sphere, F, D, grid.x, grid.y, delta)
         assert runner.blocks == 2 * 7
@@ -44,7 +46,6 @@ def test_invert_with_a_scheduler_writes_the_same_surface(inproc, tmp_path, monke
     path = save(simulate(scene, "po"), tmp_path / "po.nc")
 
     def run(name: str, *extra: str):
-        monkeypatch.setattr(forward, "_IDEAL_WAVE", type(forward._IDEAL_WAVE)())
         monkeypatch.setattr(sys, "argv", ["raysim", "invert", str(path), "-o", str(tmp_path / name),
                                           "--grid", "32", "--refine", "1", "--model", "po", *extra])
         with pytest.raises(SystemExit) as exit_info:

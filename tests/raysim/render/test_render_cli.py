@@ -14,8 +14,8 @@ from matplotlib.image import imread
 from raysim.maps.fieldmap import save
 from raysim.render import RenderError, parse_size, render
 from raysim.render.backend import colour_count
-from raysim.render.samples import equation_fieldmap, surfacemap
 from raysim.surface.deformation import GaussianBumps
+from tests.examples import equation_fieldmap, surfacemap
 
 ROOT = Path(__file__).resolve().parents[3]
 

@@ -1,6 +1,6 @@
 """FieldMap pictures rendered headless: sizes, colour ranges, and features at the right pixels.
 
-The maps come from the linear deformation-intensity equation (raysim.render.samples), so the
+The maps come from the linear deformation-intensity equation (tests/examples.py), so the
 tests need neither the ray engine nor a display. The "gap ring" is what a 10 mm panel gap
 leaves in a GO map of 1-degree cells: one row of cells about 1.5 % darker, at the theta where
 the ideal mapping r = 2F tan(theta/2) sends the gap's radius.
@@ -17,8 +17,8 @@ from raysim.maps.sphere import theta_of_radius
 from raysim.render import backend, charts, render_image
 from raysim.render.data import fa, field_quantity
 from raysim.render.field3d import field_plotter
-from raysim.render.samples import equation_fieldmap
 from raysim.surface.deformation import NoDeformation, PaperDeformation
+from tests.examples import equation_fieldmap
 
 D, F, R = 110.0, 33.0, 10.0
 SIZE = (1200, 900)

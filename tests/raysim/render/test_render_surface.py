@@ -9,9 +9,9 @@ import pytest
 
 from raysim.render import backend, charts, render_image
 from raysim.render.data import error_summary, rms, surface_panels
-from raysim.render.samples import surfacemap
 from raysim.render.surface3d import exaggeration, surface_plotter
 from raysim.surface.deformation import GaussianBumps, PaperDeformation
+from tests.examples import surfacemap
 
 D, F = 110.0, 33.0
 SIZE = (1200, 900)

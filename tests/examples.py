@@ -1,8 +1,8 @@
-"""Example maps made without the ray engine or the solver, for tests, benchmarks and trying
-the pictures: a FieldMap from the linear deformation-intensity equation and a SurfaceMap on
+"""Example maps made without the ray engine or the solver, shared by the tests of the pictures
+and the report: a FieldMap from the linear deformation-intensity equation and a SurfaceMap on
 an aperture grid.
 
-Frame (DESIGN.md): reflector vertex at the origin, axis +z, focus (0, 0, F); sphere angles in
+Frame (docs/physics.md): reflector vertex at the origin, axis +z, focus (0, 0, F); sphere angles in
 rad; lengths and delta in m. The FieldMap's deformed intensity is I_ideal / (1 + FA) with
 FA = G Laplacian(delta), G = -2 F d / R, d = F + z - R, at the aperture point r = 2F tan(theta/2)
 of each cell centre: the paper's Eq. 28, not a ray trace.
@@ -15,17 +15,14 @@ from collections.abc import Callable
 import numpy as np
 import xarray as xr
 
+from raysim.maps.aperture import ApertureGrid
 from raysim.maps.fieldmap import fieldmap
 from raysim.maps.sphere import SphereGrid, aperture_radius, ideal_go_cell_mean, theta_rim
+from raysim.maps.surfacemap import surfacemap as contract_surfacemap
+from raysim.render.figures import laplacian
 from solver.equation import G
 
 Delta = Callable[[np.ndarray, np.ndarray], np.ndarray]
-
-
-def laplacian(delta: Delta, x: np.ndarray, y: np.ndarray, h: float = 1e-2) -> np.ndarray:
-    """Laplacian of delta(x, y) (1/m) by central differences of step ``h`` (m)."""
-    return (delta(x + h, y) + delta(x - h, y) + delta(x, y + h) + delta(x, y - h)
-            - 4.0 * delta(x, y)) / (h * h)
 
 
 def equation_fieldmap(delta: Delta, D: float = 110.0, F: float = 33.0, R: float = 10.0,
@@ -56,33 +53,24 @@ def equation_fieldmap(delta: Delta, D: float = 110.0, F: float = 33.0, R: float 
 def surfacemap(delta: np.ndarray | Delta, D: float = 110.0, N: int = 128,
                truth: np.ndarray | Delta | None = None, attrs: dict | None = None,
                F: float = 33.0, R: float = 10.0) -> xr.Dataset:
-    """A SurfaceMap (contract of DESIGN.md) on the N x N cell-centred grid over [-D/2, D/2]^2.
+    """A SurfaceMap (the contract of :mod:`raysim.maps.surfacemap`) on the N x N aperture grid.
 
     ``delta`` and ``truth`` are (N, N) arrays indexed [y, x] or callables delta(x, y), in m;
-    NaN is put outside the aperture r < D/2. ``error`` = deformation - truth with a truth.
+    NaN is put outside the aperture r < D/2. ``error`` = deformation - truth with a truth,
+    whose RMS and RRMS the attributes carry as an inversion's would.
     """
-    h = D / N
-    x = -D / 2 + (np.arange(N) + 0.5) * h
-    X, Y = np.meshgrid(x, x, indexing="xy")
-    outside = np.hypot(X, Y) >= D / 2
+    grid = ApertureGrid(D, N)
 
     def values(v: np.ndarray | Delta) -> np.ndarray:
-        arr = np.array(v(X, Y) if callable(v) else v, dtype=np.float64)
-        arr[outside] = np.nan
-        return arr
+        return grid.masked(v(*grid.XY) if callable(v) else v)
 
-    unit = {"units": "m"}
-    data = {"deformation": (("y", "x"), values(delta), {**unit, "long_name": "recovered deformation"})}
     all_attrs = {"solver": "example", "boundary": "zero on the rim", "harmonic_part": "unobservable",
                  "removed_terms": "none", "focal_length": F, "diameter": D, "sphere_radius": R}
-    if truth is not None:
-        t = values(truth)
-        data["truth"] = (("y", "x"), t, {**unit, "long_name": "true deformation"})
-        data["error"] = (("y", "x"), data["deformation"][1] - t, {**unit, "long_name": "error"})
-        err = data["error"][1]
+    t = None if truth is None else values(truth)
+    if t is not None:
+        err = values(delta) - t
         M = float(np.nanmax(t) - np.nanmin(t))
         all_attrs["rms_m"] = float(np.sqrt(np.nanmean(err * err)))
         all_attrs["rrms"] = all_attrs["rms_m"] / M if M > 0 else float("nan")
     all_attrs.update(attrs or {})
-    coords = {"x": ("x", x, {"units": "m"}), "y": ("y", x, {"units": "m"})}
-    return xr.Dataset(data, coords=coords, attrs=all_attrs)
+    return contract_surfacemap(grid, values(delta), all_attrs, truth=t)

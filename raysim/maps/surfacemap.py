@@ -1,0 +1,120 @@
+"""SurfaceMap: the recovered main-reflector deformation as an ``xarray.Dataset`` (NetCDF on disk).
+
+The contract the solver writes and the renderer, the hardware crew and the tests read
+(``docs/data.md``); :mod:`solver.surface` re-exports it under its old name:
+
+- coordinates ``x``, ``y``: aperture-plane cell centres (m), N each, over [-D/2, D/2];
+- ``deformation`` (y, x): delta along z (m), NaN outside the aperture r < D/2;
+- optional ``truth`` (y, x) and ``error`` = deformation - truth (m) when the truth is known,
+  ``deformation_std`` (y, x) (m) when the scan carried ``intensity_std``;
+- attributes: ``solver``, ``boundary`` (what the rim values were), ``harmonic_part``
+  (``unobservable`` without rim targets, else ``fixed by rim targets``), ``removed_terms`` and
+  a ``removed_<coefficient>`` per removed coefficient, ``rms_m`` and ``rrms`` when the truth is
+  known, ``focal_length``, ``diameter``, ``sphere_radius`` (m) and the inversion's settings.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from raysim.errors import SurfaceMapError
+from raysim.maps.aperture import ApertureGrid
+from raysim.maps.netcdf import read, write_atomic
+from raysim.version import __version__
+
+REQUIRED_ATTRS = ("solver", "boundary", "harmonic_part", "removed_terms", "focal_length",
+                  "diameter", "sphere_radius")
+OPTIONAL_VARS = ("truth", "error", "deformation_std")
+LONG_NAMES = {
+    "deformation": "recovered surface deformation along z",
+    "truth": "true surface deformation along z (same terms removed)",
+    "error": "deformation - truth",
+    "deformation_std": "standard deviation of deformation from the intensity noise",
+}
+
+
+def surfacemap(grid: ApertureGrid, deformation: np.ndarray, attrs: Mapping[str, Any], *,
+               truth: np.ndarray | None = None, deformation_std: np.ndarray | None = None
+               ) -> xr.Dataset:
+    """Assemble a SurfaceMap on the aperture ``grid`` (deformation, truth, std in m, (N, N)).
+
+    ``attrs`` must hold at least :data:`REQUIRED_ATTRS`; values are flat numbers or strings.
+    ``error`` is added when ``truth`` is given.
+    """
+    dims = ("y", "x")
+    fields = {"deformation": deformation, "truth": truth, "deformation_std": deformation_std}
+    if truth is not None:
+        fields["error"] = np.asarray(deformation) - np.asarray(truth)
+    data_vars = {}
+    for name, values in fields.items():
+        if values is None:
+            continue
+        arr = np.asarray(values, dtype=np.float64)
+        if arr.shape != (grid.N, grid.N):
+            raise SurfaceMapError(f"{name} has shape {arr.shape}, the grid is {(grid.N, grid.N)}")
+        data_vars[name] = (dims, grid.masked(arr), {"units": "m", "long_name": LONG_NAMES[name]})
+    coords = {
+        "x": ("x", grid.x, {"units": "m", "long_name": "aperture-plane x (vertex frame)"}),
+        "y": ("y", grid.y, {"units": "m", "long_name": "aperture-plane y (vertex frame)"}),
+    }
+    all_attrs = {"raysim_version": __version__,
+                 "created": datetime.now(UTC).isoformat(timespec="seconds"),
+                 "Conventions": "CF-1.8", "grid_n": int(grid.N), "grid_step_m": float(grid.h)}
+    all_attrs.update({k: _flat(v) for k, v in attrs.items()})
+    ds = xr.Dataset(data_vars, coords=coords, attrs=all_attrs)
+    return validate(ds, "SurfaceMap")
+
+
+def _flat(value: Any) -> Any:
+    if isinstance(value, bool | np.bool_):
+        return int(value)
+    if isinstance(value, np.generic):
+        return value.item()
+    if value is None:
+        return ""
+    return value
+
+
+def validate(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
+    """Check ``ds`` against the contract; raise :class:`SurfaceMapError` naming the first defect."""
+    for coord in ("x", "y"):
+        if coord not in ds.coords:
+            raise SurfaceMapError(f"{source}: missing coordinate '{coord}'")
+        if ds[coord].attrs.get("units") != "m":
+            raise SurfaceMapError(f"{source}: coordinate '{coord}' must be in m")
+    if "deformation" not in ds.data_vars:
+        raise SurfaceMapError(f"{source}: missing variable 'deformation'")
+    for name in ("deformation", *OPTIONAL_VARS):
+        if name not in ds.data_vars:
+            continue
+        if ds[name].dims != ("y", "x"):
+            raise SurfaceMapError(f"{source}: variable '{name}' must have dims (y, x)")
+        if ds[name].attrs.get("units") != "m":
+            raise SurfaceMapError(f"{source}: variable '{name}' must be in m, "
+                                  f"got {ds[name].attrs.get('units')!r}")
+    for name in REQUIRED_ATTRS:
+        if name not in ds.attrs:
+            raise SurfaceMapError(f"{source}: missing attribute '{name}'")
+    return ds
+
+
+def grid_of(ds: xr.Dataset) -> ApertureGrid:
+    """The aperture grid of a SurfaceMap, from its diameter attribute and x coordinate."""
+    return ApertureGrid(float(ds.attrs["diameter"]), int(ds.sizes["x"]))
+
+
+def save(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
+    """Write a SurfaceMap atomically (temporary file + rename) as NetCDF-4."""
+    return write_atomic(validate(ds), path)
+
+
+def load(path: str | os.PathLike[str]) -> xr.Dataset:
+    """Read and check a SurfaceMap; raise :class:`SurfaceMapError` with one line if unusable."""
+    return validate(read(path, SurfaceMapError), source=str(path))
