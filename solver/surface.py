@@ -24,7 +24,7 @@ import numpy as np
 import xarray as xr
 
 from raysim.maps.netcdf import read, write_atomic
-from raysim.version import __version__
+from raysim.version import VERSION_ATTR, __version__
 from solver.aperture import ApertureGrid
 from solver.errors import SurfaceMapError
 
@@ -63,7 +63,7 @@ def surfacemap(grid: ApertureGrid, deformation: np.ndarray, attrs: Mapping[str, 
         "x": ("x", grid.x, {"units": "m", "long_name": "aperture-plane x (vertex frame)"}),
         "y": ("y", grid.y, {"units": "m", "long_name": "aperture-plane y (vertex frame)"}),
     }
-    all_attrs = {"raysim_version": __version__,
+    all_attrs = {VERSION_ATTR: __version__,
                  "created": datetime.now(UTC).isoformat(timespec="seconds"),
                  "Conventions": "CF-1.8", "grid_n": int(grid.N), "grid_step_m": float(grid.h)}
     all_attrs.update({k: _flat(v) for k, v in attrs.items()})

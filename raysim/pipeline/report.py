@@ -22,6 +22,7 @@ import xarray as xr
 
 from raysim.render import backend, figures
 from raysim.render.backend import RenderError
+from raysim.version import VERSION_ATTR
 from raysim.render.data import (
     UM,
     error_summary,
@@ -260,7 +261,7 @@ pre {{ background: #f5f5f5; padding: 1em; overflow-x: auto; }}
 <h2>Figures</h2>
 {"".join(blocks)}
 {scene_html}
-<p>raysim {html.escape(str(field.attrs.get("raysim_version", "")))}; FieldMap and SurfaceMap beside this
+<p>raysim {html.escape(str(field.attrs.get(VERSION_ATTR, "")))}; FieldMap and SurfaceMap beside this
 page (field.nc, surface.nc) when the run wrote them.</p>
 </body></html>
 """

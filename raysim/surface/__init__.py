@@ -3,6 +3,7 @@
 Modules:
 
 - ``deformation``: surface errors delta(x, y) in metres along +z, with their slopes.
+- ``gridded``: deformation maps from files (CSV ``x,y,dz``, NetCDF), read and checked.
 - ``panels``: ring layouts of panels with gaps.
 - ``mesh``: trimesh reflector meshes (ideal paraboloid, deformed twin on the same
   triangulation, panels with gaps, meshes loaded from files) and their smooth surfaces.

@@ -75,7 +75,7 @@ def test_source_direction_and_polarisation_off_axis():
         ({"frequency_hz = 3.0e8": 'frequency_hz = "300 MHz"'}, "must be a number"),
         ({"radius_m = 10.0": "radius_m = 10.0\ntheta_max_deg = 95.0"}, "'sphere.theta_max_deg' must be <= 90"),
         ({"radius_m = 10.0": "radius_m = 10.0\ntheta_min_deg = 85.0"}, "beyond the rim image at 79.61 deg"),
-        ({"radius_m = 10.0": "radius_m = 10.0\nn_theta = 0"}, "'sphere.n_theta' must be >= 1"),
+        ({"radius_m = 10.0": "radius_m = 10.0\nn_theta = 0"}, "'sphere.n_theta' must be an integer in 1..9000"),
         ({"[sphere]": "[spheres]"}, "unknown key 'spheres'"),
         ({"[dish]": 'method = "fdtd"\n[dish]'}, "'method' must be one of go, po, po+ptd, got 'fdtd'"),
     ],
@@ -185,7 +185,7 @@ def test_overrides_check_their_values(paper_scene):
     s = paper_scene.with_overrides(frequency_hz=1e9, n_theta=45, n_phi=180)
     assert s.source.frequency_hz == 1e9 and s.sphere.n_theta == 45 and s.sphere.dtheta == pytest.approx(
         math.radians(2.0))
-    with pytest.raises(SceneError, match="--n-phi must be >= 1"):
+    with pytest.raises(SceneError, match="--n-phi must be an integer in 1..36000"):
         paper_scene.with_overrides(n_phi=0)
 
 

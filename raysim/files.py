@@ -1,0 +1,110 @@
+"""Files at the edge: the example inputs shipped with raysim, and the guard on outputs.
+
+- The examples (scenes, scan plans, the rig file, dataset specs) live in the repository's
+  ``scenes/`` folder and ship in the wheel as ``raysim/examples/``. Wherever a file is
+  accepted, a name that is not an existing path is looked up among them (``paper_go`` or
+  ``paper_go.toml``); a path that exists always wins.
+- :func:`check_output` refuses an output that is one of the command's inputs (after
+  resolving symbolic links and relative paths), before any work is done.
+- :func:`new_file_mode` is the mode a new file gets under the process's umask (0644 under
+  022), for files written through a private temporary file.
+
+A leaf module: it imports nothing of raysim but the error base class.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from pathlib import Path
+
+from raysim.errors import RaysimError
+
+EXAMPLE_SUFFIXES = (".toml",)
+
+
+def examples_dir() -> Path:
+    """The folder of the shipped examples: ``raysim/examples`` in a wheel, ``scenes/`` in a
+    checkout."""
+    package = Path(__file__).resolve().parent
+    installed = package / "examples"
+    if installed.is_dir():
+        return installed
+    return package.parent / "scenes"
+
+
+def example_names() -> list[str]:
+    """The names of the shipped examples (file names without ``.toml``), sorted."""
+    folder = examples_dir()
+    if not folder.is_dir():
+        return []
+    return sorted(p.stem for p in folder.iterdir() if p.suffix in EXAMPLE_SUFFIXES and p.is_file())
+
+
+def example(name: str) -> Path | None:
+    """The shipped example called ``name`` (with or without ``.toml``), or None."""
+    if not name or "/" in name or os.sep in name or name.startswith("."):
+        return None
+    folder = examples_dir()
+    for candidate in (folder / name, folder / f"{name}.toml"):
+        if candidate.suffix in EXAMPLE_SUFFIXES and candidate.is_file():
+            return candidate
+    return None
+
+
+def find_input(path: str | os.PathLike[str], base: Path | None = None) -> Path:
+    """The file a user means by ``path``: the path itself (relative to ``base`` when given)
+    when it exists, else the shipped example of that name, else the path unchanged (so the
+    caller's "no such file" names what the user wrote)."""
+    given = Path(path).expanduser()
+    candidate = given if base is None or given.is_absolute() else base / given
+    if candidate.exists():
+        return candidate
+    shipped = example(str(path))
+    return shipped if shipped is not None else candidate
+
+
+def same_file(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> bool:
+    """Whether two paths name one file (symbolic links and relative paths resolved; a path
+    that does not exist yet compares by its resolved name)."""
+    pa, pb = Path(a).expanduser(), Path(b).expanduser()
+    try:
+        if pa.exists() and pb.exists():
+            return os.path.samefile(pa, pb)
+    except OSError:
+        pass
+    return pa.resolve() == pb.resolve()
+
+
+def check_output(output: str | os.PathLike[str],
+                 inputs: Iterable[tuple[str, str | os.PathLike[str] | None]],
+                 error: type[RaysimError] = RaysimError) -> None:
+    """Refuse ``output`` when it is one of ``inputs`` ((what, path) pairs; None skipped)."""
+    for what, path in inputs:
+        if path is None or "://" in str(path):
+            continue
+        if same_file(output, path):
+            raise error(f"{output}: is the {what} ({path}); writing it would destroy the input, "
+                        "give another output path")
+
+
+def check_output_folder(folder: str | os.PathLike[str],
+                        inputs: Iterable[tuple[str, str | os.PathLike[str] | None]],
+                        error: type[RaysimError] = RaysimError) -> None:
+    """Refuse an output ``folder`` that would be replaced while an input lies inside it (or is
+    the folder itself)."""
+    target = Path(folder).expanduser().resolve()
+    for what, path in inputs:
+        if path is None:
+            continue
+        resolved = Path(path).expanduser().resolve()
+        if resolved == target or target in resolved.parents:
+            raise error(f"{folder}: holds the {what} ({path}); replacing the folder would destroy "
+                        "the input, give another output folder")
+
+
+def new_file_mode() -> int:
+    """Permission bits a newly created file gets under the current umask (0o644 under 022)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
