@@ -53,12 +53,19 @@ def example(name: str) -> Path | None:
 
 
 def find_input(path: str | os.PathLike[str], base: Path | None = None) -> Path:
-    """The file a user means by ``path``: the path itself (relative to ``base`` when given)
-    when it exists, else the shipped example of that name, else the path unchanged (so the
-    caller's "no such file" names what the user wrote)."""
+    """The file a user means by ``path``: the path itself when it exists, else the shipped
+    example of that name, else the path unchanged (so the caller's "no such file" names what
+    the user wrote).
+
+    ``base`` is the folder of the file that holds a reference (a plan's ``rig = "rig.toml"``):
+    the reference resolves beside that file, and only a bare name without a suffix
+    (``rig = "rig"``) may fall back to an example, so that a missing file beside a plan is an
+    error and never silently the example's."""
     given = Path(path).expanduser()
     candidate = given if base is None or given.is_absolute() else base / given
     if candidate.exists():
+        return candidate
+    if base is not None and given.suffix:
         return candidate
     shipped = example(str(path))
     return shipped if shipped is not None else candidate

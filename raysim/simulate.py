@@ -16,11 +16,11 @@ import xarray as xr
 
 from raysim.errors import RaysimError
 from raysim.maps.fieldmap import fieldmap
+from raysim.methods import METHODS, WAVE_METHODS
 from raysim.optics import go
 from raysim.scene.scene import Scene
 from raysim.surface.mesh import Reflector, reflectors_for
 
-METHODS = ("go", "po", "po+ptd")
 Progress = Callable[[str, float], None]
 
 
@@ -66,7 +66,7 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
         raise RaysimError("--edges applies to --method po+ptd only")
     if edges is not None and edges not in ("rim", "all"):
         raise RaysimError(f"unknown edge set {edges!r}: use rim or all")
-    if method in ("po", "po+ptd"):
+    if method in WAVE_METHODS:
         return _simulate_po(scene, device, report, total, save_field, samples_per_wavelength,
                             edges=(edges or "rim") if method == "po+ptd" else None)
     if total or save_field or samples_per_wavelength is not None:
@@ -206,7 +206,7 @@ def summary(ds: xr.Dataset) -> str:
     """One line: points, rays, time and power balance of a simulated FieldMap."""
     n = ds.sizes["theta"] * ds.sizes["phi"]
     lit = np.isfinite(ds["intensity"].values) & (ds["intensity"].values > 0)
-    if ds.attrs.get("method") in ("po", "po+ptd"):
+    if ds.attrs.get("method") in WAVE_METHODS:
         edges = (f"{ds.attrs['edges']} edges ({ds.attrs.get('edge_points', 0):,} points), "
                  if "edges" in ds.attrs else "")
         return (f"{n} points, {ds.attrs.get('samples', 0):,} samples per reflector, {edges}"

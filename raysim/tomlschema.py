@@ -22,7 +22,7 @@ from typing import Any
 
 from raysim.errors import RaysimError
 
-__all__ = ["REQUIRED", "Table", "read_toml", "parse_toml"]
+__all__ = ["REQUIRED", "Table", "parse_toml", "read_text", "read_toml"]
 
 
 class _Required:

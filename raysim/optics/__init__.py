@@ -10,3 +10,7 @@ Modules:
 - ``ptd``: Michaeli's fringe equivalent edge currents on the free edges, added to PO.
 - ``kernels/``: the Warp kernels of these engines, one module per engine.
 """
+
+from raysim.methods import METHODS, WAVE_METHODS
+
+__all__ = ["METHODS", "WAVE_METHODS"]

@@ -22,7 +22,6 @@ import xarray as xr
 
 from raysim.render import backend, figures
 from raysim.render.backend import RenderError
-from raysim.version import VERSION_ATTR
 from raysim.render.data import (
     UM,
     error_summary,
@@ -32,6 +31,7 @@ from raysim.render.data import (
     rms,
     surface_panels,
 )
+from raysim.version import VERSION_ATTR
 
 PAPER_CASE = {"diameter": 110.0, "focal_length": 33.0, "sphere_radius": 10.0}
 PAPER_GO = ("paper, GO data: FDM (Gauss-Seidel, N = 256, 1000 iterations) RRMS 4.06 % in 92 ± 10 s; "

@@ -21,9 +21,9 @@ from raysim.files import find_input
 from raysim.maps.sphere import SphereGrid, theta_rim
 from raysim.methods import METHODS
 from raysim.scene.deformations import deformation_of
-from raysim.tomlschema import Table, parse_toml, read_text
 from raysim.surface.deformation import Deformation
 from raysim.surface.panels import PanelLayout
+from raysim.tomlschema import Table, parse_toml, read_text
 
 DEFAULT_RESOLUTION = 0.15  # m: triangle edge that keeps GO ratios within 1 % of the signal
 
@@ -204,11 +204,12 @@ def _dish(t: Table, base: Path) -> Dish:
     if resolution > size / 8:
         raise t.fail(f"'dish.resolution_m' = {resolution:g} m is coarser than D/8")
     if D is not None and mesh_path is None:
-        faces = 2.0 * math.pi * (D / 2) ** 2 / resolution**2
+        area = math.pi * (D / 2) ** 2
+        faces = 2.0 * area / resolution**2
         if faces > MAX_FACES:
             raise t.fail(f"'dish.resolution_m' = {resolution:g} m would make about "
                          f"{faces / 1e6:.0f} million triangles (at most {MAX_FACES / 1e6:.0f} "
-                         f"million: resolution_m >= {math.sqrt(2 * math.pi * (D / 2) ** 2 / MAX_FACES):.3g} m)")
+                         f"million: resolution_m >= {math.sqrt(2 * area / MAX_FACES):.3g} m)")
     unit = t.number("mesh_unit_m", 1.0, lo=0.0, lo_open=True, unit="m")
     t.done()
     return Dish(D, F, resolution, mesh_path, ideal_path, unit)

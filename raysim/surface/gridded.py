@@ -63,9 +63,14 @@ def read_map(path: str | Path, scale: float = 1.0, *, limit_m: float = 0.1) -> G
 
 
 def _from_netcdf(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    from raysim.maps.netcdf import read
+    import xarray as xr
 
-    ds = read(path, SceneError)
+    try:
+        with xr.open_dataset(path) as opened:
+            ds = opened.load()
+    except Exception as exc:  # every backend failure means "not a NetCDF file we can read"
+        raise SceneError(f"deformation map {path}: not a readable NetCDF file "
+                         f"({exc.__class__.__name__})") from None
     var = "deformation" if "deformation" in ds else "dz"
     if var not in ds.data_vars or "x" not in ds.coords or "y" not in ds.coords:
         raise SceneError(f"deformation map {path}: needs coords x, y and variable 'deformation' (m)")
