@@ -125,6 +125,7 @@ def load_plan(path: str | Path, rig: str | Path | None = None) -> ScanPlan:
 def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
                     rig_path: str | Path | None = None) -> ScanPlan:
     """Build a :class:`ScanPlan` from a parsed plan table; relative paths start at ``base``."""
+    top.string("description", "")  # for the reader (and raysim scenes)
     rig_entry = top.data.get("rig")
     top.used.add("rig")
     if rig_path is not None:

@@ -148,6 +148,7 @@ def load_rig(path: str | Path) -> tuple[Rig, str]:
 
 def rig_from_table(top: Table) -> Rig:
     """Build a :class:`Rig` from a parsed rig table (see ``scenes/rig.toml`` for the keys)."""
+    top.string("description", "")  # for the reader (and raysim scenes)
     track = top.sub("track", required=True)
     radius = track.number("radius_m", lo=0.0, lo_open=True)
     calibration = Calibration(

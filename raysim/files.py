@@ -52,6 +52,65 @@ def example(name: str) -> Path | None:
     return None
 
 
+def example_summary(path: Path) -> tuple[str, str]:
+    """(kind, one-line description) of an example file: scene, dataset spec, scan plan or rig,
+    described by its ``description`` key or else its first comment line."""
+    import tomllib
+
+    text = path.read_text(encoding="utf-8")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        data = {}
+    if "samples" in data:
+        kind = "dataset spec"
+    elif "reflector" in data and "grid" in data:
+        kind = "scan plan"
+    elif "track" in data:
+        kind = "rig file"
+    else:
+        kind = "scene"
+    description = data.get("description")
+    if not isinstance(description, str) or not description.strip():
+        comments = [line.lstrip("#").strip() for line in text.splitlines() if line.startswith("#")]
+        description = comments[0] if comments else ""
+    return kind, " ".join(description.split())
+
+
+def example_references(path: Path) -> list[str]:
+    """The files an example names beside itself (a plan's ``rig``, a spec's ``scene``)."""
+    import tomllib
+
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    refs = [data[key] for key in ("rig", "scene") if isinstance(data.get(key), str)]
+    return [r for r in refs if not Path(r).is_absolute()]
+
+
+def copy_example(name: str, folder: str | os.PathLike[str]) -> list[Path]:
+    """Copy the example ``name`` and the files it names into ``folder`` (created if needed);
+    return the written paths. An existing file is never overwritten."""
+    source = example(name)
+    if source is None:
+        known = ", ".join(example_names())
+        raise RaysimError(f"no example called {name!r} (known: {known})")
+    target = Path(folder).expanduser()
+    if target.exists() and not target.is_dir():
+        raise RaysimError(f"{target}: exists and is not a folder")
+    files = [source, *(source.parent / ref for ref in example_references(source))]
+    files = [f for f in files if f.is_file()]
+    for f in files:
+        if (target / f.name).exists():
+            raise RaysimError(f"{target / f.name}: exists; not overwritten (copy into another folder)")
+    target.mkdir(parents=True, exist_ok=True)
+    written = []
+    for f in files:
+        dest = target / f.name
+        with open(dest, "x", encoding="utf-8") as fh:
+            fh.write(f.read_text(encoding="utf-8"))
+        written.append(dest)
+    return written
+
+
 def find_input(path: str | os.PathLike[str], base: Path | None = None) -> Path:
     """The file a user means by ``path``: the path itself when it exists, else the shipped
     example of that name, else the path unchanged (so the caller's "no such file" names what
@@ -110,8 +169,17 @@ def check_output_folder(folder: str | os.PathLike[str],
                         "the input, give another output folder")
 
 
-def new_file_mode() -> int:
-    """Permission bits a newly created file gets under the current umask (0o644 under 022)."""
+def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
-    return 0o666 & ~mask
+    return mask
+
+
+def new_file_mode() -> int:
+    """Permission bits a newly created file gets under the current umask (0o644 under 022)."""
+    return 0o666 & ~_umask()
+
+
+def new_folder_mode() -> int:
+    """Permission bits a newly created folder gets under the current umask (0o755 under 022)."""
+    return 0o777 & ~_umask()

@@ -38,6 +38,39 @@ def scene_attrs(scene: Scene, deformed: Reflector) -> dict:
     }
 
 
+MAX_PO_SAMPLES = 1e8  # source samples per reflector (memory grows with them)
+
+
+def check_options(scene: Scene, *, method: str, device: str | None = "cpu", total: bool = False,
+                  save_field: bool = False, samples_per_wavelength: float | None = None,
+                  edges: str | None = None) -> None:
+    """Refuse options :func:`simulate` cannot honour, before any work (RaysimError)."""
+    if method not in METHODS:
+        raise RaysimError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
+    if edges is not None and method != "po+ptd":
+        raise RaysimError("--edges applies to --method po+ptd only")
+    if edges is not None and edges not in ("rim", "all"):
+        raise RaysimError(f"unknown edge set {edges!r}: use rim or all")
+    if method not in WAVE_METHODS and (total or save_field or samples_per_wavelength is not None):
+        raise RaysimError("--total, --save-field and --samples-per-wavelength apply to --method po "
+                          "and po+ptd only")
+    if samples_per_wavelength is not None and not (
+            math.isfinite(samples_per_wavelength) and 0 < samples_per_wavelength <= 20):
+        raise RaysimError(f"--samples-per-wavelength must lie in (0, 20], got {samples_per_wavelength:g}")
+    if method in WAVE_METHODS and scene.dish.diameter is not None:
+        from raysim.optics.po import DEFAULT_SAMPLES_PER_WAVELENGTH
+
+        spw = samples_per_wavelength or DEFAULT_SAMPLES_PER_WAVELENGTH
+        samples = math.pi * (scene.D / 2) ** 2 / (scene.source.wavelength / spw) ** 2
+        if samples > MAX_PO_SAMPLES:
+            raise RaysimError(f"{method} at {scene.source.frequency_hz:g} Hz needs about "
+                              f"{samples:.2g} source samples per reflector (at most "
+                              f"{MAX_PO_SAMPLES:.0g}): use go, or a lower frequency")
+    from raysim.optics.runtime import resolve_device
+
+    resolve_device(device)
+
+
 def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu",
              progress: Progress | None = None, *, total: bool = False, save_field: bool = False,
              samples_per_wavelength: float | None = None, edges: str | None = None) -> xr.Dataset:
@@ -59,19 +92,12 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
         (the rim and every panel edge beside a gap).
     """
     method = scene.method if method is None else method
-    if method not in METHODS:
-        raise RaysimError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
+    check_options(scene, method=method, device=device, total=total, save_field=save_field,
+                  samples_per_wavelength=samples_per_wavelength, edges=edges)
     report = progress or (lambda stage, fraction: None)
-    if edges is not None and method != "po+ptd":
-        raise RaysimError("--edges applies to --method po+ptd only")
-    if edges is not None and edges not in ("rim", "all"):
-        raise RaysimError(f"unknown edge set {edges!r}: use rim or all")
     if method in WAVE_METHODS:
         return _simulate_po(scene, device, report, total, save_field, samples_per_wavelength,
                             edges=(edges or "rim") if method == "po+ptd" else None)
-    if total or save_field or samples_per_wavelength is not None:
-        raise RaysimError("--total, --save-field and --samples-per-wavelength apply to --method po "
-                          "and po+ptd only")
     start = time.perf_counter()
     report("mesh", 0.0)
     ideal, deformed = reflectors_for(scene)
@@ -118,8 +144,6 @@ def _simulate_po(scene: Scene, device: str | None, report: Progress, total: bool
     from raysim.optics import po, ptd
 
     spw = po.DEFAULT_SAMPLES_PER_WAVELENGTH if samples_per_wavelength is None else samples_per_wavelength
-    if not spw > 0:
-        raise RaysimError(f"--samples-per-wavelength must be > 0, got {spw:g}")
     start = time.perf_counter()
     report("mesh", 0.0)
     ideal, deformed = reflectors_for(scene)

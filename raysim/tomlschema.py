@@ -75,8 +75,10 @@ class Table:
     """
 
     def __init__(self, data: Any, where: str = "", *, source: str,
-                 error: type[RaysimError], keys: Sequence[str] | None = None) -> None:
+                 error: type[RaysimError], keys: Sequence[str] | None = None,
+                 files: list[Path] | None = None) -> None:
         self.source = source
+        self.files: list[Path] = [] if files is None else files  # every file read through file()
         self.error = error
         self.where = where
         if data is not None and not isinstance(data, Mapping):
@@ -122,7 +124,8 @@ class Table:
             self.used.add(key)
             raise self.fail(f"missing table [{self.name(key)}]")
         _, value = self._get(key, None)
-        return Table(value, self.name(key), source=self.source, error=self.error, keys=keys)
+        return Table(value, self.name(key), source=self.source, error=self.error, keys=keys,
+                     files=self.files)
 
     def tables(self, key: str, *, required: bool = False,
                keys: Sequence[str] | None = None) -> list[Table]:
@@ -130,8 +133,8 @@ class Table:
         _, value = self._get(key, REQUIRED if required else [])
         if not isinstance(value, list) or not all(isinstance(v, Mapping) for v in value):
             raise self.fail(f"'{self.name(key)}' must be a list of tables ([[{self.name(key)}]])")
-        return [Table(v, f"{self.name(key)}[{i}]", source=self.source, error=self.error, keys=keys)
-                for i, v in enumerate(value)]
+        return [Table(v, f"{self.name(key)}[{i}]", source=self.source, error=self.error, keys=keys,
+                      files=self.files) for i, v in enumerate(value)]
 
     def number(self, key: str, default: Any = REQUIRED, *, lo: float | None = None,
                hi: float | None = None, lo_open: bool = False, hi_open: bool = False,
@@ -246,4 +249,5 @@ class Table:
         path = path if path.is_absolute() else base / path
         if not path.is_file():
             raise self.fail(f"'{self.name(key)}': no such file {path}")
+        self.files.append(path)
         return path

@@ -38,6 +38,7 @@ from solver.errors import SolverError
 from solver.fit import parse_terms, remove_terms
 from solver.forward import MODELS, Progress
 from solver.nonlinear import Forward, extend_outside, refine
+from solver.options import check_options
 from solver.poisson import SOLVERS, SolveInfo, solve_poisson
 from solver.refinement import choose_model, refinement_setup
 from solver.resample import Coverage, fill_missing, sphere_to_aperture, usable_rows
@@ -143,15 +144,10 @@ class LinearInverse:
 
 
 def _truth_from_scene(attrs: dict) -> Callable | None:
-    text = attrs.get("scene")
-    if not text:
-        return None
-    try:
-        from raysim.scene.scene import parse_scene
+    from raysim.scene.scene import scene_of
 
-        return parse_scene(str(text), source="FieldMap scene").deformation
-    except Exception:  # a scene that no longer parses just means no truth
-        return None
+    scene = scene_of(attrs)
+    return None if scene is None else scene.deformation
 
 
 def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_N,
@@ -196,6 +192,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     progress : optional ``progress(stage, fraction)`` of the refinement (0..1).
     """
     start = time.perf_counter()
+    check_options(solver=solver, N=N, refine=refine_iterations, gain=gain, iterations=iterations,
+                  remove=remove, model=model)
     if solver not in SOLVERS:
         raise SolverError(f"unknown solver {solver!r}: choose one of {', '.join(SOLVERS)}")
     if gain not in GAIN_MODES:

@@ -11,8 +11,10 @@ and the rest of raysim sees metres, hertz and radians. Every defect raises
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -76,7 +78,8 @@ class Source:
 
 @dataclass(frozen=True)
 class Scene:
-    """A validated scene; all values SI (m, Hz, rad). ``text`` is the TOML it came from."""
+    """A validated scene; all values SI (m, Hz, rad). ``text`` is the TOML it came from,
+    ``path`` its file and ``files`` the files it names."""
 
     name: str
     dish: Dish
@@ -88,6 +91,12 @@ class Scene:
     text: str = ""
     path: Path | None = None
     method: str = "go"
+    files: tuple[Path, ...] = ()  # the files the scene names (meshes, maps, panel tables)
+
+    def inputs(self) -> list[tuple[str, Path]]:
+        """(what, path) of every file this scene was read from, for output checks."""
+        out = [("scene file", self.path)] if self.path is not None else []
+        return out + [("file the scene names", f) for f in self.files]
 
     @property
     def F(self) -> float:
@@ -153,6 +162,24 @@ def check_sphere_cells(n_theta: int, n_phi: int, names: tuple[str, str] = ("n_th
                          f"the limit of {MAX_CELLS:,}")
 
 
+def scene_of(field: Any) -> Scene | None:
+    """The scene a FieldMap records (its ``scene`` attribute; ``field`` is the dataset or its
+    attributes), or None.
+
+    None when there is no scene (a measured scan) and when the recorded text no longer parses
+    here (a mesh or map file it names is absent): every reader works from the FieldMap's
+    attributes alone, and a recorded scene only adds to them (the truth, the panel layout).
+    """
+    attrs = getattr(field, "attrs", field)
+    text = attrs.get("scene") if isinstance(attrs, Mapping) else None
+    if not text:
+        return None
+    try:
+        return parse_scene(str(text), source="the FieldMap's scene")
+    except SceneError:
+        return None
+
+
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene TOML file (relative file names resolve beside it). A name
     that is not an existing path may name a shipped example (``paper_go``)."""
@@ -182,7 +209,8 @@ def parse_scene(text: str, source: str = "scene", base: Path | None = None) -> S
     top.done()
     return Scene(name=str(name), dish=dish, panels=panels, deformation=deformation,
                  source=source_, sphere=sphere, subdivisions=subdivisions, text=text,
-                 path=Path(source) if source != "scene" else None, method=method)
+                 path=Path(source) if source != "scene" else None, method=method,
+                 files=tuple(top.files))
 
 
 def _dish(t: Table, base: Path) -> Dish:
