@@ -14,7 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -76,6 +76,11 @@ class ScanPlan:
     simulator: SimSettings = field(default_factory=SimSettings)
     text: str = ""
     rig_text: str = ""
+    files: tuple[Path, ...] = ()  # the plan file and the rig file it was read from
+
+    def inputs(self) -> list[tuple[str, Path]]:
+        """(what, path) of the files this plan was read from, for output checks."""
+        return [("plan or rig file", f) for f in self.files]
 
     def steps(self) -> list[Step]:
         """Every step of the scan in acquisition order (see the module docstring)."""
@@ -103,7 +108,8 @@ class ScanPlan:
         """
         rig = asdict(self.rig)
         rig.pop("resources")
-        skip = ("text", "rig_text", "rig", "simulator", "drift_correction", "drift_window")
+        skip = ("text", "rig_text", "files", "rig", "simulator", "drift_correction",
+                "drift_window")
         content = {k: v for k, v in asdict(self).items() if k not in skip}
         content["rig"] = rig
         content["extra"] = extra or {}
@@ -119,7 +125,8 @@ class ScanPlan:
 def load_plan(path: str | Path, rig: str | Path | None = None) -> ScanPlan:
     """Read a scan plan; ``rig`` (a rig.toml) overrides the plan's own ``rig`` entry."""
     data, text, path = read_toml(path, "scan plan")
-    return plan_from_table(plan_table(data, str(path)), text, path.parent, rig)
+    plan = plan_from_table(plan_table(data, str(path)), text, path.parent, rig)
+    return replace(plan, files=(path, *plan.files))
 
 
 def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
@@ -128,10 +135,13 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
     top.string("description", "")  # for the reader (and raysim scenes)
     rig_entry = top.data.get("rig")
     top.used.add("rig")
+    rig_file = None
     if rig_path is not None:
-        rig, rig_text = load_rig(rig_path)
+        rig_file = find_input(rig_path)
+        rig, rig_text = load_rig(rig_file)
     elif isinstance(rig_entry, str):
-        rig, rig_text = load_rig(find_input(rig_entry, base))
+        rig_file = find_input(rig_entry, base)
+        rig, rig_text = load_rig(rig_file)
     elif isinstance(rig_entry, dict):
         rig, rig_text = rig_from_table(plan_table(rig_entry, top.source, "rig")), ""
     else:
@@ -174,7 +184,7 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
 
     plan = ScanPlan(F, D, frequency_hz, grid, rig, settle_s, samples, every, reference,
                     reference_samples, drift, window, dbm_to_w(power_unit_dbm), refer,
-                    simulator, text, rig_text)
+                    simulator, text, rig_text, (rig_file,) if rig_file is not None else ())
     plan.check_reach()
     return plan
 

@@ -182,19 +182,23 @@ def scheduler_address(address: str) -> str:
         port = parts.port
     except ValueError:
         port = None
+    if parts.scheme == "inproc":  # a scheduler in this process (tests, notebooks)
+        return address
     if parts.scheme not in ("tcp", "tls") or not parts.hostname or port is None or parts.path:
         raise DatasetError(f"--scheduler {address!r}: give the scheduler's address as "
                            "tcp://HOST:PORT")
     return address
 
 
-def _probe_scheduler(address: str, timeout_s: float = SCHEDULER_TIMEOUT_S) -> None:
+def _probe_scheduler(address: str, timeout_s: float | None = None) -> None:
     """Connect to the scheduler and wait for its answer to one ``identity`` request, all within
     ``timeout_s``: a host that is unknown, refuses, or accepts and never answers fails here
     with its address named, instead of hanging the client."""
     import asyncio
 
     from distributed.comm import connect
+
+    timeout_s = SCHEDULER_TIMEOUT_S if timeout_s is None else timeout_s
 
     async def probe() -> None:
         comm = await connect(address, timeout=timeout_s)

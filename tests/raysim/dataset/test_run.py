@@ -29,6 +29,7 @@ from raysim.dataset.models import RimAstigmatism
 from raysim.maps.fieldmap import validate
 from raysim.maps.sphere import ideal_go_cell_mean
 from raysim.surface.deformation import GaussianBumps, PanelRigid, zernike_radial
+from tests.cli import cli_env, popen_cli, run_cli
 
 pytestmark = pytest.mark.slow
 
@@ -66,18 +67,6 @@ def reference(tmp_path_factory, spec, inproc):
     report = generate(spec, path, scheduler=inproc)
     assert report.done == spec.samples and report.failed == 0 and report.workers == 1
     return path
-
-
-def _env() -> dict[str, str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
-    env.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
-    return env
-
-
-def _cli(*args: str, **kwargs) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "raysim.cli", *args], env=_env(), capture_output=True,
-                          text=True, timeout=RUN_TIMEOUT, **kwargs)
 
 
 def _arrays(path: Path) -> dict[str, np.ndarray]:
@@ -196,8 +185,7 @@ def test_killed_client_resumes_to_the_same_store(reference, spec, tmp_path, inpr
     after the first sample, then resumed by another cluster: the same arrays as the
     reference made by one worker, and the samples done before the kill untouched."""
     store = tmp_path / "killed.zarr"
-    proc = subprocess.Popen([sys.executable, "-m", "raysim.cli", "dataset", str(DEMO), "-o", str(store),
-                             "--workers", "2"], env=_env(), stdout=subprocess.DEVNULL,
+    proc = popen_cli("dataset", str(DEMO), "-o", str(store), "--workers", "2", stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         deadline = time.monotonic() + RUN_TIMEOUT
@@ -225,7 +213,7 @@ def test_a_store_of_another_spec_is_refused(reference, spec, tmp_path):
     other = tmp_path / "other.toml"
     other.write_text(DEMO.read_text().replace("seed = 20240917", "seed = 1"))
     before = _arrays(reference)
-    result = _cli("dataset", str(other), "-o", str(reference), "--resume")
+    result = run_cli("dataset", str(other), "-o", str(reference), "--resume", timeout=RUN_TIMEOUT)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in result.stderr and "different spec" in lines[0]
@@ -309,7 +297,7 @@ def test_separate_scheduler_and_worker_with_a_worker_killed(reference, spec, tmp
     completes, identical to the reference."""
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
-    common = dict(env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    common = dict(env=cli_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host",
                                   "127.0.0.1", "--port", str(port), "--no-dashboard"], **common)
     nanny = None
@@ -319,8 +307,7 @@ def test_separate_scheduler_and_worker_with_a_worker_killed(reference, spec, tmp
                                   "127.0.0.1", "--nworkers", "1", "--nthreads", "1", "--no-dashboard"],
                                  **common)
         store = tmp_path / "distributed.zarr"
-        run = subprocess.Popen([sys.executable, "-m", "raysim.cli", "dataset", str(DEMO), "-o", str(store),
-                                "--scheduler", address], env=_env(), stdout=subprocess.PIPE,
+        run = popen_cli("dataset", str(DEMO), "-o", str(store), "--scheduler", address, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
         try:
             _wait_until(lambda: bool(_markers(store)) or run.poll() is not None, RUN_TIMEOUT,
