@@ -52,7 +52,7 @@ class VisaLink:
         self.timeout_s = timeout_s
         self.transcript: deque[tuple[str, str]] = deque(maxlen=transcript)
         self._broken: str | None = None
-        host = tcpip_host(resource)
+        host = tcpip_host(resource) if rm is None else None  # the socket backend resolves names
         if host is not None:
             try:
                 socket.getaddrinfo(host, None)

@@ -20,7 +20,7 @@ def simulate(
                                       help=f"{', '.join(METHODS)} (default: the scene's method "
                                            "key, else go)."),
     frequency: float | None = typer.Option(None, "--frequency",
-                                           help="Override the scene's frequency (Hz, 1e6 to 1e13)."),
+                                           help="Override the scene's frequency (Hz), 1e6 to 1e13."),
     n_theta: int | None = typer.Option(
         None, "--n-theta", help=f"Cells in theta (polar angle from -z), 1 to {MAX_N_THETA}; "
                                 f"n-theta x n-phi at most {MAX_CELLS:,} (as in the scene file)."),
