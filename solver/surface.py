@@ -81,11 +81,31 @@ def _flat(value: Any) -> Any:
     return value
 
 
-def validate(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
-    """Check ``ds`` against the contract; raise :class:`SurfaceMapError` naming the first defect."""
+def canonical(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
+    """``ds`` in canonical order: x, y ascending and dims (y, x) (a legal file may store either
+    coordinate descending, or the variables transposed)."""
     for coord in ("x", "y"):
         if coord not in ds.coords:
             raise SurfaceMapError(f"{source}: missing coordinate '{coord}'")
+        values = np.asarray(ds[coord].values)
+        if (values.ndim != 1 or not np.issubdtype(values.dtype, np.number)
+                or not np.all(np.isfinite(values))):
+            raise SurfaceMapError(f"{source}: coordinate '{coord}' must hold finite numbers (m)")
+        steps = np.diff(values)
+        if values.size > 1 and not (np.all(steps > 0) or np.all(steps < 0)):
+            raise SurfaceMapError(f"{source}: coordinate '{coord}' must be strictly monotonic")
+        if values.size > 1 and steps[0] < 0:
+            ds = ds.isel({coord: slice(None, None, -1)})
+    if any(ds[name].dims == ("x", "y") for name in ds.data_vars):
+        ds = ds.transpose("y", "x", ...)
+    return ds
+
+
+def validate(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
+    """Check ``ds`` against the contract and return it in canonical order (:func:`canonical`);
+    raise :class:`SurfaceMapError` naming the first defect."""
+    ds = canonical(ds, source)
+    for coord in ("x", "y"):
         if ds[coord].attrs.get("units") != "m":
             raise SurfaceMapError(f"{source}: coordinate '{coord}' must be in m")
     if "deformation" not in ds.data_vars:
