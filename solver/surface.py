@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from raysim.maps.netcdf import read, write_atomic
+from raysim.maps.netcdf import canonical_order, read, write_atomic
 from raysim.version import VERSION_ATTR, __version__
 from solver.aperture import ApertureGrid
 from solver.errors import SurfaceMapError
@@ -84,21 +84,7 @@ def _flat(value: Any) -> Any:
 def canonical(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
     """``ds`` in canonical order: x, y ascending and dims (y, x) (a legal file may store either
     coordinate descending, or the variables transposed)."""
-    for coord in ("x", "y"):
-        if coord not in ds.coords:
-            raise SurfaceMapError(f"{source}: missing coordinate '{coord}'")
-        values = np.asarray(ds[coord].values)
-        if (values.ndim != 1 or not np.issubdtype(values.dtype, np.number)
-                or not np.all(np.isfinite(values))):
-            raise SurfaceMapError(f"{source}: coordinate '{coord}' must hold finite numbers (m)")
-        steps = np.diff(values)
-        if values.size > 1 and not (np.all(steps > 0) or np.all(steps < 0)):
-            raise SurfaceMapError(f"{source}: coordinate '{coord}' must be strictly monotonic")
-        if values.size > 1 and steps[0] < 0:
-            ds = ds.isel({coord: slice(None, None, -1)})
-    if any(ds[name].dims == ("x", "y") for name in ds.data_vars):
-        ds = ds.transpose("y", "x", ...)
-    return ds
+    return canonical_order(ds, ("y", "x"), "m", source, SurfaceMapError)
 
 
 def validate(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:

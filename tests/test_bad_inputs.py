@@ -18,25 +18,11 @@ import pytest
 
 from raysim.maps.fieldmap import fieldmap, save
 from raysim.maps.sphere import SphereGrid, ideal_go_intensity
+from tests.raysim.test_cli import SMALL
 
 F, D, R = 8.0, 20.0, 3.0
 
-SCENE = """
-name = "small"
-[dish]
-diameter_m = 20.0
-focal_length_m = 8.0
-resolution_m = 0.5
-[[deformation]]
-type = "bumps"
-bumps = [{x_m = 3.0, y_m = 2.0, amplitude_um = 300.0, sigma_m = 2.0}]
-[source]
-frequency_hz = 1.0e9
-[sphere]
-radius_m = 3.0
-n_theta = 10
-n_phi = 20
-"""
+SCENE = SMALL.replace("n_theta = 30", "n_theta = 10").replace("n_phi = 60", "n_phi = 20")
 
 PANELS = """
 [panels]

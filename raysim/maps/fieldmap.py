@@ -25,7 +25,7 @@ import numpy as np
 import xarray as xr
 
 from raysim.errors import FieldMapError
-from raysim.maps.netcdf import read, write_atomic
+from raysim.maps.netcdf import canonical_order, read, write_atomic
 from raysim.maps.sphere import SphereGrid
 from raysim.methods import FIELDMAP_METHODS
 from raysim.version import VERSION_ATTR, __version__
@@ -125,22 +125,7 @@ def canonical(ds: xr.Dataset, source: str = "FieldMap") -> xr.Dataset:
     """``ds`` in the contract's canonical order: dims (theta, phi) in that order, both
     coordinates ascending (a legal NetCDF file may store either descending, or the variables
     transposed; every reader then sees the same arrays)."""
-    for coord in ("theta", "phi"):
-        if coord not in ds.coords:
-            raise FieldMapError(f"{source}: missing coordinate '{coord}'")
-        values = np.asarray(ds[coord].values)
-        if values.ndim != 1 or ds[coord].dims != (coord,):
-            raise FieldMapError(f"{source}: coordinate '{coord}' must be 1-D along its own dimension")
-        if not np.issubdtype(values.dtype, np.number) or not np.all(np.isfinite(values)):
-            raise FieldMapError(f"{source}: coordinate '{coord}' must hold finite numbers (rad)")
-        if values.size > 1 and not (np.all(np.diff(values) > 0) or np.all(np.diff(values) < 0)):
-            raise FieldMapError(f"{source}: coordinate '{coord}' must be strictly monotonic "
-                                "(each cell once, in order)")
-        if values.size > 1 and values[0] > values[-1]:
-            ds = ds.isel({coord: slice(None, None, -1)})
-    if any(ds[name].dims == ("phi", "theta") for name in ds.data_vars):
-        ds = ds.transpose("theta", "phi", ...)
-    return ds
+    return canonical_order(ds, ("theta", "phi"), "rad", source, FieldMapError)
 
 
 def validate(ds: xr.Dataset, source: str = "FieldMap") -> xr.Dataset:

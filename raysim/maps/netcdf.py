@@ -12,9 +12,35 @@ import os
 import tempfile
 from pathlib import Path
 
+import numpy as np
 import xarray as xr
 
 from raysim.files import new_file_mode
+
+
+def canonical_order(ds: xr.Dataset, dims: tuple[str, str], unit: str, source: str,
+                    error: type[Exception]) -> xr.Dataset:
+    """``ds`` with both coordinates of ``dims`` ascending and its 2-D variables in ``dims``
+    order: a legal file may store a coordinate descending, or the variables transposed, and
+    every reader must see the same arrays. A coordinate that is missing, not 1-D, not finite
+    or not strictly monotonic raises ``error`` (one line naming ``source``)."""
+    for coord in dims:
+        if coord not in ds.coords:
+            raise error(f"{source}: missing coordinate '{coord}'")
+        values = np.asarray(ds[coord].values)
+        if values.ndim != 1 or ds[coord].dims != (coord,):
+            raise error(f"{source}: coordinate '{coord}' must be 1-D along its own dimension")
+        if not np.issubdtype(values.dtype, np.number) or not np.all(np.isfinite(values)):
+            raise error(f"{source}: coordinate '{coord}' must hold finite numbers ({unit})")
+        steps = np.diff(values)
+        if values.size > 1 and not (np.all(steps > 0) or np.all(steps < 0)):
+            raise error(f"{source}: coordinate '{coord}' must be strictly monotonic "
+                        "(each value once, in order)")
+        if values.size > 1 and steps[0] < 0:
+            ds = ds.isel({coord: slice(None, None, -1)})
+    if any(ds[name].dims == dims[::-1] for name in ds.data_vars):
+        ds = ds.transpose(*dims, ...)
+    return ds
 
 
 def read(path: str | os.PathLike[str], error: type[Exception]) -> xr.Dataset:
