@@ -25,8 +25,9 @@ endif
 BIN   := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-# Warp compiles kernels once into this ignored folder; later runs load them.
-export WARP_CACHE_PATH := $(CURDIR)/.cache/warp
+# Warp compiles kernels once into this ignored folder (one per dependency mode: the Warp
+# versions differ); later runs load them.
+export WARP_CACHE_PATH := $(CURDIR)/.cache/warp$(if $(filter lock,$(RAYSIM_DEPS)),,-$(RAYSIM_DEPS))
 export MPLBACKEND := Agg
 export PYTHONUNBUFFERED := 1
 

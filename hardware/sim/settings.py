@@ -56,8 +56,9 @@ class SimSettings:
                 isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value))
             if not ok or not lo <= value <= hi:
                 kind = "an integer" if integer else "a number"
-                raise PlanError(f"the simulator's {name} ({option}) must be {kind} in "
-                                f"{lo:g}..{hi:g}, got {value!r}")
+                span = f"{lo}..{hi}" if integer else f"{lo:g}..{hi:g}"
+                raise PlanError(f"the simulator's {name} ({option}) must be {kind} in {span}, "
+                                f"got {value!r}")
         for name in ("slider_zero", "rotation_zero"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and abs(value) <= math.pi):
