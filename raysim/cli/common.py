@@ -77,12 +77,33 @@ def _root(
     """Reflector surface deformation from one intensity scan on a hemisphere at the focus."""
 
 
-def progress_bar(*columns: ProgressColumn, transient: bool = True) -> Progress:
+class _NoBar:
+    """What :func:`progress_bar` gives off a terminal: the same calls, nothing printed (a
+    disabled rich bar still ends with a newline in some rich versions)."""
+
+    def __enter__(self) -> _NoBar:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+    def add_task(self, *args: object, **kwargs: object) -> int:
+        return 0
+
+    def update(self, *args: object, **kwargs: object) -> None:
+        return None
+
+    def reset(self, *args: object, **kwargs: object) -> None:
+        return None
+
+
+def progress_bar(*columns: ProgressColumn, transient: bool = True) -> Progress | _NoBar:
     """A progress bar on stderr, shown only on a terminal (a pipe or a log gets no bar and no
     blank line before an error)."""
+    if not console.is_terminal:
+        return _NoBar()
     columns = columns or (TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn())
-    return Progress(*columns, console=console, transient=transient,
-                    disable=not console.is_terminal)
+    return Progress(*columns, console=console, transient=transient)
 
 
 def output_path(path: Path, inputs: Iterable[tuple[str, str | os.PathLike[str] | None]] = ()) -> Path:
