@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hardware.config import Table
+from hardware.config import plan_table as checked_table
 from hardware.plan import plan_from_table
 from hardware.session import open_instruments, scan
 from hardware.sim.rig import SimulatedRig
@@ -57,7 +57,7 @@ def main() -> None:
         field = save(fieldmap(grid, ideal, ideal, focal_length=F, diameter=D, frequency_hz=3e8,
                               method="go", sampling="cell_mean"), folder / "field.nc")
 
-        plan = plan_from_table(Table(plan_table(args.steps_theta, args.steps_phi, 1), "bench"))
+        plan = plan_from_table(checked_table(plan_table(args.steps_theta, args.steps_phi, 1), "bench"))
         with SimulatedRig(plan.rig, SimSettings(time_scale=0.0)) as sim:
             inst = open_instruments(sim.resources, plan.rig)
             inst.meter.setup(3e8)
@@ -75,7 +75,7 @@ def main() -> None:
         print(f"power readings (4 exchanges):    {reads:7.1f} per s")
 
         for samples in (1, 4):
-            plan = plan_from_table(Table(plan_table(args.steps_theta, args.steps_phi, samples),
+            plan = plan_from_table(checked_table(plan_table(args.steps_theta, args.steps_phi, samples),
                                          "bench"))
             steps = len(plan.steps())
             out = folder / f"scan{samples}.nc"

@@ -112,11 +112,18 @@ class Journal:
 
     @classmethod
     def create(cls, path: str | Path, fingerprint: str, steps: int) -> Journal:
-        """Start a new journal; refuse to overwrite one that holds records."""
+        """Start a new journal; refuse to overwrite one that holds records (a journal holding
+        only its header, from a scan that failed before its first step, is replaced)."""
         path = Path(path)
         if path.exists() and path.stat().st_size > 0:
-            raise JournalError(f"{path}: a journal of an earlier scan exists; pass --resume to "
-                               "continue it, or move it away to start afresh")
+            try:
+                held = len(read_journal(path)[1])
+            except JournalError as exc:
+                raise JournalError(f"{path}: exists and is not a scan journal with no steps; not "
+                                   "overwritten (move it away, or give another --journal)") from exc
+            if held:
+                raise JournalError(f"{path}: a journal of an earlier scan exists ({held} steps); pass "
+                                   "--resume to continue it, or move it away to start afresh")
         path.parent.mkdir(parents=True, exist_ok=True)
         header = {"format": FORMAT, "version": VERSION, "fingerprint": fingerprint,
                   "steps": steps, "created": datetime.now(UTC).isoformat(timespec="seconds")}

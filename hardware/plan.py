@@ -14,15 +14,15 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from hardware.config import Table, read_toml
+from hardware.config import Table, plan_table, read_toml
 from hardware.drift import DRIFT_MODES
-from hardware.errors import PlanError
 from hardware.rig import Rig, load_rig, rig_from_table
 from hardware.sim.settings import SimSettings, sim_settings_from_table
+from raysim.files import find_input
 from raysim.maps.sphere import SphereGrid
 
 SAMPLE = "sample"
@@ -76,6 +76,11 @@ class ScanPlan:
     simulator: SimSettings = field(default_factory=SimSettings)
     text: str = ""
     rig_text: str = ""
+    files: tuple[Path, ...] = ()  # the plan file and the rig file it was read from
+
+    def inputs(self) -> list[tuple[str, Path]]:
+        """(what, path) of the files this plan was read from, for output checks."""
+        return [("plan or rig file", f) for f in self.files]
 
     def steps(self) -> list[Step]:
         """Every step of the scan in acquisition order (see the module docstring)."""
@@ -103,7 +108,8 @@ class ScanPlan:
         """
         rig = asdict(self.rig)
         rig.pop("resources")
-        skip = ("text", "rig_text", "rig", "simulator", "drift_correction", "drift_window")
+        skip = ("text", "rig_text", "files", "rig", "simulator", "drift_correction",
+                "drift_window")
         content = {k: v for k, v in asdict(self).items() if k not in skip}
         content["rig"] = rig
         content["extra"] = extra or {}
@@ -118,57 +124,58 @@ class ScanPlan:
 
 def load_plan(path: str | Path, rig: str | Path | None = None) -> ScanPlan:
     """Read a scan plan; ``rig`` (a rig.toml) overrides the plan's own ``rig`` entry."""
-    path = Path(path)
-    data, text = read_toml(path, "scan plan")
-    return plan_from_table(Table(data, str(path)), text, path.parent, rig)
+    data, text, path = read_toml(path, "scan plan")
+    plan = plan_from_table(plan_table(data, str(path)), text, path.parent, rig)
+    return replace(plan, files=(path, *plan.files))
 
 
 def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
                     rig_path: str | Path | None = None) -> ScanPlan:
     """Build a :class:`ScanPlan` from a parsed plan table; relative paths start at ``base``."""
+    top.string("description", "")  # for the reader (and raysim scenes)
     rig_entry = top.data.get("rig")
     top.used.add("rig")
+    rig_file = None
     if rig_path is not None:
-        rig, rig_text = load_rig(rig_path)
+        rig_file = find_input(rig_path)
+        rig, rig_text = load_rig(rig_file)
     elif isinstance(rig_entry, str):
-        rig, rig_text = load_rig(base / rig_entry)
+        rig_file = find_input(rig_entry, base)
+        rig, rig_text = load_rig(rig_file)
     elif isinstance(rig_entry, dict):
-        rig, rig_text = rig_from_table(Table(rig_entry, f"{top.where} [rig]")), ""
+        rig, rig_text = rig_from_table(plan_table(rig_entry, top.source, "rig")), ""
     else:
-        raise PlanError(f"{top.where}: 'rig' must name a rig file or be a [rig] table")
+        raise top.fail("'rig' must name a rig file or be a [rig] table")
 
-    refl = top.sub("reflector")
-    F = refl.number("focal_length_m", low=0.0, strict_low=True)
-    D = refl.number("diameter_m", low=0.0, strict_low=True)
-    frequency_hz = refl.number("frequency_hz", low=0.0, strict_low=True)
+    refl = top.sub("reflector", required=True)
+    F = refl.number("focal_length_m", lo=0.0, lo_open=True)
+    D = refl.number("diameter_m", lo=0.0, lo_open=True)
+    frequency_hz = refl.number("frequency_hz", lo=0.0, lo_open=True)
     refl.done()
     if rig.radius >= F:
-        raise PlanError(f"{top.where}: the track radius {rig.radius:g} m must be below F = {F:g} m")
+        raise top.fail(f"the track radius {rig.radius:g} m must be below F = {F:g} m")
 
-    g = top.sub("grid")
-    theta_lo, theta_hi = g.angle("theta_min_deg", 0.0, low=0.0), g.angle("theta_max_deg", high=90.0)
-    phi_lo = g.angle("phi_min_deg", 0.0, low=-360.0, high=360.0)
-    phi_hi = g.angle("phi_max_deg", 360.0, low=-360.0, high=720.0)
+    g = top.sub("grid", required=True)
+    theta_lo, theta_hi = g.angle("theta_min_deg", 0.0, lo=0.0), g.angle("theta_max_deg", hi=90.0)
+    phi_lo = g.angle("phi_min_deg", 0.0, lo=-360.0, hi=360.0)
+    phi_hi = g.angle("phi_max_deg", 360.0, lo=-360.0, hi=720.0)
     n_theta = _cells(g, "theta", theta_lo, theta_hi)
     n_phi = _cells(g, "phi", phi_lo, phi_hi)
     g.done()
     if phi_hi - phi_lo > 2 * math.pi + 1e-9:
-        raise PlanError(f"{g.where}: the phi range exceeds 360 deg")
+        raise g.fail("'grid': the phi range exceeds 360 deg")
     grid = SphereGrid(rig.radius, n_theta, n_phi, theta_lo, theta_hi, phi_lo, phi_hi)
 
     acq = top.sub("acquisition", required=False)
-    settle_s = acq.number("settle_s", 0.0, low=0.0, high=3600.0)
-    samples = acq.integer("samples_per_point", 4, low=1)
-    every = acq.integer("reference_every_lines", 4, low=1)
-    reference = (acq.angle("reference_theta_deg", 0.0, low=0.0, high=90.0),
-                 acq.angle("reference_phi_deg", 0.0, low=-360.0, high=360.0))
-    power_unit_dbm = acq.number("power_unit_dbm", -20.0, low=-150.0, high=60.0)
-    reference_samples = acq.integer("reference_samples", 64, low=1)
-    drift = acq.string("drift_correction", "auto")
-    if drift not in DRIFT_MODES:
-        raise PlanError(f"{acq.where}: 'drift_correction' must be one of "
-                        f"{', '.join(DRIFT_MODES)}, got {drift!r}")
-    window = acq.integer("drift_window", 9, low=2)
+    settle_s = acq.number("settle_s", 0.0, lo=0.0, hi=3600.0)
+    samples = acq.integer("samples_per_point", 4, lo=1)
+    every = acq.integer("reference_every_lines", 4, lo=1)
+    reference = (acq.angle("reference_theta_deg", 0.0, lo=0.0, hi=90.0),
+                 acq.angle("reference_phi_deg", 0.0, lo=-360.0, hi=360.0))
+    power_unit_dbm = acq.number("power_unit_dbm", -20.0, lo=-150.0, hi=60.0)
+    reference_samples = acq.integer("reference_samples", 64, lo=1)
+    drift = acq.string("drift_correction", "auto", choices=DRIFT_MODES)
+    window = acq.integer("drift_window", 9, lo=2)
     refer = acq.boolean("refer_to_sphere", True)
     acq.done()
 
@@ -177,7 +184,7 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
 
     plan = ScanPlan(F, D, frequency_hz, grid, rig, settle_s, samples, every, reference,
                     reference_samples, drift, window, dbm_to_w(power_unit_dbm), refer,
-                    simulator, text, rig_text)
+                    simulator, text, rig_text, (rig_file,) if rig_file is not None else ())
     plan.check_reach()
     return plan
 
@@ -194,11 +201,11 @@ def w_to_dbm(p_w: float) -> float:
 
 def _cells(g: Table, name: str, lo: float, hi: float) -> int:
     """Number of cells from ``<name>_step_deg``; the range must hold a whole number of them."""
-    step = g.angle(f"{name}_step_deg", low=0.0, strict_low=True)
+    step = g.angle(f"{name}_step_deg", lo=0.0, lo_open=True)
     if hi <= lo:
-        raise PlanError(f"{g.where}: {name}_max_deg must be above {name}_min_deg")
+        raise g.fail(f"'grid.{name}_max_deg' must be above {name}_min_deg")
     n = (hi - lo) / step
     if abs(n - round(n)) > 1e-6 or round(n) < 1:
-        raise PlanError(f"{g.where}: the {name} range must hold a whole number of "
+        raise g.fail(f"'grid': the {name} range must hold a whole number of "
                         f"{math.degrees(step):g} deg steps")
     return round(n)

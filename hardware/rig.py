@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hardware.config import Table, read_toml
+from hardware.config import Table, plan_table, read_toml
 from hardware.errors import PlanError
 from raysim.maps.measurement import probe_point
 
@@ -140,48 +140,49 @@ def _wrap_into(angle: float, low: float, high: float) -> float | None:
 
 def load_rig(path: str | Path) -> tuple[Rig, str]:
     """Read a ``rig.toml``; return the rig and the file's text. Degrees in, radians out."""
-    data, text = read_toml(path, "rig")
-    return rig_from_table(Table(data, str(path))), text
+    data, text, path = read_toml(path, "rig")
+    return rig_from_table(plan_table(data, str(path))), text
 
 
 def rig_from_table(top: Table) -> Rig:
     """Build a :class:`Rig` from a parsed rig table (see ``scenes/rig.toml`` for the keys)."""
-    track = top.sub("track")
-    radius = track.number("radius_m", low=0.0, strict_low=True)
+    top.string("description", "")  # for the reader (and raysim scenes)
+    track = top.sub("track", required=True)
+    radius = track.number("radius_m", lo=0.0, lo_open=True)
     calibration = Calibration(
         centre_offset=track.vector3("centre_offset_m", (0.0, 0.0, 0.0)),
-        slider_zero=track.angle("slider_zero_deg", 0.0, low=-180.0, high=180.0),
-        rotation_zero=track.angle("rotation_zero_deg", 0.0, low=-360.0, high=360.0),
+        slider_zero=track.angle("slider_zero_deg", 0.0, lo=-180.0, hi=180.0),
+        rotation_zero=track.angle("rotation_zero_deg", 0.0, lo=-360.0, hi=360.0),
     )
     track.done()
     if math.dist(calibration.centre_offset, (0, 0, 0)) >= 0.5 * radius:
-        raise PlanError(f"{track.where}: 'centre_offset_m' must be well inside the track radius")
+        raise track.fail("'track.centre_offset_m' must be well inside the track radius")
     lim_t = top.sub("limits", required=False)
     limits = Limits(
-        slider_min=lim_t.angle("slider_min_deg", -95.0, low=-180.0, high=180.0),
-        slider_max=lim_t.angle("slider_max_deg", 95.0, low=-180.0, high=180.0),
-        rotation_min=lim_t.angle("rotation_min_deg", -5.0, low=-720.0, high=720.0),
-        rotation_max=lim_t.angle("rotation_max_deg", 185.0, low=-720.0, high=720.0),
+        slider_min=lim_t.angle("slider_min_deg", -95.0, lo=-180.0, hi=180.0),
+        slider_max=lim_t.angle("slider_max_deg", 95.0, lo=-180.0, hi=180.0),
+        rotation_min=lim_t.angle("rotation_min_deg", -5.0, lo=-720.0, hi=720.0),
+        rotation_max=lim_t.angle("rotation_max_deg", 185.0, lo=-720.0, hi=720.0),
     )
     lim_t.done()
     if limits.slider_min >= limits.slider_max or limits.rotation_min >= limits.rotation_max:
-        raise PlanError(f"{lim_t.where}: each minimum must be below its maximum")
+        raise lim_t.fail("'limits': each minimum must be below its maximum")
     park_t = top.sub("park", required=False)
     park = (park_t.angle("slider_deg", 95.0), park_t.angle("rotation_deg", 0.0))
     park_t.done()
     motion = top.sub("motion", required=False)
-    slider_axis = motion.integer("slider_axis", 1, low=1)
-    rotation_axis = motion.integer("rotation_axis", 2, low=1)
-    speed = motion.angle("speed_deg_s", 5.0, low=0.0, strict_low=True)
-    tolerance = motion.angle("tolerance_deg", 0.005, low=0.0, strict_low=True)
-    move_timeout_s = motion.number("timeout_s", 120.0, low=0.0, strict_low=True)
+    slider_axis = motion.integer("slider_axis", 1, lo=1)
+    rotation_axis = motion.integer("rotation_axis", 2, lo=1)
+    speed = motion.angle("speed_deg_s", 5.0, lo=0.0, lo_open=True)
+    tolerance = motion.angle("tolerance_deg", 0.005, lo=0.0, lo_open=True)
+    move_timeout_s = motion.number("timeout_s", 120.0, lo=0.0, lo_open=True)
     motion.done()
     if slider_axis == rotation_axis or max(slider_axis, rotation_axis) > 3:
-        raise PlanError(f"{motion.where}: the two axes must be distinct ESP301 axes 1..3")
+        raise motion.fail("'motion': the two axes must be distinct ESP301 axes 1..3")
     inst = top.sub("instruments", required=False)
     resources = {role: value for role in ("meter", "motion")
-                 if (value := inst.string(role)) is not None}
-    visa_timeout_s = inst.number("timeout_s", 2.0, low=0.0, strict_low=True)
+                 if (value := inst.string(role, None)) is not None}
+    visa_timeout_s = inst.number("timeout_s", 2.0, lo=0.0, lo_open=True)
     inst.done()
     top.done()
     rig = Rig(radius=radius, calibration=calibration, limits=limits, park=park,
@@ -189,7 +190,7 @@ def rig_from_table(top: Table) -> Rig:
               tolerance=tolerance, move_timeout_s=move_timeout_s, resources=resources,
               visa_timeout_s=visa_timeout_s)
     if not rig.within_limits(*park):
-        raise PlanError(f"{park_t.where}: the park position lies outside the axis limits")
+        raise park_t.fail("'park': the park position lies outside the axis limits")
     return rig
 
 

@@ -31,6 +31,7 @@ from hardware.plan import ScanPlan, w_to_dbm
 from hardware.rig import Rig
 from hardware.sim.rig import Faults, SimulatedRig
 from hardware.sim.settings import SimSettings
+from raysim.files import check_output
 from raysim.maps import fieldmap as fieldmaps
 from raysim.progress import Progress
 
@@ -88,32 +89,98 @@ def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
     """
     output = Path(output)
     jpath = Path(journal) if journal is not None else journal_path(output)
+    check_output(output, [("journal", jpath), ("FieldMap the simulated rig scans", simulate)],
+                 PlanError)
+    check_output(jpath, [("FieldMap the simulated rig scans", simulate)], PlanError)
+    if resources and simulate is not None:
+        raise PlanError("give either --resource or --simulate, not both")
     settings = sim if sim is not None else plan.simulator
     steps = plan.steps()
     with _instrument_addresses(plan, resources, simulate, settings, faults) as (addr, sim_rig,
                                                                                  extra):
         fingerprint = plan.fingerprint({k: v for k, v in extra.items() if k != "sim_field"})
-        if resume and jpath.exists() and jpath.stat().st_size > 0:
+        held = journal_records(jpath)
+        if resume and held:
             jr = Journal.resume(jpath, fingerprint, len(steps))
-        else:
+        else:  # no journal, or one holding no step: nothing to resume, start afresh
             jr = Journal.create(jpath, fingerprint, len(steps))
         with jr:
             start = len(jr.records)
             attrs: dict[str, object] = {"journal_fingerprint": fingerprint, **extra}
-            if start < len(steps):
-                inst = open_instruments(addr, plan.rig, rm)
-                try:
-                    attrs["meter_idn"] = inst.meter.idn
-                    attrs["motion_version"] = inst.motion.version
-                    acquire(plan, inst, jr, progress=progress,
-                            before_step=sim_rig.set_sample if sim_rig else None)
-                finally:
-                    inst.close()
-            else:
-                step_progress(progress, start, len(steps))
+            try:
+                if start < len(steps):
+                    inst = open_instruments(addr, plan.rig, rm)
+                    try:
+                        attrs["meter_idn"] = inst.meter.idn
+                        attrs["motion_version"] = inst.motion.version
+                        acquire(plan, inst, jr, progress=progress,
+                                before_step=sim_rig.set_sample if sim_rig else None)
+                    finally:
+                        inst.close()
+                else:
+                    step_progress(progress, start, len(steps))
+            except BaseException:
+                if not jr.records:  # failed before its first step: leave no journal behind
+                    jr.close()
+                    jpath.unlink(missing_ok=True)
+                raise
     ds = fieldmap_from_journal(plan, jpath, attrs)
     fieldmaps.save(ds, output)
     return ScanResult(ds, output, jpath, len(steps), len(steps) - start)
+
+
+def scan_files(plan: str | os.PathLike[str], output: str | os.PathLike[str], *,
+               rig: str | os.PathLike[str] | None = None, journal: str | os.PathLike[str] | None = None,
+               resources: list[str] | Mapping[str, str] | None = None,
+               simulate: str | os.PathLike[str] | None = None, resume: bool = False,
+               sim_options: Mapping[str, object] | None = None,
+               progress: Progress | None = None) -> ScanResult:
+    """``raysim scan`` as one call: read the plan file (``rig`` over its rig file), check the
+    output against every input, apply ``sim_options`` (``seed``, ``noise_db``, ``drift_db``,
+    ``centre_offset``, ``time_scale``; None values ignored, the bounds of
+    :class:`~hardware.sim.settings.SimSettings`) and run :func:`scan`."""
+    from hardware.plan import load_plan
+    from hardware.sim.settings import with_options
+
+    scan_plan = load_plan(plan, rig=rig)
+    addresses = parse_resources(resources) if not isinstance(resources, Mapping) else dict(resources)
+    _check_outputs(scan_plan, output, journal)
+    settings = with_options(scan_plan.simulator, **(sim_options or {}))
+    if simulate is None and sim_options and any(v is not None for v in sim_options.values()):
+        raise PlanError("the simulator's options (--seed, --noise-db, --drift-db, --centre-offset, "
+                        "--time-scale) apply with --simulate only")
+    return scan(scan_plan, output, resources=addresses, simulate=simulate, sim=settings,
+                resume=resume, journal=journal, progress=progress)
+
+
+def fieldmap_file_from_journal(plan: str | os.PathLike[str], output: str | os.PathLike[str], *,
+                               rig: str | os.PathLike[str] | None = None,
+                               journal: str | os.PathLike[str] | None = None) -> xr.Dataset:
+    """``raysim scan --from-journal``: write the FieldMap of the journal as it stands (cells not
+    yet measured are NaN), without a rig."""
+    from hardware.plan import load_plan
+
+    scan_plan = load_plan(plan, rig=rig)
+    _check_outputs(scan_plan, output, journal)
+    ds = fieldmap_from_journal(scan_plan, journal or journal_path(output))
+    fieldmaps.save(ds, output)
+    return ds
+
+
+def _check_outputs(plan: ScanPlan, output: str | os.PathLike[str],
+                   journal: str | os.PathLike[str] | None) -> None:
+    for target in (output, journal):
+        if target is not None:
+            check_output(target, plan.inputs(), PlanError)
+
+
+def journal_records(path: str | os.PathLike[str]) -> int:
+    """Completed steps in the journal at ``path`` (0 when there is none, or only its header);
+    raises :class:`JournalError` when the file is not a usable journal."""
+    path = Path(path)
+    if not path.exists() or path.stat().st_size == 0:
+        return 0
+    return len(read_journal(path)[1])
 
 
 def fieldmap_from_journal(plan: ScanPlan, path: str | os.PathLike[str],
@@ -130,10 +197,17 @@ def fieldmap_from_journal(plan: ScanPlan, path: str | os.PathLike[str],
 def park(rig: Rig, *, resources: Mapping[str, str] | None = None, simulate: bool = False,
          rm: pyvisa.ResourceManager | None = None) -> tuple[float, float]:
     """Move the rig to its park position; return the read-back (slider, rotation) in rad."""
+    resources = dict(resources or {})
+    other = sorted(set(resources) - {"motion"})
+    if other:
+        raise PlanError(f"rig park drives the motion controller only: --resource {other[0]}=... "
+                        "does not apply (give --resource motion=VISA)")
     if simulate:
+        if resources:
+            raise PlanError("give either --resource or --simulate, not both")
         with SimulatedRig(rig, SimSettings(time_scale=0.0)) as sim_rig:
             return _park(rig, sim_rig.resources["motion"], rm)
-    address = {**rig.resources, **(resources or {})}.get("motion")
+    address = {**rig.resources, **resources}.get("motion")
     if address is None:
         raise PlanError("no motion controller address: give --resource motion=VISA, "
                         "[instruments] motion in the rig file, or --simulate")
@@ -176,8 +250,6 @@ def _instrument_addresses(plan: ScanPlan, resources: Mapping[str, str] | None,
                             f"{missing[0]}=VISA, [instruments] in the rig file, or --simulate")
         yield addr, None, {"simulated": 0}
         return
-    if resources:
-        raise PlanError("give either --resource or --simulate, not both")
     ds = fieldmaps.load(simulate)
     for name, ours in (("focal_length", plan.focal_length), ("diameter", plan.diameter)):
         if not math.isclose(float(ds.attrs[name]), ours, rel_tol=1e-9):

@@ -13,7 +13,9 @@ Subpackages, from the ground up (a layer imports only from layers below it; the 
 - ``pipeline``: end-to-end runs (``report``, ``paper``).
 - ``cli``: the ``raysim`` command.
 
-Leaves any layer may use: ``errors`` (user errors), ``version``.
+Leaves any layer may use: ``errors`` (user errors), ``version``, ``methods`` (the simulation
+methods, named once), ``files`` (the shipped examples, output guards), ``tomlschema`` (the one
+TOML checker).
 """
 
 from raysim.version import __version__

@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from raysim.errors import RaysimError
 from raysim.maps.fieldmap import fieldmap
+from raysim.methods import METHODS, WAVE_METHODS
 from raysim.optics import go
 from raysim.progress import Progress
 from raysim.scene import Scene
@@ -40,7 +41,7 @@ from raysim.surface.mesh import Reflector, reflectors_for
 if TYPE_CHECKING:
     from raysim.optics.sources import Sources
 
-METHODS = ("go", "po", "po+ptd")
+MAX_PO_SAMPLES = 1e8  # wave source samples per reflector (memory grows with them)
 
 
 @dataclass(frozen=True)
@@ -104,7 +105,7 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
         (the rim and every panel edge beside a gap).
     """
     options = Options(total, save_field, samples_per_wavelength, edges)
-    method = check_method(scene, method, options)
+    method = check_method(scene, method, options, device)
     report = progress or (lambda stage, fraction: None)
     start = time.perf_counter()
     report("mesh", 0.0)
@@ -117,14 +118,37 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
     return fieldmap_of(scene, method, run, deformed.F, deformed.D, attrs)
 
 
-def check_method(scene: Scene, method: str | None, options: Options) -> str:
-    """The method to run (``method``, else the scene's), its options checked; raises
-    RaysimError with one line."""
+def check_method(scene: Scene, method: str | None, options: Options,
+                 device: str | None = None) -> str:
+    """The method to run (``method``, else the scene's), its options and ``device`` (when
+    given) checked before any work; raises RaysimError with one line."""
     method = scene.method if method is None else method
     if method not in ENGINES:
         raise RaysimError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
     _check_options(method, options)
+    if method in WAVE_METHODS and scene.dish.diameter is not None:
+        from raysim.optics.po import DEFAULT_SAMPLES_PER_WAVELENGTH
+
+        spw = options.samples_per_wavelength or DEFAULT_SAMPLES_PER_WAVELENGTH
+        samples = math.pi * (scene.D / 2) ** 2 / (scene.source.wavelength / spw) ** 2
+        if samples > MAX_PO_SAMPLES:
+            raise RaysimError(f"{method} at {scene.source.frequency_hz:g} Hz needs about "
+                              f"{samples:.2g} source samples per reflector (at most "
+                              f"{MAX_PO_SAMPLES:.0g}): use go, or a lower frequency")
+    if device is not None:
+        from raysim.optics.runtime import resolve_device
+
+        resolve_device(device)
     return method
+
+
+def check_options(scene: Scene, *, method: str | None = None, device: str | None = "cpu",
+                  total: bool = False, save_field: bool = False,
+                  samples_per_wavelength: float | None = None, edges: str | None = None) -> str:
+    """Refuse what :func:`simulate` cannot honour, before any work (the keywords of
+    :func:`simulate`); return the method that would run."""
+    return check_method(scene, method, Options(total, save_field, samples_per_wavelength, edges),
+                        device)
 
 
 def fieldmap_of(scene: Scene, method: str, run: Run, F: float, D: float, attrs: dict) -> xr.Dataset:
@@ -142,12 +166,12 @@ def _check_options(method: str, options: Options) -> None:
     if options.edges is not None and options.edges not in ("rim", "all"):
         raise RaysimError(f"unknown edge set {options.edges!r}: use rim or all")
     wave_only = options.total or options.save_field or options.samples_per_wavelength is not None
-    if method == "go" and wave_only:
+    if method not in WAVE_METHODS and wave_only:
         raise RaysimError("--total, --save-field and --samples-per-wavelength apply to --method po "
                           "and po+ptd only")
     spw = options.samples_per_wavelength
-    if spw is not None and not (math.isfinite(spw) and spw > 0):
-        raise RaysimError(f"--samples-per-wavelength must be > 0, got {spw:g}")
+    if spw is not None and not (math.isfinite(spw) and 0 < spw <= 20):
+        raise RaysimError(f"--samples-per-wavelength must lie in (0, 20], got {spw:g}")
 
 
 def _stage(report: Progress, offset: float, width: float, label: str) -> Progress:
@@ -394,7 +418,7 @@ def summary(ds: xr.Dataset) -> str:
     """One line: points, rays, time and power balance of a simulated FieldMap."""
     n = ds.sizes["theta"] * ds.sizes["phi"]
     lit = np.isfinite(ds["intensity"].values) & (ds["intensity"].values > 0)
-    if ds.attrs.get("method") in ("po", "po+ptd"):
+    if ds.attrs.get("method") in WAVE_METHODS:
         edges = (f"{ds.attrs['edges']} edges ({ds.attrs.get('edge_points', 0):,} points), "
                  if "edges" in ds.attrs else "")
         return (f"{n} points, {ds.attrs.get('samples', 0):,} samples per reflector, {edges}"

@@ -13,4 +13,7 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from an uninstalled source tree
     __version__ = "0+unknown"
 
-__all__ = ["__version__"]
+VERSION_ATTR = "raysim_version"
+"""The attribute under which every output (FieldMap, SurfaceMap, dataset store) records it."""
+
+__all__ = ["VERSION_ATTR", "__version__"]

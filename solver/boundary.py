@@ -31,6 +31,7 @@ from solver.errors import RimTargetsError
 MIN_TARGETS = 8
 MAX_HARMONICS = 12
 MAX_RADIUS_FACTOR = 1.05  # targets may sit up to 5 % beyond the rim
+MIN_RADIUS_FACTOR = 0.8  # ... and up to 20 % inside it: they fix the rim values
 
 
 @dataclass(frozen=True)
@@ -116,10 +117,17 @@ def read_rim_csv(path: str | os.PathLike[str]) -> RimTargets:
 
 
 def check_targets(targets: RimTargets, a: float) -> None:
-    """Raise :class:`RimTargetsError` unless there are >= 8 targets near the rim of radius a (m)."""
+    """Raise :class:`RimTargetsError` unless there are >= 8 targets near the rim of radius a (m):
+    between 0.8 a and 1.05 a, with |dz| under 1 % of a."""
     if len(targets) < MIN_TARGETS:
         raise RimTargetsError(f"{targets.source}: {len(targets)} rim targets, at least "
                               f"{MIN_TARGETS} are needed")
+    inner = targets.r < MIN_RADIUS_FACTOR * a
+    if np.any(inner):
+        raise RimTargetsError(f"{targets.source}: {int(inner.sum())} of {len(targets)} targets lie "
+                              f"inside {MIN_RADIUS_FACTOR:g} x the rim radius {a:g} m (the closest "
+                              f"to the centre at r = {float(targets.r.min()):.3g} m); rim targets "
+                              "must lie near the rim")
     far = targets.r > MAX_RADIUS_FACTOR * a
     if np.any(far):
         raise RimTargetsError(f"{targets.source}: {int(far.sum())} targets lie beyond "

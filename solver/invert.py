@@ -28,7 +28,6 @@ from raysim.progress import Progress
 from solver import boundary
 from solver.aperture import ApertureGrid, solver_grid
 from solver.equation import (
-    GAIN_MODES,
     debias,
     intensity_ratio_fa,
     noise_variance,
@@ -37,10 +36,10 @@ from solver.equation import (
 )
 from solver.errors import SolverError
 from solver.fit import parse_terms, remove_terms
-from solver.forward import MODELS, Forward, ForwardModel
+from solver.forward import Forward, ForwardModel
 from solver.linear import MAX_INCIDENCE, LinearInverse, LinearSolution, Scan
 from solver.nonlinear import RefineHistory, refine
-from solver.poisson import SOLVERS
+from solver.options import check_options
 from solver.record import Outcome, accuracy_attrs, surface_attrs
 from solver.refinement import RefinementSetup, choose_model, refinement_setup
 from solver.resample import fill_missing, usable_rows
@@ -80,14 +79,8 @@ class InvertOptions:
     weights: str = "auto"
 
     def __post_init__(self) -> None:
-        if self.solver not in SOLVERS:
-            raise SolverError(f"unknown solver {self.solver!r}: choose one of {', '.join(SOLVERS)}")
-        if self.gain not in GAIN_MODES:
-            raise SolverError(f"unknown gain mode {self.gain!r}: choose one of {', '.join(GAIN_MODES)}")
-        if self.refine_iterations < 0:
-            raise SolverError(f"refine must be >= 0, got {self.refine_iterations}")
-        if self.model is not None and self.model not in MODELS:
-            raise SolverError(f"unknown model {self.model!r}: choose one of {', '.join(MODELS)}")
+        check_options(solver=self.solver, N=self.N, refine=self.refine_iterations, gain=self.gain,
+                      iterations=self.iterations, remove=self.remove, model=self.model)
         if self.weights not in WEIGHTS:
             raise SolverError(f"unknown weights {self.weights!r}: choose one of {', '.join(WEIGHTS)}")
         if self.rim is not None and self.solver == "fft":
@@ -240,15 +233,12 @@ def measured_fa(scan: Scan, gain: str) -> MeasuredFA:
 
 
 def _truth_from_scene(attrs: dict) -> Callable | None:
-    text = attrs.get("scene")
-    if not text:
-        return None
-    try:
-        from raysim.scene.scene import parse_scene
+    """The deformation of the scene a FieldMap carries (None without one, or if it no longer
+    parses: :func:`raysim.scene.scene.scene_of`)."""
+    from raysim.scene.scene import scene_of
 
-        return parse_scene(str(text), source="FieldMap scene").deformation
-    except Exception:  # a scene that no longer parses just means no truth
-        return None
+    scene = scene_of(attrs)
+    return None if scene is None else scene.deformation
 
 
 def truth_on_grid(truth, scan: Scan, grid: ApertureGrid) -> NDArray[np.float64] | None:

@@ -22,15 +22,10 @@ from solver.invert import DEFAULT_N, DEFAULT_REFINE, DEFAULT_SOLVER, invert
 
 def panel_layout_of(field: xr.Dataset):
     """The panel layout of the scene a FieldMap records, or None (a measured scan has none)."""
-    text = field.attrs.get("scene")
-    if not text:
-        return None
-    try:
-        from raysim.scene.scene import parse_scene
+    from raysim.scene.scene import scene_of
 
-        return parse_scene(str(text), source="FieldMap scene").panels
-    except Exception:  # an unparsable recorded scene just means no layout
-        return None
+    scene = scene_of(field)
+    return None if scene is None else scene.panels
 
 
 def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str], *,

@@ -8,6 +8,7 @@ from raysim.maps.surfacemap import (
     LONG_NAMES,
     OPTIONAL_VARS,
     REQUIRED_ATTRS,
+    canonical,
     grid_of,
     load,
     save,
@@ -15,5 +16,5 @@ from raysim.maps.surfacemap import (
     validate,
 )
 
-__all__ = ["LONG_NAMES", "OPTIONAL_VARS", "REQUIRED_ATTRS", "grid_of", "load", "save", "surfacemap",
-           "validate"]
+__all__ = ["LONG_NAMES", "OPTIONAL_VARS", "REQUIRED_ATTRS", "canonical", "grid_of", "load", "save",
+           "surfacemap", "validate"]

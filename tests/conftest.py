@@ -1,4 +1,4 @@
-"""Shared fixtures: small scenes and meshes reused across the raysim tests."""
+"""Shared fixtures: small scenes and meshes reused across the tests, and the CLI runner."""
 
 from __future__ import annotations
 
@@ -15,6 +15,16 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 @pytest.fixture(scope="session")
 def repo_root() -> Path:
     return ROOT
+
+
+@pytest.fixture
+def raysim_cli(capfd, monkeypatch):
+    """Run the ``raysim`` command in this process: ``raysim_cli(*args) -> Result`` (exit
+    status, stdout, stderr; see tests/cli.py), with wide columns."""
+    from tests.cli import run_in_process
+
+    monkeypatch.setenv("COLUMNS", "200")
+    return lambda *args: run_in_process(capfd, *args)
 
 
 @pytest.fixture(scope="session")

@@ -52,12 +52,20 @@ class VisaLink:
         self.timeout_s = timeout_s
         self.transcript: deque[tuple[str, str]] = deque(maxlen=transcript)
         self._broken: str | None = None
-        try:
+        host = tcpip_host(resource) if rm is None else None  # the socket backend resolves names
+        if host is not None:
+            try:
+                socket.getaddrinfo(host, None)
+            except (socket.gaierror, UnicodeError) as exc:
+                raise InstrumentError(f"{name} at {resource} is unreachable: unknown host "
+                                      f"{host!r} ({getattr(exc, 'strerror', None) or exc})") from None
+        ms = max(1, round(timeout_s * 1000))
+        try:  # the connection and every read are bounded by timeout_s
             self._inst = (rm or resource_manager()).open_resource(
                 resource, read_termination=read_termination,
-                write_termination=write_termination, timeout=max(1, round(timeout_s * 1000)))
-        except (pyvisa.errors.Error, OSError, ValueError) as exc:
-            raise self._error("cannot be opened", exc) from exc
+                write_termination=write_termination, timeout=ms, open_timeout=ms)
+        except Exception as exc:  # pyvisa-py raises bare Exception for a failed connect
+            raise self._error("cannot be opened", exc) from None
         _no_delay(self._inst)
 
     def write(self, command: str) -> None:
@@ -106,7 +114,16 @@ class VisaLink:
         if isinstance(exc, OSError):
             return InstrumentError(f"{self.name} at {self.resource} is unreachable ({exc})")
         detail = getattr(exc, "description", None) or str(exc) or exc.__class__.__name__
-        return InstrumentError(f"{self.name} at {self.resource} {what} ({detail})")
+        return InstrumentError(f"{self.name} at {self.resource} {what} ({' '.join(detail.split())}; "
+                               f"within {self.timeout_s:g} s)")
+
+
+def tcpip_host(resource: str) -> str | None:
+    """The host of a ``TCPIP[n]::HOST::...`` VISA resource name, or None for other kinds."""
+    parts = resource.split("::")
+    if len(parts) >= 2 and parts[0].upper().startswith("TCPIP"):
+        return parts[1] or None
+    return None
 
 
 def _no_delay(inst: pyvisa.resources.Resource) -> None:

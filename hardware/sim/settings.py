@@ -9,12 +9,22 @@ wall time, so a killed and resumed scan reproduces an uninterrupted one exactly.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 from hardware.config import Table
+from hardware.errors import PlanError
 from hardware.rig import Calibration, Rig
 from raysim.maps import measurement
+
+# the simulator's bounds: name -> (low, high, the CLI option / plan key that sets it)
+BOUNDS: dict[str, tuple[float, float, str]] = {
+    "seed": (0, 2**63 - 1, "--seed, [simulator] seed"),
+    "noise_db": (0.0, 10.0, "--noise-db, [simulator] noise_db"),
+    "drift_db": (0.0, 10.0, "--drift-db, [simulator] drift_db"),
+    "drift_period": (1.0, 1e12, "[simulator] drift_period_samples"),
+    "time_scale": (0.0, 1e3, "--time-scale, [simulator] time_scale"),
+}
 
 
 @dataclass(frozen=True)
@@ -36,6 +46,26 @@ class SimSettings:
     slider_zero: float | None = None
     rotation_zero: float | None = None
     time_scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        """The one check of the simulator's settings, whether they come from a plan's
+        ``[simulator]`` table, the command line or Python."""
+        for name, (lo, hi, option) in BOUNDS.items():
+            value = getattr(self, name)
+            integer = name == "seed"
+            ok = (isinstance(value, int) and not isinstance(value, bool)) if integer else (
+                isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value))
+            if not ok or not lo <= value <= hi:
+                kind = "an integer" if integer else "a number"
+                span = f"{lo}..{hi}" if integer else f"{lo:g}..{hi:g}"
+                raise PlanError(f"the simulator's {name} ({option}) must be {kind} in {span}, "
+                                f"got {value!r}")
+        for name in ("slider_zero", "rotation_zero"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and abs(value) <= math.pi):
+                raise PlanError(f"the simulator's {name} must lie within +-180 deg, got {value!r}")
+        if self.centre_offset is not None and not all(math.isfinite(v) for v in self.centre_offset):
+            raise PlanError(f"the simulator's centre_offset must be finite, got {self.centre_offset}")
 
     def true_rig(self, rig: Rig) -> Rig:
         """The rig as it really is: the file's rig with this simulator's true calibration."""
@@ -61,20 +91,29 @@ class SimSettings:
 
 
 def sim_settings_from_table(t: Table) -> SimSettings:
-    """Parse a ``[simulator]`` table (degrees in ``*_deg`` keys, see ``scenes/scan_demo.toml``)."""
-    offset = t.vector3("centre_offset_m", (0.0, 0.0, 0.0)) if t.has("centre_offset_m") else None
-    settings = SimSettings(
-        seed=t.integer("seed", 0, low=0),
-        noise_db=t.number("noise_db", 0.0, low=0.0, high=10.0),
-        drift_db=t.number("drift_db", 0.0, low=0.0, high=10.0),
-        drift_period=t.number("drift_period_samples", 2000.0, low=1.0),
-        centre_offset=offset,
-        slider_zero=t.angle("slider_zero_deg") if t.has("slider_zero_deg") else None,
-        rotation_zero=t.angle("rotation_zero_deg") if t.has("rotation_zero_deg") else None,
-        time_scale=t.number("time_scale", 1.0, low=0.0, high=1e3),
-    )
+    """Parse a ``[simulator]`` table (degrees in ``*_deg`` keys, see ``scenes/scan_demo.toml``);
+    the bounds are :data:`BOUNDS`, checked by :class:`SimSettings` itself."""
+    offset = t.vector3("centre_offset_m") if t.has("centre_offset_m") else None
+    values = {
+        "seed": t.integer("seed", 0),
+        "noise_db": t.number("noise_db", 0.0),
+        "drift_db": t.number("drift_db", 0.0),
+        "drift_period": t.number("drift_period_samples", 2000.0),
+        "centre_offset": offset,
+        "slider_zero": t.angle("slider_zero_deg") if t.has("slider_zero_deg") else None,
+        "rotation_zero": t.angle("rotation_zero_deg") if t.has("rotation_zero_deg") else None,
+        "time_scale": t.number("time_scale", 1.0),
+    }
     t.done()
-    return settings
+    try:
+        return SimSettings(**values)
+    except PlanError as exc:
+        raise t.fail(str(exc)) from exc
+
+
+def with_options(settings: SimSettings, **options: Any) -> SimSettings:
+    """``settings`` with the options that are not None replaced (checked like the table)."""
+    return replace(settings, **{k: v for k, v in options.items() if v is not None})
 
 
 def drift_db(settings: SimSettings, index: int) -> float:

@@ -1,39 +1,71 @@
-"""What every command shares: the consoles, the app, output checks.
+"""What every command shares: the consoles, the app, the progress bar, output checks.
 
 Units at this edge: lengths in metres, frequencies in Hz, angles in degrees where an option
 name ends in ``-deg``. Errors a user can cause end with one line on stderr and exit status 2.
+Text that comes from users or from messages is printed as it is (never read as rich markup,
+so ``[track]`` stays ``[track]``) and never wrapped.
 """
 
 from __future__ import annotations
 
+import os
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 
 import typer
 from rich.console import Console
+from rich.progress import BarColumn, Progress, ProgressColumn, TextColumn, TimeElapsedColumn
+from rich.text import Text
 
 from raysim.errors import RaysimError
+from raysim.files import check_output
 
 app = typer.Typer(
     name="raysim",
     help=(
         "Reflector surface deformation from one intensity scan on a hemisphere around the "
         "focus. Lengths in metres, frequencies in Hz, angles in degrees (options ending in "
-        "-deg); scenes are TOML files (see scenes/)."
+        "-deg). Inputs are TOML files or the name of a shipped example (raysim scenes lists "
+        "them)."
     ),
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-console = Console(stderr=True)
-out = Console()
+console = Console(stderr=True, soft_wrap=True, highlight=False)
+out = Console(soft_wrap=True, highlight=False)
+
+
+def say(text: str) -> None:
+    """One line of output on stdout, printed as it is."""
+    out.print(text, markup=False, highlight=False, soft_wrap=True)
+
+
+def note(text: str) -> None:
+    """One line of progress on stderr, printed as it is."""
+    console.print(text, markup=False, highlight=False, soft_wrap=True)
+
+
+def say_error(message: str, prefix: str = "error:") -> None:
+    """The one line of a failed command on stderr (the message collapsed onto one line)."""
+    line = " ".join(str(message).split())
+    console.print(Text.assemble((prefix, "bold red"), " " if prefix else "", line),
+                  soft_wrap=True, highlight=False)
+
+
+def error_line(exc: Exception) -> str:
+    """The one line of a usage error of the CLI framework: command, problem, where to look."""
+    ctx = getattr(exc, "ctx", None)
+    where = getattr(ctx, "command_path", None) or "raysim"
+    return f"{where}: {exc.format_message()} (see '{where} --help')"  # type: ignore[attr-defined]
 
 
 def _version(value: bool) -> None:
     if value:
         from raysim.version import __version__
 
-        out.print(f"raysim {__version__}")
+        say(f"raysim {__version__}")
         raise typer.Exit()
 
 
@@ -45,11 +77,45 @@ def _root(
     """Reflector surface deformation from one intensity scan on a hemisphere at the focus."""
 
 
-def output_path(path: Path) -> Path:
-    """Check an output file can be written before any work goes into it; return it."""
+class _NoBar:
+    """What :func:`progress_bar` gives off a terminal: the same calls, nothing printed (a
+    disabled rich bar still ends with a newline in some rich versions)."""
+
+    def __enter__(self) -> _NoBar:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+    def add_task(self, *args: object, **kwargs: object) -> int:
+        return 0
+
+    def update(self, *args: object, **kwargs: object) -> None:
+        return None
+
+    def reset(self, *args: object, **kwargs: object) -> None:
+        return None
+
+
+def progress_bar(*columns: ProgressColumn, transient: bool = True) -> Progress | _NoBar:
+    """A progress bar on stderr, shown only on a terminal (a pipe or a log gets no bar and no
+    blank line before an error)."""
+    if not console.is_terminal:
+        return _NoBar()
+    columns = columns or (TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn())
+    return Progress(*columns, console=console, transient=transient)
+
+
+def output_path(path: Path, inputs: Iterable[tuple[str, str | os.PathLike[str] | None]] = ()) -> Path:
+    """Check an output file can be written before any work goes into it; return it.
+
+    Refuses a folder, an output that is one of the command's ``inputs`` ((what, path) pairs,
+    symbolic links and relative paths resolved), and a folder where nothing can be written.
+    """
     path = path.expanduser()
     if path.is_dir():
         raise RaysimError(f"{path}: is a folder, give a file name")
+    check_output(path, inputs)
     parent = path.resolve().parent
     try:
         parent.mkdir(parents=True, exist_ok=True)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from raysim.cli.common import app, console, out, output_path
+from raysim.cli.common import app, note, output_path, say
 
 
 @app.command()
@@ -26,23 +26,28 @@ def render(
     """
     from raysim.render import render as run
 
-    written = run(file, output_path(output), kind=kind, size=size, quantity=quantity)
-    out.print(f"{written}", highlight=False)
+    written = run(file, output_path(output, [("file to draw", file)]), kind=kind, size=size,
+                  quantity=quantity)
+    say(f"{written}")
 
 
 @app.command()
 def report(
-    source: Path = typer.Argument(..., help="Scene TOML file, or a FieldMap (.nc) simulated or measured."),
-    output: Path = typer.Option(..., "-o", "--output", help="Folder for report.html, its figures and data."),
+    source: Path = typer.Argument(..., help="Scene TOML file (or a shipped example's name), or a "
+                                            "FieldMap (.nc) simulated or measured."),
+    output: Path = typer.Option(..., "-o", "--output",
+                                help="Folder for report.html, its figures and data (a new folder, or "
+                                     "an earlier report's, replaced once the new one is complete)."),
     method: str | None = typer.Option(None, "--method",
                                       help="Simulation method: go, po or po+ptd (default: the "
                                            "scene's method key, else go)."),
     device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
     solver: str | None = typer.Option(None, "--solver", help="Poisson solver (default: the solver's)."),
     grid: int | None = typer.Option(None, "--grid",
-                                    help="Aperture grid points across D (default: the solver's)."),
+                                    help="Aperture grid points across D, 16 to 4096 (default 256)."),
     refine: int | None = typer.Option(None, "--refine",
-                                      help="GO refinement iterations (0: the paper's linear answer)."),
+                                      help="Model refinement iterations, 0 to 50 (0: the paper's "
+                                           "linear answer; default 3)."),
     invert: bool = typer.Option(True, "--invert/--no-invert",
                                 help="--no-invert leaves the inversion out: the field's figures only."),
 ) -> None:
@@ -55,5 +60,5 @@ def report(
 
     page = run(source, output, method=method, device=device, solver=solver, grid=grid, refine=refine,
                invert=invert,
-               progress=lambda stage, fraction: console.print(f"report: {stage}", highlight=False))
-    out.print(f"{page}", highlight=False)
+               progress=lambda stage, fraction: note(f"report: {stage}"))
+    say(f"{page}")

@@ -1,12 +1,19 @@
-"""``raysim scan`` and ``raysim rig park``: the scanning rig (hardware)."""
+"""``raysim scan`` and ``raysim rig park``: the scanning rig (hardware.session)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import typer
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
 
-from raysim.cli.common import app, console, out, output_path
+from raysim.cli.common import app, output_path, progress_bar, say, say_error
 from raysim.errors import RaysimError
 
 rig_app = typer.Typer(help="The scanning rig (track, slider, rotation, power meter).",
@@ -29,7 +36,8 @@ def _vector3(text: str | None, option: str) -> tuple[float, float, float] | None
 
 @app.command()
 def scan(
-    plan: Path = typer.Argument(..., help="Scan plan (TOML), e.g. scenes/scan_demo.toml."),
+    plan: Path = typer.Argument(..., help="Scan plan (TOML), or a shipped example's name "
+                                          "(scan_demo)."),
     output: Path = typer.Option(..., "-o", "--output", help="Measured FieldMap to write (.nc)."),
     resource: list[str] | None = typer.Option(
         None, "--resource", help="Instrument address ROLE=VISA, ROLE meter or motion (twice)."),
@@ -40,55 +48,37 @@ def scan(
     journal: Path | None = typer.Option(None, "--journal", help="Journal file [OUTPUT.journal]."),
     from_journal: bool = typer.Option(
         False, "--from-journal", help="Write the FieldMap from the journal alone (no rig)."),
-    seed: int | None = typer.Option(None, "--seed", help="Simulator: noise and drift seed."),
-    noise_db: float | None = typer.Option(None, "--noise-db", help="Simulator: noise (dB rms)."),
+    seed: int | None = typer.Option(None, "--seed", help="Simulator: noise and drift seed (>= 0)."),
+    noise_db: float | None = typer.Option(None, "--noise-db",
+                                          help="Simulator: noise (dB rms), 0 to 10."),
     drift_db: float | None = typer.Option(None, "--drift-db",
-                                          help="Simulator: drift amplitude (dB)."),
+                                          help="Simulator: drift amplitude (dB), 0 to 10."),
     centre_offset: str | None = typer.Option(
         None, "--centre-offset", help="Simulator: true track-centre offset X,Y,Z from the "
         "focus (m)."),
     time_scale: float | None = typer.Option(
-        None, "--time-scale", help="Simulator: move-time factor (0 instant, 1 real time)."),
+        None, "--time-scale", help="Simulator: move-time factor, 0 to 1000 (0 instant, 1 real "
+                                   "time)."),
 ) -> None:
     """Scan the hemisphere with the rig (or a simulated one) into a measured FieldMap.
 
     Every completed sample is journaled to disk first; after a stop (Ctrl-C, kill, an
     instrument fault) the same command with --resume continues where it stopped.
     """
-    import dataclasses
     import signal
 
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
+    from hardware.session import fieldmap_file_from_journal, journal_path, scan_files
 
-    from hardware.plan import load_plan
-    from hardware.session import fieldmap_from_journal, journal_path, parse_resources
-    from hardware.session import scan as run_scan
-    from raysim.maps.fieldmap import save
-
-    scan_plan = load_plan(plan, rig=rig)
-    output = output_path(output)
+    inputs = [("FieldMap the simulated rig scans", simulate)]
+    output_path(output, inputs)
     if from_journal:
-        ds = fieldmap_from_journal(scan_plan, journal or journal_path(output))
-        save(ds, output)
-        out.print(f"wrote {output} from the journal: {ds.attrs['samples_measured']} of "
-                  f"{ds.attrs['samples_expected']} samples")
+        ds = fieldmap_file_from_journal(plan, output, rig=rig, journal=journal)
+        say(f"wrote {output} from the journal: {ds.attrs['samples_measured']} of "
+            f"{ds.attrs['samples_expected']} samples")
         return
-    overrides = {"seed": seed, "noise_db": noise_db, "drift_db": drift_db,
-                 "centre_offset": _vector3(centre_offset, "--centre-offset"),
-                 "time_scale": time_scale}
-    for name in ("noise_db", "drift_db", "time_scale"):
-        if overrides[name] is not None and not 0.0 <= overrides[name] < 1e3:
-            raise RaysimError(f"--{name.replace('_', '-')} must be >= 0")
-    sim = dataclasses.replace(scan_plan.simulator,
-                              **{k: v for k, v in overrides.items() if v is not None})
-    done = [0, len(scan_plan.steps())]
+    options = {"seed": seed, "noise_db": noise_db, "drift_db": drift_db,
+               "centre_offset": _vector3(centre_offset, "--centre-offset"), "time_scale": time_scale}
+    done = [0, 0]
 
     def on_signal(signum: int, frame: object) -> None:
         raise KeyboardInterrupt
@@ -97,35 +87,38 @@ def scan(
     columns = (TextColumn("scan"), BarColumn(), MofNCompleteColumn(), TextColumn("elapsed"),
                TimeElapsedColumn(), TextColumn("left"), TimeRemainingColumn())
     try:
-        with Progress(*columns, console=console, disable=not console.is_terminal) as bar:
-            task = bar.add_task("scan", total=done[1])
+        with progress_bar(*columns, transient=False) as bar:
+            task = bar.add_task("scan", total=None)
 
             def progress(stage: str, fraction: float) -> None:
-                done[0] = round(fraction * done[1])
-                bar.update(task, completed=done[0])
+                # stage "step <done> of <total>" (hardware.acquire.step_progress)
+                steps_done, steps_total = (int(n) for n in stage.split()[1::2])
+                if done[1] == 0:
+                    bar.reset(task, total=steps_total, completed=steps_done)
+                bar.update(task, completed=steps_done)
+                done[:] = [steps_done, steps_total]
 
-            result = run_scan(scan_plan, output, resources=parse_resources(resource),
-                              simulate=simulate, sim=sim, resume=resume, journal=journal,
-                              progress=progress)
+            result = scan_files(plan, output, rig=rig, journal=journal, resources=resource,
+                                simulate=simulate, resume=resume, sim_options=options,
+                                progress=progress)
     except KeyboardInterrupt:
         where = journal or journal_path(output)
-        console.print(f"[bold red]interrupted:[/] {done[0]} of {done[1]} steps are in {where}; "
-                      "run the same command with --resume to continue", highlight=False)
+        say_error(f"{done[0]} of {done[1]} steps are in {where}; run the same command with "
+                  "--resume to continue", prefix="interrupted:")
         raise typer.Exit(code=130) from None
     finally:
         signal.signal(signal.SIGTERM, previous)
     ds = result.fieldmap
-    out.print(f"wrote {result.output}: {ds.attrs['samples_measured']} samples, "
-              f"{result.steps_taken} of {result.steps_total} steps taken now "
-              f"(journal {result.journal})")
+    say(f"wrote {result.output}: {ds.attrs['samples_measured']} samples, "
+        f"{result.steps_taken} of {result.steps_total} steps taken now (journal {result.journal})")
 
 
 @rig_app.command("park")
 def rig_park(
-    rig: Path = typer.Argument(..., help="Rig file (TOML), e.g. scenes/rig.toml."),
+    rig: Path = typer.Argument(..., help="Rig file (TOML), or a shipped example's name (rig)."),
     resource: list[str] | None = typer.Option(
-        None, "--resource", help="Motion controller address motion=VISA."),
-    simulate: bool = typer.Option(False, "--simulate", help="Park a simulated rig."),
+        None, "--resource", help="Motion controller address motion=VISA (over the rig file's)."),
+    simulate: bool = typer.Option(False, "--simulate", help="Park a simulated rig (no --resource)."),
 ) -> None:
     """Move the probe to the park position that clears the optical path."""
     import math
@@ -133,7 +126,7 @@ def rig_park(
     from hardware.rig import load_rig
     from hardware.session import park, parse_resources
 
+    addresses = parse_resources(resource)
     rig_obj, _ = load_rig(rig)
-    slider, rotation = park(rig_obj, resources=parse_resources(resource), simulate=simulate)
-    out.print(f"parked: slider {math.degrees(slider):.4f} deg, rotation "
-              f"{math.degrees(rotation):.4f} deg")
+    slider, rotation = park(rig_obj, resources=addresses, simulate=simulate)
+    say(f"parked: slider {math.degrees(slider):.4f} deg, rotation {math.degrees(rotation):.4f} deg")

@@ -6,19 +6,25 @@ from pathlib import Path
 
 import typer
 
-from raysim.cli.common import app, console, out, output_path
+from raysim.cli.common import app, output_path, progress_bar, say
+from raysim.methods import METHODS
+from raysim.scene.scene import MAX_CELLS, MAX_N_PHI, MAX_N_THETA
 
 
 @app.command()
 def simulate(
-    scene: Path = typer.Argument(..., help="Scene TOML file (see scenes/)."),
+    scene: Path = typer.Argument(..., help="Scene TOML file, or the name of a shipped example "
+                                           "(raysim scenes lists them)."),
     output: Path = typer.Option(..., "-o", "--output", help="FieldMap NetCDF file to write."),
     method: str | None = typer.Option(None, "--method",
-                                      help="go (geometric optics), po, or po+ptd (default: the "
-                                           "scene's method key, else go)."),
-    frequency: float | None = typer.Option(None, "--frequency", help="Override the scene's frequency (Hz)."),
-    n_theta: int | None = typer.Option(None, "--n-theta", help="Cells in theta (polar angle from -z)."),
-    n_phi: int | None = typer.Option(None, "--n-phi", help="Cells in phi (azimuth)."),
+                                      help=f"{', '.join(METHODS)} (default: the scene's method "
+                                           "key, else go)."),
+    frequency: float | None = typer.Option(None, "--frequency",
+                                           help="Override the scene's frequency (Hz), 1e6 to 1e13."),
+    n_theta: int | None = typer.Option(
+        None, "--n-theta", help=f"Cells in theta (polar angle from -z), 1 to {MAX_N_THETA}; "
+                                f"n-theta x n-phi at most {MAX_CELLS:,} (as in the scene file)."),
+    n_phi: int | None = typer.Option(None, "--n-phi", help=f"Cells in phi (azimuth), 1 to {MAX_N_PHI}."),
     device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
     total: bool = typer.Option(False, "--total", help="PO: intensity of scattered plus incident field."),
     save_field: bool = typer.Option(False, "--save-field",
@@ -53,24 +59,23 @@ def simulate(
     Writes a FieldMap (NetCDF): intensity relative to the incident plane wave on (theta, phi)
     cells, theta from -z at the focus and phi = atan2(y, x), both in radians in the file.
     """
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
     from raysim.maps.fieldmap import save
     from raysim.scene.scene import load_scene
+    from raysim.simulate import check_options, summary
     from raysim.simulate import simulate as run
-    from raysim.simulate import summary
 
     loaded = load_scene(scene).with_overrides(frequency, n_theta, n_phi)
     method = method or loaded.method
-    output_path(output)
+    check_options(loaded, method=method, device=device, total=total, save_field=save_field,
+                  samples_per_wavelength=samples_per_wavelength, edges=edges)
+    output_path(output, loaded.inputs())
     if scheduler or workers or resume or block_size or threads:
         _simulate_blocks(loaded, output, method, device, total=total, save_field=save_field,
                          samples_per_wavelength=samples_per_wavelength, edges=edges,
                          scheduler=scheduler, workers=workers, threads=threads or 1, resume=resume,
                          block_size=block_size)
         return
-    with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
-                  console=console, transient=True) as bar:
+    with progress_bar() as bar:
         task = bar.add_task(f"{method} {loaded.name}", total=1.0)
 
         def report(stage: str, fraction: float) -> None:
@@ -79,18 +84,18 @@ def simulate(
         ds = run(loaded, method=method, device=device, progress=report, total=total,
                  save_field=save_field, samples_per_wavelength=samples_per_wavelength, edges=edges)
     save(ds, output)
-    out.print(f"{output}: {summary(ds)}", highlight=False, soft_wrap=True)
+    say(f"{output}: {summary(ds)}")
 
 
 def _simulate_blocks(scene, output: Path, method: str, device: str, **options) -> None:
     """``simulate`` in blocks of sphere points on Dask (raysim.distributed), a bar over blocks."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
     from raysim.distributed import simulate as run
     from raysim.simulate import summary
 
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), console=console, transient=True) as bar:
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    with progress_bar(*columns) as bar:
         task = bar.add_task(f"{method} {scene.name}: blocks", total=None)
 
         def report(done: int, total: int) -> None:
@@ -98,6 +103,5 @@ def _simulate_blocks(scene, output: Path, method: str, device: str, **options) -
 
         ds = run(scene, output, method, device, report, **options)
     a = ds.attrs
-    out.print(f"{output}: {summary(ds)}; {a['blocks']} blocks on {a['workers']} workers "
-              f"({a['blocks_reused']} reused, {a['blocks_computed_twice']} computed twice)",
-              highlight=False, soft_wrap=True)
+    say(f"{output}: {summary(ds)}; {a['blocks']} blocks on {a['workers']} workers "
+        f"({a['blocks_reused']} reused, {a['blocks_computed_twice']} computed twice)")

@@ -76,6 +76,8 @@ def parse_distribution(value: Any, name: str, lo: float | None = None, hi: float
     if isinstance(value, bool):
         raise ValueError(f"'{name}' must be a number or a table like {{ uniform = [lo, hi] }}")
     if isinstance(value, int | float):
+        if not math.isfinite(value):
+            raise ValueError(f"'{name}' must be a finite number, got {value!r}")
         if integer and (not float(value).is_integer()):
             raise ValueError(f"'{name}' must be an integer, got {value!r}")
         dist = Distribution("fixed", float(value))

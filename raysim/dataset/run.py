@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import shutil
 import time
 import uuid
 from collections.abc import Callable, Iterator
@@ -90,21 +91,19 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
     """
     start = time.perf_counter()
     spec = spec if isinstance(spec, DatasetSpec) else load_spec(spec)
-    if threads < 1:
-        raise DatasetError(f"threads must be >= 1, got {threads}")
-    if workers is not None and workers < 1:
-        raise DatasetError(f"workers must be >= 1, got {workers}")
-    if scheduler is None and device != "cpu":  # local workers see this machine's devices
-        from raysim.optics import runtime as warp_runtime
-
-        warp_runtime.resolve_device(device)
+    check_run_options(spec, store, workers=workers, scheduler=scheduler, device=device,
+                      threads=threads, resume=resume)
     path = _store_path(store)
     if zstore.exists(path):
         if not resume:
             raise DatasetError(f"{path}: already exists; add --resume to complete it, or give a new path")
         group = zstore.open_checked(path, spec)
+        created = False
     else:
+        if scheduler:  # before the store exists: a dead scheduler leaves nothing behind
+            _probe_scheduler(scheduler)
         group = zstore.create(path, spec)
+        created = True
     pending = np.flatnonzero(zstore.status(group) != zstore.DONE)
     ideal_pending = np.flatnonzero(zstore.ideal_status(group) != zstore.DONE)
     skipped = spec.samples - len(pending)
@@ -115,14 +114,22 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
     n_workers = 0
     if len(pending) or len(ideal_pending):
         writer = zstore.Writer(group)
-        with _client(scheduler, workers, threads, len(pending) + len(ideal_pending)) as (client, n_workers):
-            try:
-                client.register_plugin(DatasetWorkerPlugin(threads, device))
-            except Exception as exc:  # e.g. a device the workers lack, Warp failing to load
-                raise DatasetError(f"the Dask workers could not be prepared "
-                                   f"({type(exc).__name__}: {' '.join(str(exc).split())})") from exc
-            _run(client, path, spec, device, pending, ideal_pending, writer, report, skipped,
-                 failures, ideal_failures)
+        try:
+            with _client(scheduler, workers, threads,
+                         len(pending) + len(ideal_pending)) as (client, n_workers):
+                try:
+                    client.register_plugin(DatasetWorkerPlugin(threads, device))
+                except Exception as exc:  # e.g. a device the workers lack, Warp failing to load
+                    raise DatasetError(f"the Dask workers could not be prepared ({type(exc).__name__}: "
+                                       f"{' '.join(str(exc).split())})") from exc
+                _run(client, path, spec, device, pending, ideal_pending, writer, report, skipped,
+                     failures, ideal_failures)
+        except BaseException:
+            # a store this run created and that holds no finished sample is no store to resume:
+            # remove it, so that the same command can simply be run again
+            if created and np.all(zstore.status(group) == zstore.PENDING):
+                shutil.rmtree(path, ignore_errors=True)
+            raise
     final = zstore.status(group)
     return RunReport(
         store=path, samples=spec.samples, done=int(np.sum(final == zstore.DONE)),
@@ -142,6 +149,88 @@ def _sample_progress(progress: Progress | None) -> SampleReport:
             progress(f"{done} of {total} samples{note}", (done + failed) / total if total else 1.0)
 
     return report
+
+
+MAX_WORKERS = 1024
+MAX_THREADS = 256
+SCHEDULER_TIMEOUT_S = 20.0
+
+
+def check_run_options(spec: DatasetSpec, store: str | Path, *, workers: int | None = None,
+                      scheduler: str | None = None, device: str = "cpu", threads: int = 1,
+                      resume: bool = False) -> None:
+    """Refuse options :func:`generate` cannot honour, before any work (DatasetError): worker
+    and thread counts, the scheduler's address, the device, and a store path that is a file
+    or the spec itself. Creates the store's parent folder."""
+    from raysim.files import check_output
+
+    for name, value, hi in (("--threads", threads, MAX_THREADS), ("--workers", workers, MAX_WORKERS)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)
+                                  or not 1 <= value <= hi):
+            raise DatasetError(f"{name} must be an integer in 1..{hi}, got {value!r}")
+    if scheduler is not None:
+        scheduler_address(scheduler)
+    elif device != "cpu":  # local workers see this machine's devices
+        from raysim.optics import runtime as warp_runtime
+
+        warp_runtime.resolve_device(device)
+    text = str(store)
+    if "://" in text:
+        return
+    path = Path(text).expanduser()
+    check_output(path, [("dataset spec", spec.source if Path(spec.source).is_file() else None)],
+                 DatasetError)
+    if path.exists() and not path.is_dir():
+        raise DatasetError(f"{path}: exists and is not a Zarr store (a folder); give a new path")
+    try:
+        path.resolve().parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise DatasetError(f"{path}: cannot create its folder ({exc.strerror})") from exc
+
+
+def scheduler_address(address: str) -> str:
+    """A Dask scheduler address ``tcp://HOST:PORT`` (or ``tls://``), checked; DatasetError else."""
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(address)
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if parts.scheme == "inproc":  # a scheduler in this process (tests, notebooks)
+        return address
+    if parts.scheme not in ("tcp", "tls") or not parts.hostname or port is None or parts.path:
+        raise DatasetError(f"--scheduler {address!r}: give the scheduler's address as "
+                           "tcp://HOST:PORT")
+    return address
+
+
+def _probe_scheduler(address: str, timeout_s: float | None = None) -> None:
+    """Connect to the scheduler and wait for its answer to one ``identity`` request, all within
+    ``timeout_s``: a host that is unknown, refuses, or accepts and never answers fails here
+    with its address named, instead of hanging the client."""
+    import asyncio
+
+    from distributed.comm import connect
+
+    timeout_s = SCHEDULER_TIMEOUT_S if timeout_s is None else timeout_s
+
+    async def probe() -> None:
+        comm = await connect(address, timeout=timeout_s)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            await comm.read()
+        finally:
+            comm.abort()
+
+    try:
+        asyncio.run(asyncio.wait_for(probe(), timeout_s))
+    except TimeoutError:
+        raise DatasetError(f"the Dask scheduler at {address} did not answer within "
+                           f"{timeout_s:g} s") from None
+    except (OSError, ValueError) as exc:
+        raise DatasetError(f"cannot reach the Dask scheduler at {address} "
+                           f"({' '.join(str(exc).split()) or type(exc).__name__})") from None
 
 
 def _run(client, path: str, spec: DatasetSpec, device: str, pending: np.ndarray,
@@ -198,9 +287,10 @@ def _client(scheduler: str | None, workers: int | None, threads: int, tasks: int
 
     if scheduler:
         try:
-            client = Client(scheduler, timeout="20s")
+            client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S:g}s")
         except (OSError, TimeoutError) as exc:
-            raise DatasetError(f"cannot reach the Dask scheduler at {scheduler} ({exc})") from exc
+            raise DatasetError(f"cannot reach the Dask scheduler at {scheduler} "
+                               f"({' '.join(str(exc).split())})") from exc
         try:
             try:
                 client.wait_for_workers(1, timeout=WORKER_WAIT_S)
@@ -214,8 +304,10 @@ def _client(scheduler: str | None, workers: int | None, threads: int, tasks: int
     n = workers or max(1, usable_cores() // threads)
     n = max(1, min(n, tasks))
     try:
+        # the scheduler's HTTP routes always listen: on a free loopback port, never the shared
+        # default 8787 (another cluster on this machine would draw a warning)
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None, silence_logs=logging.ERROR,
+                               dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR,
                                env={"RAYSIM_THREADS": str(threads)})
     except (RuntimeError, OSError) as exc:
         raise DatasetError(f"could not start a local Dask cluster of {n} workers ({exc})") from exc
@@ -225,8 +317,25 @@ def _client(scheduler: str | None, workers: int | None, threads: int, tasks: int
             yield client, n
         finally:
             client.close()
+            _stop_workers(cluster)
     finally:
         cluster.close()
+
+
+def _stop_workers(cluster, timeout_s: float = 30.0) -> None:
+    """Stop the local workers before the scheduler: scale the cluster to none and wait until
+    the scheduler has seen every worker leave.
+
+    Closing the cluster at once stops the scheduler first; a worker whose heartbeat is in
+    flight at that moment logs a 30-line "Failed to communicate with scheduler during
+    heartbeat" traceback after a successful run. Workers that have left send no heartbeat.
+    """
+    cluster.scale(0)
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if not cluster.scheduler_info.get("workers") and not cluster.workers:
+            return
+        time.sleep(0.05)
 
 
 def usable_cores() -> int:

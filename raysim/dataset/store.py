@@ -42,15 +42,16 @@ import zarr
 
 from raysim.dataset.spec import DatasetError, DatasetSpec
 from raysim.dataset.store_layout import FORMAT, ArraySpec, layout
-from raysim.version import __version__
+from raysim.version import VERSION_ATTR, __version__
 
 PENDING, DONE, FAILED = 0, 1, 2
 _PACKAGES = ("numpy", "warp-lang", "dask", "distributed", "zarr", "xarray")
 
 
 def versions() -> dict[str, str]:
-    """``version_<package>`` of raysim, Python and the packages a sample depends on."""
-    out = {"version_raysim": __version__, "version_python": platform.python_version()}
+    """raysim's version (under :data:`~raysim.version.VERSION_ATTR`, as every output records
+    it) and ``version_<package>`` of Python and the packages a sample depends on."""
+    out = {VERSION_ATTR: __version__, "version_python": platform.python_version()}
     for name in _PACKAGES:
         try:
             out[f"version_{name.split('-')[0]}"] = metadata.version(name)

@@ -134,7 +134,7 @@ def simulate(scene: Scene, output: str | Path, method: str | None = None, device
     """
     start = time.perf_counter()
     options = Options(total, save_field, samples_per_wavelength, edges)
-    method = check_method(scene, method, options)
+    method = check_method(scene, method, options, device)
     if method not in BLOCK_ENGINES:
         raise ClusterError(f"--scheduler and --workers apply to the wave methods "
                            f"({', '.join(BLOCK_ENGINES)}); {method} runs in one process")

@@ -25,11 +25,12 @@ import numpy as np
 import xarray as xr
 
 from raysim.errors import FieldMapError
-from raysim.maps.netcdf import read, write_atomic
+from raysim.maps.netcdf import canonical_order, read, write_atomic
 from raysim.maps.sphere import SphereGrid
-from raysim.version import __version__
+from raysim.methods import FIELDMAP_METHODS
+from raysim.version import VERSION_ATTR, __version__
 
-METHODS = ("go", "po", "po+ptd", "measured")
+METHODS = FIELDMAP_METHODS  # re-exported: the list is defined once, in raysim.methods
 SAMPLINGS = ("cell_mean", "centre")
 REQUIRED_ATTRS = ("focal_length", "diameter", "sphere_radius", "frequency_hz", "method", "sampling")
 REQUIRED_VARS = ("intensity", "intensity_ideal")
@@ -94,7 +95,7 @@ def fieldmap(
         "theta_max": float(grid.theta_max),
         "phi_min": float(grid.phi_min),
         "phi_max": float(grid.phi_max),
-        "raysim_version": __version__,
+        VERSION_ATTR: __version__,
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
         "Conventions": "CF-1.8",
     }
@@ -120,43 +121,77 @@ def grid_of(ds: xr.Dataset) -> SphereGrid:
     return grid
 
 
+def canonical(ds: xr.Dataset, source: str = "FieldMap") -> xr.Dataset:
+    """``ds`` in the contract's canonical order: dims (theta, phi) in that order, both
+    coordinates ascending (a legal NetCDF file may store either descending, or the variables
+    transposed; every reader then sees the same arrays)."""
+    return canonical_order(ds, ("theta", "phi"), "rad", source, FieldMapError)
+
+
 def validate(ds: xr.Dataset, source: str = "FieldMap") -> xr.Dataset:
-    """Check ``ds`` against the contract; raise :class:`FieldMapError` naming the first defect."""
+    """Check ``ds`` against the contract and return it in canonical order (:func:`canonical`);
+    raise :class:`FieldMapError` naming the first defect."""
+    ds = canonical(ds, source)
     for coord in ("theta", "phi"):
-        if coord not in ds.coords:
-            raise FieldMapError(f"{source}: missing coordinate '{coord}'")
         if ds[coord].attrs.get("units", "rad") != "rad":
             raise FieldMapError(f"{source}: coordinate '{coord}' must be in rad, "
                                 f"got {ds[coord].attrs.get('units')!r}")
         values = np.asarray(ds[coord].values, dtype=np.float64)
-        if values.ndim != 1 or values.size < 1 or not np.all(np.isfinite(values)):
-            raise FieldMapError(f"{source}: coordinate '{coord}' must be a finite 1-D array")
         if values.size > 1 and not np.allclose(np.diff(values), values[1] - values[0],
                                                rtol=1e-6, atol=1e-12):
             raise FieldMapError(f"{source}: coordinate '{coord}' must be regularly spaced")
+    if float(np.min(ds["theta"].values)) < 0.0:
+        raise FieldMapError(f"{source}: theta below 0 is not a polar angle from -z")
     if float(np.max(ds["theta"].values)) > np.pi / 2 + 1e-9:
         raise FieldMapError(f"{source}: theta beyond 90 deg is off the hemisphere facing the dish")
+    phi = np.asarray(ds["phi"].values, dtype=np.float64)
+    if phi.size > 1 and phi[-1] - phi[0] >= 2 * np.pi:
+        raise FieldMapError(f"{source}: phi spans more than 360 deg")
     for name in REQUIRED_VARS:
         if name not in ds.data_vars:
             raise FieldMapError(f"{source}: missing variable '{name}'")
+    for name in (*REQUIRED_VARS, "intensity_std"):
+        if name not in ds.data_vars:
+            continue
         if ds[name].dims != ("theta", "phi"):
             raise FieldMapError(f"{source}: variable '{name}' must have dims (theta, phi), "
                                 f"got {ds[name].dims}")
+        _check_intensity(ds[name].values, name, source)
     for name in ("focal_length", "diameter", "sphere_radius"):
         if name not in ds.attrs:
             raise FieldMapError(f"{source}: missing attribute '{name}' (m)")
         value = _float_attr(ds, name, source)
-        if not value > 0:
-            raise FieldMapError(f"{source}: attribute '{name}' must be > 0 m, got {value}")
+        if not (value > 0 and np.isfinite(value)):
+            raise FieldMapError(f"{source}: attribute '{name}' must be a finite length > 0 m, "
+                                f"got {value}")
     for name in ("frequency_hz", "method", "sampling"):
         if name not in ds.attrs:
             raise FieldMapError(f"{source}: missing attribute '{name}'")
-    _float_attr(ds, "frequency_hz", source)
+    frequency = _float_attr(ds, "frequency_hz", source)
+    if not (frequency > 0 and np.isfinite(frequency)):
+        raise FieldMapError(f"{source}: attribute 'frequency_hz' must be a finite frequency > 0 Hz, "
+                            f"got {frequency}")
     if ds.attrs["sampling"] not in SAMPLINGS:
-        raise FieldMapError(f"{source}: attribute 'sampling' must be one of {SAMPLINGS}")
+        raise FieldMapError(f"{source}: attribute 'sampling' must be one of {', '.join(SAMPLINGS)}, "
+                            f"got {ds.attrs['sampling']!r}")
     if _float_attr(ds, "sphere_radius", source) >= _float_attr(ds, "focal_length", source):
         raise FieldMapError(f"{source}: sphere_radius must be smaller than focal_length")
     return ds
+
+
+def _check_intensity(values: np.ndarray, name: str, source: str) -> None:
+    """Intensities are |E|^2: finite and >= 0 where present (NaN marks a missing sample)."""
+    arr = np.asarray(values)
+    if not np.issubdtype(arr.dtype, np.number):
+        raise FieldMapError(f"{source}: variable '{name}' must hold numbers")
+    arr = arr.astype(np.float64)
+    if np.any(np.isinf(arr)):
+        raise FieldMapError(f"{source}: variable '{name}' holds infinite values "
+                            "(a missing sample is NaN)")
+    present = arr[np.isfinite(arr)]
+    if present.size and float(present.min()) < 0.0:
+        raise FieldMapError(f"{source}: variable '{name}' holds negative values (down to "
+                            f"{float(present.min()):.3g}): an intensity |E|^2 is >= 0")
 
 
 def save(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:

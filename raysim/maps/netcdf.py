@@ -1,7 +1,9 @@
 """Atomic NetCDF writing shared by every data contract (FieldMap, SurfaceMap, scans).
 
 A reader never sees a half-written file: the dataset goes to a temporary file in the
-target folder, is flushed to disk, then renamed over the target in one step.
+target folder, is flushed to disk, then renamed over the target in one step. The file gets
+the mode any new file gets under the umask (0644 under 022), not the temporary file's 0600.
+An operating-system failure names the target, never the temporary file.
 """
 
 from __future__ import annotations
@@ -10,7 +12,35 @@ import os
 import tempfile
 from pathlib import Path
 
+import numpy as np
 import xarray as xr
+
+from raysim.files import new_file_mode
+
+
+def canonical_order(ds: xr.Dataset, dims: tuple[str, str], unit: str, source: str,
+                    error: type[Exception]) -> xr.Dataset:
+    """``ds`` with both coordinates of ``dims`` ascending and its 2-D variables in ``dims``
+    order: a legal file may store a coordinate descending, or the variables transposed, and
+    every reader must see the same arrays. A coordinate that is missing, not 1-D, not finite
+    or not strictly monotonic raises ``error`` (one line naming ``source``)."""
+    for coord in dims:
+        if coord not in ds.coords:
+            raise error(f"{source}: missing coordinate '{coord}'")
+        values = np.asarray(ds[coord].values)
+        if values.ndim != 1 or ds[coord].dims != (coord,):
+            raise error(f"{source}: coordinate '{coord}' must be 1-D along its own dimension")
+        if not np.issubdtype(values.dtype, np.number) or not np.all(np.isfinite(values)):
+            raise error(f"{source}: coordinate '{coord}' must hold finite numbers ({unit})")
+        steps = np.diff(values)
+        if values.size > 1 and not (np.all(steps > 0) or np.all(steps < 0)):
+            raise error(f"{source}: coordinate '{coord}' must be strictly monotonic "
+                        "(each value once, in order)")
+        if values.size > 1 and steps[0] < 0:
+            ds = ds.isel({coord: slice(None, None, -1)})
+    if any(ds[name].dims == dims[::-1] for name in ds.data_vars):
+        ds = ds.transpose(*dims, ...)
+    return ds
 
 
 def read(path: str | os.PathLike[str], error: type[Exception]) -> xr.Dataset:
@@ -22,7 +52,7 @@ def read(path: str | os.PathLike[str], error: type[Exception]) -> xr.Dataset:
         with xr.open_dataset(path) as ds:
             return ds.load()
     except Exception as exc:  # every backend failure means "not a NetCDF file we can read"
-        raise error(f"{path}: not a readable NetCDF file ({exc.__class__.__name__})") from exc
+        raise error(f"{path}: not a readable NetCDF file ({exc.__class__.__name__})") from None
 
 
 def write_atomic(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
@@ -33,6 +63,7 @@ def write_atomic(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
     os.close(fd)
     try:
         ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
+        os.chmod(tmp, new_file_mode())
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, path)
@@ -41,6 +72,9 @@ def write_atomic(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
             os.fsync(dir_fd)
         finally:
             os.close(dir_fd)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

@@ -59,7 +59,8 @@ def ideal_go_cell_mean(theta_lo, theta_hi, F: float, R: float, D: float | None =
     """
     a = np.asarray(theta_lo, dtype=np.float64)
     b = np.asarray(theta_hi, dtype=np.float64)
-    b_lit = b if D is None else np.clip(b, a, theta_rim(D, F))
+    # the lit part of the cell ends at the rim image; a cell wholly beyond it gets none
+    b_lit = b if D is None else np.minimum(b, np.maximum(a, theta_rim(D, F)))
     power = (4.0 * F * F / (R * R)) * (1.0 / (1.0 + np.cos(b_lit)) - 1.0 / (1.0 + np.cos(a)))
     return power / (np.cos(a) - np.cos(b))
 

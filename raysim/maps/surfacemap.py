@@ -26,8 +26,8 @@ import xarray as xr
 
 from raysim.errors import SurfaceMapError
 from raysim.maps.aperture import ApertureGrid
-from raysim.maps.netcdf import read, write_atomic
-from raysim.version import __version__
+from raysim.maps.netcdf import canonical_order, read, write_atomic
+from raysim.version import VERSION_ATTR, __version__
 
 REQUIRED_ATTRS = ("solver", "boundary", "harmonic_part", "removed_terms", "focal_length",
                   "diameter", "sphere_radius")
@@ -64,7 +64,7 @@ def surfacemap(grid: ApertureGrid, deformation: np.ndarray, attrs: Mapping[str, 
         "x": ("x", grid.x, {"units": "m", "long_name": "aperture-plane x (vertex frame)"}),
         "y": ("y", grid.y, {"units": "m", "long_name": "aperture-plane y (vertex frame)"}),
     }
-    all_attrs = {"raysim_version": __version__,
+    all_attrs = {VERSION_ATTR: __version__,
                  "created": datetime.now(UTC).isoformat(timespec="seconds"),
                  "Conventions": "CF-1.8", "grid_n": int(grid.N), "grid_step_m": float(grid.h)}
     all_attrs.update({k: _flat(v) for k, v in attrs.items()})
@@ -82,11 +82,17 @@ def _flat(value: Any) -> Any:
     return value
 
 
+def canonical(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
+    """``ds`` in canonical order: x, y ascending and dims (y, x) (a legal file may store either
+    coordinate descending, or the variables transposed)."""
+    return canonical_order(ds, ("y", "x"), "m", source, SurfaceMapError)
+
+
 def validate(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
-    """Check ``ds`` against the contract; raise :class:`SurfaceMapError` naming the first defect."""
+    """Check ``ds`` against the contract and return it in canonical order (:func:`canonical`);
+    raise :class:`SurfaceMapError` naming the first defect."""
+    ds = canonical(ds, source)
     for coord in ("x", "y"):
-        if coord not in ds.coords:
-            raise SurfaceMapError(f"{source}: missing coordinate '{coord}'")
         if ds[coord].attrs.get("units") != "m":
             raise SurfaceMapError(f"{source}: coordinate '{coord}' must be in m")
     if "deformation" not in ds.data_vars:

@@ -12,3 +12,7 @@ Modules:
   field points, bit for bit the sums of the whole (what blocks of sphere points run).
 - ``kernels/``: the Warp kernels of these engines, one module per engine.
 """
+
+from raysim.methods import METHODS, WAVE_METHODS
+
+__all__ = ["METHODS", "WAVE_METHODS"]

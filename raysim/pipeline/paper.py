@@ -7,14 +7,19 @@ N = 256, RRMS 4.06 % in 92 +- 10 s; FFT, RRMS 7.47 %. raysim's rows use the same
 
 from __future__ import annotations
 
+import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import xarray as xr
 
+from raysim.errors import RaysimError
 from raysim.maps.fieldmap import fieldmap
 from raysim.maps.sphere import SphereGrid
+from raysim.scene.scene import check_frequency, check_sphere_cells
 from solver.invert import DEFAULT_REFINE, DEFAULT_SOLVER, invert
+from solver.options import check_options
 
 D, F, R = 110.0, 33.0, 10.0
 FREQUENCY_HZ = 0.3e9
@@ -45,10 +50,18 @@ def paper_fieldmap(scale: float = 1.0, device: str | None = "cpu") -> xr.Dataset
                     attrs={"deformation": f"paper Eq. 8 x {scale:g}"})
 
 
+MAX_SCALE = 50.0  # Eq. 8 x 50: 60 mm peak to peak, far beyond the small-deformation regime
+
+
 def compare(scale: float = 1.0, N: int = 256, refine: int = DEFAULT_REFINE,
             device: str | None = "cpu", field: xr.Dataset | None = None) -> list[Row]:
     """The paper's GO rows beside ours on the same data; RRMS against Eq. 8 times ``scale``."""
     from raysim.surface.deformation import PaperDeformation
+
+    if not (math.isfinite(scale) and 0 < scale <= MAX_SCALE):
+        raise RaysimError(f"--scale must lie in (0, {MAX_SCALE:g}] (1: the paper's 1.2 mm peak to "
+                          f"peak), got {scale:g}")
+    check_options(N=N, refine=refine)
 
     field = paper_fieldmap(scale, device) if field is None else field
     truth = PaperDeformation(D, F, scale)
@@ -70,6 +83,18 @@ def compare(scale: float = 1.0, N: int = 256, refine: int = DEFAULT_REFINE,
         rows.append(Row(method, paper_rrms, paper_seconds, float(result.attrs["rrms"]),
                         float(result.attrs["rms_m"]), time.perf_counter() - start))
     return rows
+
+
+def compare_lines(rows: list[Row], scale: float, N: int) -> list[str]:
+    """The GO comparison as the lines ``raysim paper`` prints."""
+    lines = [f"paper GO case, Eq. 8 x {scale:g}, N = {N}, 90 x 360 cells",
+             f"{'method':44s} {'paper RRMS':>10s} {'paper s':>9s} {'RRMS':>9s} {'RMS um':>8s} "
+             f"{'time s':>7s}"]
+    for row in rows:
+        paper = f"{row.paper_rrms * 100:.2f} %" if row.paper_rrms is not None else "-"
+        lines.append(f"{row.method:44s} {paper:>10s} {row.paper_seconds:>9s} "
+                     f"{row.rrms * 100:7.3f} % {row.rms_m * 1e6:8.2f} {row.seconds:7.2f}")
+    return lines
 
 
 # --- Table 3: PO & PTD data at five frequencies -------------------------------------------
@@ -121,6 +146,67 @@ class SweepRow:
     seconds_invert: float
 
 
+MAX_SWEEP_HZ = 1e11
+
+
+def sweep_options(frequencies: str | Sequence[float], coarse: str | tuple[int, int], *,
+                  N: int = 256, refine: int = DEFAULT_REFINE, wave_max_ghz: float = 0.3) -> dict:
+    """The options of :func:`po_sweep` from the command line's text (``"0.1e9,0.3e9"``,
+    ``"90x36"``), checked before anything runs: keyword arguments for :func:`po_sweep`."""
+    if isinstance(frequencies, str):
+        try:
+            freqs = [float(f) for f in frequencies.split(",") if f.strip()]
+        except ValueError:
+            raise RaysimError(f"--frequencies takes frequencies in Hz separated by commas, got "
+                              f"{frequencies!r}") from None
+    else:
+        freqs = [float(f) for f in frequencies]
+    if not freqs:
+        raise RaysimError("--frequencies names no frequency")
+    for f in freqs:
+        check_frequency(f, "--frequencies")
+        if f > MAX_SWEEP_HZ:
+            raise RaysimError(f"--frequencies: {f:g} Hz is above the sweep's {MAX_SWEEP_HZ:g} Hz "
+                              "(PO costs grow as f^2)")
+    if isinstance(coarse, str):
+        try:
+            n_theta, n_phi = (int(n) for n in coarse.lower().split("x"))
+        except ValueError:
+            raise RaysimError(f"--coarse-3ghz takes a sphere grid such as 90x36, got {coarse!r}") from None
+    else:
+        n_theta, n_phi = coarse
+    check_sphere_cells(n_theta, n_phi, ("--coarse-3ghz n_theta", "--coarse-3ghz n_phi"))
+    if not (math.isfinite(wave_max_ghz) and wave_max_ghz >= 0):
+        raise RaysimError(f"--wave-max-ghz must be a finite number >= 0, got {wave_max_ghz:g}")
+    check_options(N=N, refine=refine)
+    return {"frequencies_hz": tuple(freqs), "coarse": (n_theta, n_phi), "N": N, "refine": refine,
+            "wave_max_hz": wave_max_ghz * 1e9}
+
+
+def sweep_lines(rows: list[SweepRow], N: int, refine: int, wave_max_ghz: float) -> list[str]:
+    """Table 3 beside raysim's rows, as the lines ``raysim paper --po`` prints."""
+    lines = [f"paper Table 3: PO & PTD (rim) data, Eq. 8 (1.2 mm), R = 10 m, N = {N}",
+             f"paper setting: FDM + Gauss-Seidel, 1000 iterations, linear; GO: {DEFAULT_SOLVER} "
+             f"with {refine} GO refinements; wave: {DEFAULT_SOLVER} with {refine} PO + PTD "
+             f"refinements (the default for PO + PTD data; up to {wave_max_ghz:g} GHz here)",
+             f"{'f GHz':>6s} {'sphere grid':>11s} {'paper RMS um':>12s} {'paper RRMS':>10s} "
+             f"{'RMS um':>8s} {'RRMS':>8s} {'GO RMS um':>10s} {'GO RRMS':>9s} "
+             f"{'wave RMS um':>11s} {'wave RRMS':>9s} {'sim s':>7s}"]
+    for r in rows:
+        paper_rms = f"{r.paper_rms_m * 1e6:.2f}" if r.paper_rms_m is not None else "-"
+        paper_rrms = f"{r.paper_rrms * 100:.2f} %" if r.paper_rrms is not None else "-"
+        wave_rms = f"{r.wave_rms_m * 1e6:.2f}" if r.wave_rms_m is not None else "-"
+        wave_rrms = f"{r.wave_rrms * 100:.2f} %" if r.wave_rrms is not None else "-"
+        lines.append(f"{r.frequency_hz / 1e9:6g} {f'{r.n_theta} x {r.n_phi}':>11s} {paper_rms:>12s} "
+                     f"{paper_rrms:>10s} {r.rms_m * 1e6:8.2f} {r.rrms * 100:6.2f} % "
+                     f"{r.default_rms_m * 1e6:10.2f} {r.default_rrms * 100:7.2f} % {wave_rms:>11s} "
+                     f"{wave_rrms:>9s} {r.seconds_simulate:7.0f}")
+    if any(r.n_phi != 360 for r in rows):
+        lines.append("coarse grids (fewer phi cells) keep the CPU time in check; the Eq. 8 "
+                     "deformation is axially symmetric, so they lose nothing it can show")
+    return lines
+
+
 def po_fieldmap(frequency_hz: float, n_theta: int = 90, n_phi: int = 360, edges: str = "rim",
                 device: str | None = "cpu", progress=None) -> xr.Dataset:
     """PO + PTD FieldMap of the paper's case at ``frequency_hz`` on an n_theta x n_phi grid."""
@@ -150,6 +236,7 @@ def po_sweep(frequencies_hz=TABLE3_FREQUENCIES_HZ, N: int = 256,
     from raysim.maps.fieldmap import load, save
     from raysim.surface.deformation import PaperDeformation
 
+    sweep_options(frequencies_hz, coarse, N=N, refine=refine, wave_max_ghz=wave_max_hz / 1e9)
     say = log or (lambda line: None)
     truth = PaperDeformation(D, F, 1.0)
     rows = []

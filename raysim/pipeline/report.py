@@ -10,11 +10,12 @@ figures beside ours.
 from __future__ import annotations
 
 import base64
+import contextlib
 import html
 import io
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -32,10 +33,14 @@ from raysim.render.data import (
     rms,
     surface_panels,
 )
+from raysim.version import VERSION_ATTR
 
 PAPER_CASE = {"diameter": 110.0, "focal_length": 33.0, "sphere_radius": 10.0}
 PAPER_GO = ("paper, GO data: FDM (Gauss-Seidel, N = 256, 1000 iterations) RRMS 4.06 % in 92 ± 10 s; "
             "FFT RRMS 7.47 %")
+
+
+REPORT_FILES = ("report.html", "field.nc", "surface.nc", "figures")
 
 
 def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, method: str | None = None,
@@ -44,9 +49,14 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
            progress: Progress | None = None) -> Path:
     """Simulate a scene (or take a FieldMap), invert it and write the report into ``out_dir``.
 
+    Every option is checked before the simulation starts. The report is built in a temporary
+    folder beside ``out_dir`` and replaces an earlier report there only once it is complete,
+    so a failed run leaves the old report as it was; a folder holding other files is refused.
+
     Parameters
     ----------
-    source : scene TOML file, or a FieldMap NetCDF (``.nc``) already simulated or measured.
+    source : scene TOML file (or a shipped example's name), or a FieldMap NetCDF (``.nc``)
+        already simulated or measured.
     out_dir : folder for ``report.html``, ``field.nc``, ``surface.nc`` and ``figures/``.
     method : simulation method (``go``, ``po``, ``po+ptd``); None takes the scene's ``method``.
     device : Warp device, ``cpu`` or ``cuda``.
@@ -57,37 +67,90 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
         (simulating, inverting, drawing, done).
     Returns the path of ``report.html``.
     """
+    from raysim.files import find_input
     from raysim.maps.fieldmap import load, save
 
     say = progress or silent
-    run_inversion = inversion() if invert else None  # fail before hours of simulation, not after
+    run_inversion = inversion() if invert else None
+    if invert:
+        from solver.options import check_options
+
+        check_options(solver=solver, N=grid, refine=refine)
     timings: dict[str, float] = {}
-    if Path(source).suffix.lower() in (".nc", ".nc4", ".netcdf"):
+    is_field = Path(source).suffix.lower() in (".nc", ".nc4", ".netcdf")
+    if is_field:
         field = load(source)
-        out = _folder(out_dir)
+        inputs = [("FieldMap", Path(source))]
     else:
         from raysim.scene.scene import load_scene
+        from raysim.simulate import check_options as check_simulation
         from raysim.simulate import simulate
 
-        loaded = load_scene(source)
+        loaded = load_scene(find_input(source))
         method = method or loaded.method
-        out = _folder(out_dir)
-        say(f"simulating {loaded.name} ({method})", 0.0)
-        start = time.perf_counter()
-        field = simulate(loaded, method=method, device=device)
-        timings["simulate"] = time.perf_counter() - start
-        save(field, out / "field.nc")
-    surface = None
-    if run_inversion is not None:
-        say("inverting", 0.6)
-        start = time.perf_counter()
-        surface = run_inversion(field, solver=solver, grid=grid, refine=refine, device=device)
-        timings["invert"] = time.perf_counter() - start
-        _save_surface(surface, out / "surface.nc")
-    say("drawing", 0.8)
-    page = write_report(field, surface, out, timings=timings)
+        check_simulation(loaded, method=method, device=device)
+        inputs = loaded.inputs()
+    target = _target(out_dir, inputs)
+    with _staging(target) as out:
+        if not is_field:
+            say(f"simulating {loaded.name} ({method})", 0.0)
+            start = time.perf_counter()
+            field = simulate(loaded, method=method, device=device)
+            timings["simulate"] = time.perf_counter() - start
+            save(field, out / "field.nc")
+        surface = None
+        if run_inversion is not None:
+            say("inverting", 0.6)
+            start = time.perf_counter()
+            surface = run_inversion(field, solver=solver, grid=grid, refine=refine, device=device)
+            timings["invert"] = time.perf_counter() - start
+            _save_surface(surface, out / "surface.nc")
+        say("drawing", 0.8)
+        write_report(field, surface, out, timings=timings)
     say("done", 1.0)
-    return page
+    return target / "report.html"
+
+
+def _target(out_dir: str | os.PathLike[str], inputs) -> Path:
+    """The report folder, checked: not a file, not holding an input, holding nothing but an
+    earlier report."""
+    from raysim.files import check_output_folder
+
+    target = Path(out_dir).expanduser()
+    if target.exists() and not target.is_dir():
+        raise RenderError(f"{target}: exists and is not a folder")
+    check_output_folder(target, inputs, RenderError)
+    if target.is_dir():
+        other = sorted(p.name for p in target.iterdir() if p.name not in REPORT_FILES)
+        if other:
+            raise RenderError(f"{target}: holds files that are not a raysim report ({other[0]}, ...); "
+                              "give a new or empty folder")
+    return target
+
+
+@contextlib.contextmanager
+def _staging(target: Path) -> Iterator[Path]:
+    """A temporary folder beside ``target`` that replaces it when the block completes."""
+    import shutil
+    import tempfile
+
+    from raysim.files import new_folder_mode
+
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
+    try:
+        yield tmp
+        os.chmod(tmp, new_folder_mode())  # mkdtemp's folder is private (0700)
+        old = None
+        if target.exists():
+            old = target.with_name(f".{target.name}.old-{os.getpid()}")
+            os.replace(target, old)
+        os.replace(tmp, target)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
 
 
 def inversion() -> Callable[..., xr.Dataset]:
@@ -264,7 +327,7 @@ pre {{ background: #f5f5f5; padding: 1em; overflow-x: auto; }}
 <h2>Figures</h2>
 {"".join(blocks)}
 {scene_html}
-<p>raysim {html.escape(str(field.attrs.get("raysim_version", "")))}; FieldMap and SurfaceMap beside this
+<p>raysim {html.escape(str(field.attrs.get(VERSION_ATTR, "")))}; FieldMap and SurfaceMap beside this
 page (field.nc, surface.nc) when the run wrote them.</p>
 </body></html>
 """

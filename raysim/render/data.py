@@ -43,7 +43,21 @@ def open_map(path: str | os.PathLike[str]) -> tuple[str, xr.Dataset]:
     Raises :class:`RenderError` (one line) for a missing, unreadable or unknown file.
     """
     loaded = read(path, RenderError)
-    return kind_of(loaded, str(path)), loaded
+    kind = kind_of(loaded, str(path))
+    return kind, canonical_order(loaded, kind, str(path))
+
+
+def canonical_order(ds: xr.Dataset, kind: str, source: str) -> xr.Dataset:
+    """The map in its contract's canonical order (ascending coordinates, dims (theta, phi) or
+    (y, x)), whatever order the file stored it in."""
+    from raysim.maps.fieldmap import canonical as field_canonical
+    from solver.errors import SurfaceMapError
+    from solver.surface import canonical as surface_canonical
+
+    try:
+        return field_canonical(ds, source) if kind == "field" else surface_canonical(ds, source)
+    except (FieldMapError, SurfaceMapError) as exc:
+        raise RenderError(str(exc)) from exc
 
 
 def kind_of(ds: xr.Dataset, source: str = "dataset") -> str:
@@ -57,7 +71,9 @@ def kind_of(ds: xr.Dataset, source: str = "dataset") -> str:
             raise RenderError(str(exc)) from exc
         return "field"
     if "deformation" in ds.data_vars and "x" in ds.coords and "y" in ds.coords:
-        check_surface(ds, source)
+        from solver.surface import canonical
+
+        check_surface(canonical(ds, source), source)
         return "surface"
     raise RenderError(f"{source}: neither a FieldMap (theta, phi, intensity) nor a SurfaceMap "
                       "(x, y, deformation)")

@@ -17,7 +17,6 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from raysim.errors import RaysimError
 from raysim.maps.fieldmap import grid_of
 from raysim.render import backend
 from raysim.render.data import Quantity, field_quantity, field_subtitle, field_title, frequency_text
@@ -65,18 +64,14 @@ def _reflector(D: float, F: float, text: str | None) -> tuple[Any, Any, str]:
     from raysim.surface.mesh import paraboloid
 
     layout, what = None, "ideal paraboloid (from the map's attributes)"
-    if text:
-        try:
-            from raysim.scene.scene import parse_scene
+    from raysim.scene.scene import scene_of
 
-            scene = parse_scene(text, source="FieldMap scene")
-            if scene.dish.mesh is None and scene.dish.diameter and scene.dish.focal_length:
-                D, F = scene.D, scene.F
-                layout = scene.panels
-                what = (f"{layout.n_panels} panels, {layout.gap * 1e3:g} mm gaps" if layout is not None
-                        else "one-piece paraboloid")
-        except RaysimError:
-            pass  # a scene that refers to files not present here: draw the ideal dish
+    scene = scene_of({"scene": text})  # None: no scene, or one naming files not present here
+    if scene is not None and scene.dish.mesh is None and scene.dish.diameter and scene.dish.focal_length:
+        D, F = scene.D, scene.F
+        layout = scene.panels
+        what = (f"{layout.n_panels} panels, {layout.gap * 1e3:g} mm gaps" if layout is not None
+                else "one-piece paraboloid")
     dish = paraboloid(D, F, resolution=D / DISH_CELLS, layout=layout)
     mesh = polydata(dish.vertices, dish.faces)
     edges = mesh.extract_feature_edges(boundary_edges=True, feature_edges=False, manifold_edges=False,

@@ -18,7 +18,6 @@ import numpy as np
 import xarray as xr
 from scipy.interpolate import RegularGridInterpolator
 
-from raysim.errors import RaysimError
 from raysim.maps.aperture import ApertureGrid
 from raysim.render import backend, charts
 from raysim.render.backend import RenderError
@@ -57,16 +56,10 @@ class SceneTruth:
 def scene_deformation(field: xr.Dataset) -> SceneTruth | None:
     """The true deformation of the scene the FieldMap carries, or None (measured scan, or a
     scene that refers to files not present here)."""
-    text = field.attrs.get("scene")
-    if not text:
-        return None
-    try:
-        from raysim.scene.scene import parse_scene
+    from raysim.scene.scene import scene_of
 
-        scene = parse_scene(str(text), source="FieldMap scene")
-    except RaysimError:
-        return None
-    return SceneTruth(scene.deformation, scene.panels)
+    scene = scene_of(field)
+    return None if scene is None else SceneTruth(scene.deformation, scene.panels)
 
 
 def fa_on_aperture(field: xr.Dataset, x: np.ndarray) -> np.ndarray:

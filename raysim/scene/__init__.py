@@ -2,11 +2,13 @@
 
 Modules:
 
-- ``schema``: key checks of TOML tables (unknown keys, types, units in the key names).
 - ``deformations``: the ``[[deformation]]`` tables -> a :class:`~raysim.surface.deformation.Deformation`.
-- ``scene``: the scene itself (dish, panels, source, sphere, method) and :func:`load_scene`.
+- ``scene``: the scene itself (dish, panels, source, sphere, method), :func:`load_scene` and
+  :func:`scene_of` (the scene a FieldMap records, re-parsed in one place).
+
+The keys are checked by the one TOML checker, :mod:`raysim.tomlschema`.
 """
 
-from raysim.scene.scene import Dish, Scene, Source, load_scene, parse_scene
+from raysim.scene.scene import Dish, Scene, Source, load_scene, parse_scene, scene_of
 
-__all__ = ["Dish", "Scene", "Source", "load_scene", "parse_scene"]
+__all__ = ["Dish", "Scene", "Source", "load_scene", "parse_scene", "scene_of"]

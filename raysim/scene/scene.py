@@ -11,19 +11,22 @@ and the rest of raysim sees metres, hertz and radians. Every defect raises
 from __future__ import annotations
 
 import math
-import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from raysim.constants import wavelength
 from raysim.errors import SceneError
+from raysim.files import find_input
 from raysim.maps.sphere import SphereGrid, theta_rim
+from raysim.methods import METHODS
 from raysim.scene.deformations import deformation_of
-from raysim.scene.schema import INT, LIST, NUM, STR, TABLE, TABLES, KeyChecker, resolve
 from raysim.surface.deformation import Deformation
 from raysim.surface.panels import PanelLayout
+from raysim.tomlschema import Table, parse_toml, read_text
 
 DEFAULT_RESOLUTION = 0.15  # m: triangle edge that keeps GO ratios within 1 % of the signal
 
@@ -76,7 +79,8 @@ class Source:
 
 @dataclass(frozen=True)
 class Scene:
-    """A validated scene; all values SI (m, Hz, rad). ``text`` is the TOML it came from."""
+    """A validated scene; all values SI (m, Hz, rad). ``text`` is the TOML it came from,
+    ``path`` its file and ``files`` the files it names."""
 
     name: str
     dish: Dish
@@ -88,6 +92,12 @@ class Scene:
     text: str = ""
     path: Path | None = None
     method: str = "go"
+    files: tuple[Path, ...] = ()  # the files the scene names (meshes, maps, panel tables)
+
+    def inputs(self) -> list[tuple[str, Path]]:
+        """(what, path) of every file this scene was read from, for output checks."""
+        out = [("scene file", self.path)] if self.path is not None else []
+        return out + [("file the scene names", f) for f in self.files]
 
     @property
     def F(self) -> float:
@@ -106,172 +116,212 @@ class Scene:
         """The same scene with a new frequency (Hz) or sphere grid size, checked again."""
         scene = self
         if frequency_hz is not None:
-            _check_frequency(frequency_hz, "--frequency")
+            check_frequency(frequency_hz, "--frequency")
             scene = replace(scene, source=replace(scene.source, frequency_hz=float(frequency_hz)))
         if n_theta is not None or n_phi is not None:
-            for name, value in (("--n-theta", n_theta), ("--n-phi", n_phi)):
-                if value is not None and value < 1:
-                    raise SceneError(f"{name} must be >= 1, got {value}")
-            sphere = replace(scene.sphere, n_theta=n_theta or scene.sphere.n_theta,
-                             n_phi=n_phi or scene.sphere.n_phi)
+            sphere = replace(scene.sphere,
+                             n_theta=scene.sphere.n_theta if n_theta is None else n_theta,
+                             n_phi=scene.sphere.n_phi if n_phi is None else n_phi)
+            check_sphere_cells(sphere.n_theta, sphere.n_phi, ("--n-theta", "--n-phi"))
             scene = replace(scene, sphere=sphere)
         return scene
 
 
-# the simulation a scene is made for (``raysim simulate`` uses it unless --method says otherwise)
-SCENE_METHODS = ("go", "po", "po+ptd")
+# what ``raysim simulate`` runs unless --method says otherwise (defined in raysim.methods)
+SCENE_METHODS = METHODS
 
-# --- the schema: section -> key -> expected kind ------------------------------------------
-_SCHEMA: dict[str, dict[str, str]] = {
-    "": {"name": STR, "description": STR, "method": STR, "dish": TABLE, "panels": TABLE,
-         "deformation": TABLES, "source": TABLE, "sphere": TABLE, "go": TABLE},
-    "dish": {"diameter_m": NUM, "focal_length_m": NUM, "resolution_m": NUM, "mesh": STR,
-             "ideal_mesh": STR, "mesh_unit_m": NUM},
-    "panels": {"ring_edges_m": LIST, "panels_per_ring": LIST, "gap_m": NUM, "phi0_deg": NUM},
-    "source": {"frequency_hz": NUM, "incidence_theta_deg": NUM, "incidence_phi_deg": NUM,
-               "polarization_deg": NUM},
-    "sphere": {"radius_m": NUM, "n_theta": INT, "n_phi": INT, "theta_min_deg": NUM,
-               "theta_max_deg": NUM, "phi_min_deg": NUM, "phi_max_deg": NUM},
-    "go": {"subdivisions": INT},
+# the keys of a scene file: the top level and each table
+SCENE_KEYS = ("name", "description", "method", "dish", "panels", "deformation", "source",
+              "sphere", "go")
+TABLE_KEYS = {
+    "dish": ("diameter_m", "focal_length_m", "resolution_m", "mesh", "ideal_mesh", "mesh_unit_m"),
+    "panels": ("ring_edges_m", "panels_per_ring", "gap_m", "phi0_deg"),
+    "source": ("frequency_hz", "incidence_theta_deg", "incidence_phi_deg", "polarization_deg"),
+    "sphere": ("radius_m", "n_theta", "n_phi", "theta_min_deg", "theta_max_deg", "phi_min_deg",
+               "phi_max_deg"),
+    "go": ("subdivisions",),
 }
+
+# the probe sphere's grid: one set of bounds for the scene file and the --n-theta/--n-phi options
+MAX_N_THETA = 9000
+MAX_N_PHI = 36000
+MAX_CELLS = 10_000_000
+# the generated mesh: triangles of about resolution^2 / 2 over the aperture
+MAX_FACES = 10_000_000
+
+
+def check_sphere_cells(n_theta: int, n_phi: int, names: tuple[str, str] = ("n_theta", "n_phi"),
+                       source: str = "") -> None:
+    """Refuse a probe-sphere grid outside 1..MAX_N_THETA x 1..MAX_N_PHI or over MAX_CELLS cells
+    (the one check of the scene file's ``[sphere]`` and the ``--n-theta``/``--n-phi`` options)."""
+    prefix = f"{source}: " if source else ""
+    for name, value, hi in ((names[0], n_theta, MAX_N_THETA), (names[1], n_phi, MAX_N_PHI)):
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= hi:
+            raise SceneError(f"{prefix}{name} must be an integer in 1..{hi}, got {value!r}")
+    if n_theta * n_phi > MAX_CELLS:
+        raise SceneError(f"{prefix}{names[0]} x {names[1]} = {n_theta * n_phi:,} cells is over "
+                         f"the limit of {MAX_CELLS:,}")
+
+
+def scene_of(field: Any) -> Scene | None:
+    """The scene a FieldMap records (its ``scene`` attribute; ``field`` is the dataset or its
+    attributes), or None.
+
+    None when there is no scene (a measured scan) and when the recorded text no longer parses
+    here (a mesh or map file it names is absent): every reader works from the FieldMap's
+    attributes alone, and a recorded scene only adds to them (the truth, the panel layout).
+    """
+    attrs = getattr(field, "attrs", field)
+    text = attrs.get("scene") if isinstance(attrs, Mapping) else None
+    if not text:
+        return None
+    try:
+        return parse_scene(str(text), source="the FieldMap's scene")
+    except SceneError:
+        return None
+
+
 def load_scene(path: str | Path) -> Scene:
-    """Read and validate a scene TOML file (relative file names resolve beside it)."""
-    path = Path(path)
-    if not path.is_file():
-        raise SceneError(f"{path}: no such scene file")
-    text = path.read_text(encoding="utf-8")
+    """Read and validate a scene TOML file (relative file names resolve beside it). A name
+    that is not an existing path may name a shipped example (``paper_go``)."""
+    path = find_input(path)
+    text = read_text(path, "scene", SceneError)
     return parse_scene(text, source=str(path), base=path.parent)
 
 
 def parse_scene(text: str, source: str = "scene", base: Path | None = None) -> Scene:
     """Validate scene TOML ``text``; ``source`` names it in messages, ``base`` resolves files."""
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{source}: not valid TOML ({exc})") from exc
+    top = Table(parse_toml(text, source, SceneError), source=source, error=SceneError,
+                keys=SCENE_KEYS)
     base = base or Path.cwd()
-    ctx = KeyChecker(source)
-    ctx.check_keys(raw, "", _SCHEMA[""])
-    dish = _dish(ctx, raw.get("dish", {}), base)
-    panels = _panels(ctx, raw.get("panels"), dish)
-    source_ = _source(ctx, raw.get("source", {}))
-    sphere = _sphere(ctx, raw.get("sphere", {}), dish)
-    go = raw.get("go", {})
-    ctx.check_keys(go, "go", _SCHEMA["go"])
-    subdivisions = ctx.integer(go, "go", "subdivisions", 1, lo=1, hi=16)
-    deformation = deformation_of(ctx, raw.get("deformation", []), dish.diameter, dish.focal_length,
+    name = top.string("name", None) or (Path(source).stem if source != "scene" else "scene")
+    top.string("description", "")
+    method = top.string("method", "go", choices=SCENE_METHODS)
+    dish = _dish(top.sub("dish", keys=TABLE_KEYS["dish"]), base)
+    panels = _panels(top.sub("panels", keys=TABLE_KEYS["panels"]) if top.has("panels") else None,
+                     dish)
+    source_ = _source(top.sub("source", keys=TABLE_KEYS["source"]))
+    sphere = _sphere(top.sub("sphere", keys=TABLE_KEYS["sphere"]), dish)
+    go = top.sub("go", keys=TABLE_KEYS["go"])
+    subdivisions = go.integer("subdivisions", 1, lo=1, hi=16)
+    go.done()
+    deformation = deformation_of(top.tables("deformation"), dish.diameter, dish.focal_length,
                                  panels, base)
-    name = raw.get("name") or (Path(source).stem if source != "scene" else "scene")
-    method = raw.get("method", "go")
-    if method not in SCENE_METHODS:
-        raise ctx.fail("", f"'method' must be one of {', '.join(SCENE_METHODS)}, got {method!r}")
+    top.done()
     return Scene(name=str(name), dish=dish, panels=panels, deformation=deformation,
                  source=source_, sphere=sphere, subdivisions=subdivisions, text=text,
-                 path=Path(source) if source != "scene" else None, method=method)
+                 path=Path(source) if source != "scene" else None, method=method,
+                 files=tuple(top.files))
 
 
-def _dish(ctx: KeyChecker, table: dict, base: Path) -> Dish:
-    ctx.check_keys(table, "dish", _SCHEMA["dish"])
-    mesh = table.get("mesh")
-    mesh_path = resolve(ctx, base, mesh, "dish.mesh") if mesh else None
-    ideal = table.get("ideal_mesh")
-    ideal_path = resolve(ctx, base, ideal, "dish.ideal_mesh") if ideal else None
+def _dish(t: Table, base: Path) -> Dish:
+    mesh_path = t.file("mesh", base, None)
+    ideal_path = t.file("ideal_mesh", base, None)
     if ideal_path and not mesh_path:
-        raise ctx.fail("", "'dish.ideal_mesh' needs 'dish.mesh'")
+        raise t.fail("'dish.ideal_mesh' needs 'dish.mesh'")
     D = F = None
-    if "diameter_m" in table or not mesh_path:
-        D = ctx.number(table, "dish", "diameter_m", lo=0.0, lo_open=True)
+    if t.has("diameter_m") or not mesh_path:
+        D = t.number("diameter_m", lo=0.0, lo_open=True, unit="m")
         if D > 1000.0:
-            raise ctx.fail("", f"'dish.diameter_m' = {D:g} m is not a dish: is it in mm?")
-    if "focal_length_m" in table or not mesh_path:
-        F = ctx.number(table, "dish", "focal_length_m", lo=0.0, lo_open=True)
+            raise t.fail(f"'dish.diameter_m' = {D:g} m is not a dish: is it in mm?")
+    if t.has("focal_length_m") or not mesh_path:
+        F = t.number("focal_length_m", lo=0.0, lo_open=True, unit="m")
         if F > 1000.0:
-            raise ctx.fail("", f"'dish.focal_length_m' = {F:g} m is not a dish: is it in mm?")
+            raise t.fail(f"'dish.focal_length_m' = {F:g} m is not a dish: is it in mm?")
     size = D if D is not None else 100.0
-    resolution = ctx.number(table, "dish", "resolution_m", DEFAULT_RESOLUTION, lo=0.0, lo_open=True)
+    resolution = t.number("resolution_m", DEFAULT_RESOLUTION, lo=0.0, lo_open=True, unit="m")
     if resolution > size / 8:
-        raise ctx.fail("", f"'dish.resolution_m' = {resolution:g} m is coarser than D/8")
-    if D is not None and resolution < D / 20000:
-        raise ctx.fail("", f"'dish.resolution_m' = {resolution:g} m would make billions of triangles")
-    unit = ctx.number(table, "dish", "mesh_unit_m", 1.0, lo=0.0, lo_open=True)
+        raise t.fail(f"'dish.resolution_m' = {resolution:g} m is coarser than D/8")
+    if D is not None and mesh_path is None:
+        area = math.pi * (D / 2) ** 2
+        faces = 2.0 * area / resolution**2
+        if faces > MAX_FACES:
+            raise t.fail(f"'dish.resolution_m' = {resolution:g} m would make about "
+                         f"{faces / 1e6:.0f} million triangles (at most {MAX_FACES / 1e6:.0f} "
+                         f"million: resolution_m >= {math.sqrt(2 * area / MAX_FACES):.3g} m)")
+    unit = t.number("mesh_unit_m", 1.0, lo=0.0, lo_open=True, unit="m")
+    t.done()
     return Dish(D, F, resolution, mesh_path, ideal_path, unit)
 
 
-def _panels(ctx: KeyChecker, table: dict | None, dish: Dish) -> PanelLayout | None:
-    if table is None:
+def _panels(t: Table | None, dish: Dish) -> PanelLayout | None:
+    if t is None:
         return None
-    ctx.check_keys(table, "panels", _SCHEMA["panels"])
-    if "ring_edges_m" not in table or "panels_per_ring" not in table:
-        raise ctx.fail("", "[panels] needs 'ring_edges_m' and 'panels_per_ring'")
-    edges = table["ring_edges_m"]
-    counts = table["panels_per_ring"]
-    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in edges):
-        raise ctx.fail("", "'panels.ring_edges_m' must be a list of numbers (m)")
-    if not all(isinstance(v, int) and not isinstance(v, bool) for v in counts):
-        raise ctx.fail("", "'panels.panels_per_ring' must be a list of integers")
-    gap = ctx.number(table, "panels", "gap_m", 0.0, lo=0.0)
+    if not t.has("ring_edges_m") or not t.has("panels_per_ring"):
+        raise t.fail("the panels table needs 'panels.ring_edges_m' and 'panels.panels_per_ring'")
+    edges = t.numbers("ring_edges_m", min_length=2, lo=0.0, what=" (m)")
+    counts = t.numbers("panels_per_ring", integer=True, min_length=1, lo=1)
+    gap = t.number("gap_m", 0.0, lo=0.0, unit="m")
     if gap > 0.5:
-        raise ctx.fail("", f"'panels.gap_m' = {gap:g} m is wider than any panel gap: is it in mm?")
+        raise t.fail(f"'panels.gap_m' = {gap:g} m is wider than any panel gap: is it in mm?")
     if dish.diameter is not None and not math.isclose(edges[-1], dish.diameter / 2, rel_tol=1e-9):
-        raise ctx.fail("", f"'panels.ring_edges_m' must end at the rim D/2 = {dish.diameter / 2:g} m, "
-                       f"got {edges[-1]:g}")
-    phi0 = math.radians(ctx.number(table, "panels", "phi0_deg", 0.0))
+        raise t.fail(f"'panels.ring_edges_m' must end at the rim D/2 = {dish.diameter / 2:g} m, "
+                     f"got {edges[-1]:g}")
+    phi0 = t.angle("phi0_deg", 0.0)
+    t.done()
     try:
-        layout = PanelLayout(tuple(float(e) for e in edges), tuple(counts), gap, phi0)
+        layout = PanelLayout(edges, counts, gap, phi0)
     except ValueError as exc:
-        raise ctx.fail("", f"[panels] {exc}") from exc
+        raise t.fail(f"'panels': {exc}") from exc
     for ring in range(layout.n_rings):
         lo, hi = layout.radial_limits(ring)
         if hi - lo < 4 * gap or hi <= lo:
-            raise ctx.fail("", f"'panels.gap_m' = {gap:g} m leaves ring {ring} no panel area")
+            raise t.fail(f"'panels.gap_m' = {gap:g} m leaves ring {ring} no panel area")
     return layout
 
 
-def _check_frequency(f: float, name: str) -> None:
-    if not f > 0:
-        raise SceneError(f"{name} must be > 0 Hz, got {f:g}")
+def check_frequency(f: float, name: str) -> None:
+    """Refuse a frequency (Hz) that is not a finite microwave one (1 MHz .. 10 THz)."""
+    if not math.isfinite(f) or not f > 0:
+        raise SceneError(f"{name} must be a finite frequency > 0 Hz, got {f:g}")
     if f < 1e6:
         raise SceneError(f"{name} = {f:g} is in Hz: {f:g} Hz is not a microwave; "
                          f"for {f:g} GHz write {f * 1e9:g}")
+    if f > MAX_FREQUENCY_HZ:
+        raise SceneError(f"{name} = {f:g} Hz is above {MAX_FREQUENCY_HZ:g} Hz (10 THz): "
+                         "not a radio telescope's frequency")
 
 
-def _source(ctx: KeyChecker, table: dict) -> Source:
-    ctx.check_keys(table, "source", _SCHEMA["source"])
-    f = ctx.number(table, "source", "frequency_hz")
+MAX_FREQUENCY_HZ = 1e13
+
+
+def _source(t: Table) -> Source:
+    f = t.number("frequency_hz", unit="Hz")
     try:
-        _check_frequency(f, "'source.frequency_hz'")
+        check_frequency(f, "'source.frequency_hz'")
     except SceneError as exc:
-        raise ctx.fail("", str(exc)) from exc
-    t = ctx.number(table, "source", "incidence_theta_deg", 0.0, lo=0.0)
-    if t >= 90.0:
-        raise ctx.fail("", f"'source.incidence_theta_deg' = {t:g}: the wave must come from above (< 90)")
-    p = ctx.number(table, "source", "incidence_phi_deg", 0.0)
-    pol = ctx.number(table, "source", "polarization_deg", 0.0)
-    return Source(f, math.radians(t), math.radians(p), math.radians(pol))
+        raise t.fail(str(exc)) from exc
+    theta = t.number("incidence_theta_deg", 0.0, lo=0.0, hi=90.0, hi_open=True, unit="deg")
+    phi = t.number("incidence_phi_deg", 0.0, unit="deg")
+    pol = t.number("polarization_deg", 0.0, unit="deg")
+    t.done()
+    return Source(f, math.radians(theta), math.radians(phi), math.radians(pol))
 
 
-def _sphere(ctx: KeyChecker, table: dict, dish: Dish) -> SphereGrid:
-    ctx.check_keys(table, "sphere", _SCHEMA["sphere"])
-    R = ctx.number(table, "sphere", "radius_m", lo=0.0, lo_open=True)
+def _sphere(t: Table, dish: Dish) -> SphereGrid:
+    R = t.number("radius_m", lo=0.0, lo_open=True, unit="m")
     if dish.focal_length is not None and R >= dish.focal_length:
-        raise ctx.fail("", f"'sphere.radius_m' = {R:g} m must be smaller than the focal length "
-                       f"{dish.focal_length:g} m (the sphere would cut the dish)")
-    n_theta = ctx.integer(table, "sphere", "n_theta", 90, lo=1, hi=20000)
-    n_phi = ctx.integer(table, "sphere", "n_phi", 360, lo=1, hi=40000)
-    t0 = ctx.number(table, "sphere", "theta_min_deg", 0.0, lo=0.0)
-    t1 = ctx.number(table, "sphere", "theta_max_deg", 90.0, hi=90.0)
+        raise t.fail(f"'sphere.radius_m' = {R:g} m must be smaller than the focal length "
+                     f"{dish.focal_length:g} m (the sphere would cut the dish)")
+    n_theta = t.integer("n_theta", 90)
+    n_phi = t.integer("n_phi", 360)
+    try:
+        check_sphere_cells(n_theta, n_phi, ("'sphere.n_theta'", "'sphere.n_phi'"))
+    except SceneError as exc:
+        raise t.fail(str(exc)) from exc
+    t0 = t.number("theta_min_deg", 0.0, lo=0.0, unit="deg")
+    t1 = t.number("theta_max_deg", 90.0, hi=90.0, unit="deg")
     if t1 <= t0:
-        raise ctx.fail("", f"'sphere.theta_max_deg' = {t1:g} must exceed theta_min_deg = {t0:g}")
+        raise t.fail(f"'sphere.theta_max_deg' = {t1:g} must exceed theta_min_deg = {t0:g}")
     if dish.diameter is not None and dish.focal_length is not None:
         rim = math.degrees(theta_rim(dish.diameter, dish.focal_length))
         if t0 >= rim:
-            raise ctx.fail("", f"'sphere.theta_min_deg' = {t0:g} is beyond the rim image at "
-                           f"{rim:.2f} deg: the sphere would see no reflection")
-    p0 = ctx.number(table, "sphere", "phi_min_deg", 0.0)
-    p1 = ctx.number(table, "sphere", "phi_max_deg", p0 + 360.0)
+            raise t.fail(f"'sphere.theta_min_deg' = {t0:g} is beyond the rim image at "
+                         f"{rim:.2f} deg: the sphere would see no reflection")
+    p0 = t.number("phi_min_deg", 0.0, lo=-360.0, hi=360.0, unit="deg")
+    p1 = t.number("phi_max_deg", p0 + 360.0, lo=-360.0, hi=720.0, unit="deg")
     if not 0 < p1 - p0 <= 360.0:
-        raise ctx.fail("", "'sphere.phi_max_deg' - 'phi_min_deg' must lie in (0, 360]")
+        raise t.fail("'sphere.phi_max_deg' - 'phi_min_deg' must lie in (0, 360]")
+    t.done()
     return SphereGrid(R, n_theta, n_phi, math.radians(t0), math.radians(t1),
                       math.radians(p0), math.radians(p1))
-
-

@@ -6,6 +6,7 @@ Modules:
   paper's Eq. 8, Zernike terms, Gaussian bumps, rigid panel errors).
 - ``gridded``: a deformation given on a regular grid, and the harmonic (Laplace) fill of
   missing grid cells that the gridded maps and the solver share.
+- ``mapfile``: deformation maps from files (CSV ``x,y,dz``, NetCDF), read and checked.
 - ``panels``: ring layouts of panels with gaps.
 - ``mesh``: trimesh reflector meshes (ideal paraboloid, deformed twin on the same
   triangulation, panels with gaps, meshes loaded from files) and their smooth surfaces.

@@ -126,47 +126,8 @@ class GriddedMap(Deformation):
 
     @classmethod
     def from_file(cls, path: str | Path, scale: float = 1.0) -> GriddedMap:
-        """Read a map: NetCDF with coords x, y (m) and ``deformation`` (m), or CSV x,y,dz (m).
+        """Read a map: NetCDF with coords x, y (m) and ``deformation`` (m), or CSV x,y,dz (m)
+        (read and checked by :func:`raysim.surface.mapfile.read_map`)."""
+        from raysim.surface.mapfile import read_map
 
-        The CSV rows must fill a regular grid (any order).
-        """
-        path = Path(path)
-        if not path.is_file():
-            raise SceneError(f"deformation map {path}: no such file")
-        if path.suffix.lower() in (".nc", ".nc4", ".netcdf"):
-            import xarray as xr
-
-            try:
-                with xr.open_dataset(path) as ds:
-                    var = "deformation" if "deformation" in ds else "dz"
-                    if var not in ds or "x" not in ds.coords or "y" not in ds.coords:
-                        raise SceneError(f"deformation map {path}: needs coords x, y and "
-                                         "variable 'deformation' (m)")
-                    units = ds[var].attrs.get("units", "m")
-                    if units != "m":
-                        raise SceneError(f"deformation map {path}: '{var}' must be in m, got {units!r}")
-                    arr = ds[var].transpose("y", "x")
-                    return cls(ds["x"].values, ds["y"].values, arr.values, scale)
-            except (OSError, ValueError) as exc:
-                if isinstance(exc, SceneError):
-                    raise
-                raise SceneError(f"deformation map {path}: unreadable ({exc})") from exc
-        return cls._from_csv(path, scale)
-
-    @classmethod
-    def _from_csv(cls, path: Path, scale: float) -> GriddedMap:
-        try:
-            data = np.genfromtxt(path, delimiter=",", names=True, dtype=np.float64)
-        except ValueError as exc:
-            raise SceneError(f"deformation map {path}: bad CSV ({exc})") from exc
-        if data.dtype.names is None or not {"x", "y", "dz"} <= set(data.dtype.names):
-            raise SceneError(f"deformation map {path}: CSV header must be x,y,dz (m)")
-        x, y, dz = (np.atleast_1d(data[k]) for k in ("x", "y", "dz"))
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
-            raise SceneError(f"deformation map {path}: x and y must be numbers on every row")
-        xs, ys = np.unique(x), np.unique(y)
-        if len(xs) * len(ys) != len(x):
-            raise SceneError(f"deformation map {path}: rows do not fill a regular x-y grid")
-        grid = np.full((len(ys), len(xs)), np.nan)
-        grid[np.searchsorted(ys, y), np.searchsorted(xs, x)] = dz
-        return cls(xs, ys, grid, scale)
+        return read_map(path, scale)

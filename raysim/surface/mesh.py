@@ -322,6 +322,10 @@ def load_reflector(path: str | Path, unit: float = 1.0, F: float | None = None,
     return ideal, deformed, fit
 
 
+MAX_MESH_SPAN_M = 1000.0  # the largest dish this project is for is 110 m
+MIN_MESH_SPAN_M = 0.1
+
+
 def _read_mesh(path: str | Path, unit: float):
     import trimesh
 
@@ -335,6 +339,16 @@ def _read_mesh(path: str | Path, unit: float):
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise MeshError(f"{path}: holds no triangles")
     mesh.apply_scale(unit)
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    if not np.all(np.isfinite(vertices)):
+        raise MeshError(f"{path}: holds vertices that are not finite numbers")
+    span = float(np.max(np.ptp(vertices[:, :2], axis=0)))
+    if span > MAX_MESH_SPAN_M:
+        raise MeshError(f"{path}: spans {span:g} m across with dish.mesh_unit_m = {unit:g}: not a "
+                        f"dish in metres (is the file in mm? then set dish.mesh_unit_m = 0.001)")
+    if span < MIN_MESH_SPAN_M:
+        raise MeshError(f"{path}: spans only {span:g} m across with dish.mesh_unit_m = {unit:g}: "
+                        "is dish.mesh_unit_m right?")
     return mesh
 
 

@@ -1,10 +1,8 @@
-"""Shared helpers for the hardware tests: small plans, rig files, synthetic FieldMaps, the CLI."""
+"""Shared helpers for the hardware tests: small plans, rig files, synthetic FieldMaps; the CLI
+runners are the suite's (tests/cli.py)."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +10,7 @@ import pytest
 
 from raysim.maps.fieldmap import fieldmap, save
 from raysim.maps.sphere import SphereGrid, ideal_go_intensity
+from tests.cli import cli_env, error_line, run_cli  # noqa: F401  (the tests import them from here)
 
 ROOT = Path(__file__).resolve().parents[2]
 F, D, R = 33.0, 110.0, 10.0
@@ -111,41 +110,7 @@ def fine_field(tmp_path: Path) -> Path:
     return write_field(tmp_path / "field.nc", SphereGrid(R, 45, 90))
 
 
-def run_cli(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
-    """Run ``python -m raysim.cli ARGS`` with this worktree first on the path."""
-    return subprocess.run([sys.executable, "-m", "raysim.cli", *args], capture_output=True,
-                          text=True, timeout=timeout, env=cli_env(), cwd=ROOT)
-
-
-def cli_env() -> dict[str, str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
-    env["COLUMNS"] = "200"
-    return env
-
-
-def error_line(stderr: str) -> str:
-    """The single non-empty line of a failed command's stderr (asserts there is one)."""
-    lines = [line for line in stderr.splitlines() if line.strip()]
-    assert len(lines) == 1, stderr
-    return lines[0]
-
-
 @pytest.fixture
-def raysim_main(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch):
-    """Run ``raysim.cli.main`` in this process: (exit status, stdout, stderr)."""
-    from raysim import cli
-
-    def run(*args: str) -> tuple[int, str, str]:
-        monkeypatch.setattr(sys, "argv", ["raysim", *args])
-        monkeypatch.setenv("COLUMNS", "200")
-        capsys.readouterr()
-        try:
-            cli.main()
-            code = 0
-        except SystemExit as exc:
-            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-        out, err = capsys.readouterr()
-        return code, out, err
-
-    return run
+def raysim_main(raysim_cli):
+    """The in-process runner of tests/conftest.py: ``code, out, err = raysim_main(*args)``."""
+    return raysim_cli

@@ -95,3 +95,21 @@ def test_not_a_journal(tmp_path: Path) -> None:
     path.write_text("hello\n")
     with pytest.raises(JournalError, match="not a raysim scan journal"):
         read_journal(path)
+
+
+def test_a_journal_holding_only_its_header_never_blocks_the_next_scan(tmp_path):
+    """A scan that failed before its first step left a header: a new scan replaces it, with or
+    without --resume, whatever plan made it; a journal with steps, or another file, is kept."""
+    from hardware.journal import Journal, JournalError
+
+    path = tmp_path / "scan.nc.journal"
+    Journal.create(path, "fingerprint-a", 10).close()
+    with Journal.create(path, "fingerprint-b", 12) as journal:  # another plan: fine, no steps
+        journal.append(Record(0, "reference", -1, -1, (0.0, 0.0), (0.0, 0.0), (1e-5,), 0.0))
+    with pytest.raises(JournalError, match="1 steps"):
+        Journal.create(path, "fingerprint-b", 12)
+    other = tmp_path / "notes.txt"
+    other.write_text("not a journal\n")
+    with pytest.raises(JournalError, match="not overwritten"):
+        Journal.create(other, "fingerprint-a", 10)
+    assert other.read_text() == "not a journal\n"

@@ -11,7 +11,6 @@ from __future__ import annotations
 import random
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -22,8 +21,9 @@ from hardware.journal import read_journal
 from hardware.plan import load_plan
 from hardware.session import scan
 from raysim.maps import fieldmap as fieldmaps
+from tests.cli import popen_cli
 
-from .conftest import ROOT, cli_env, run_cli, write_plan
+from .conftest import run_cli, write_plan
 
 
 def journal_lines(path: Path) -> int:
@@ -37,9 +37,7 @@ def journal_lines(path: Path) -> int:
 def kill_once(args: list[str], journal: Path, sig: int, rng: random.Random,
               early: bool) -> tuple[int, str]:
     """Start the scan, kill it with ``sig`` at a random moment; (exit status, stderr)."""
-    proc = subprocess.Popen([sys.executable, "-m", "raysim.cli", *args], cwd=ROOT,
-                            env=cli_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+    proc = popen_cli(*args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         if early:
             time.sleep(rng.uniform(0.05, 0.6))

@@ -68,7 +68,7 @@ def test_fingerprint_follows_what_decides_the_samples(tmp_path: Path) -> None:
     ("samples_per_point = 2", "samples_per_point = 0", "must be >= 1"),
     ("focal_length_m = 33.0", "focal_length_m = 9.0", "must be below F"),
     ("power_unit_dbm = -20.0", "power_unit_dbm = \"loud\"", "must be a number"),
-    ("seed = 3", "seed = 3\nnoise = 0.1", "unknown key 'noise'"),
+    ("seed = 3", "seed = 3\nnoise = 0.1", "unknown key 'simulator.noise' .did you mean 'noise_db'"),
     ("phi_max_deg = 360.0", "phi_max_deg = 420.0", "exceeds 360 deg"),
     ("[reflector]", "[reflectr]", "missing table [reflector]"),
     ('drift_correction = "smooth"', 'drift_correction = "spline"',

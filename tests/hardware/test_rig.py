@@ -93,9 +93,9 @@ def test_sample_rig_file_loads() -> None:
 
 
 @pytest.mark.parametrize(("snippet", "message"), [
-    ("[track]\nradius_m = 10.0\nradius = 3.0\n", "unknown key 'radius'"),
-    ("[track]\nradius_m = -1.0\n", "'radius_m' must be > 0"),
-    ("[track]\nradius_m = 10.0\ncentre_offset_m = [0.0, 1.0]\n", "three numbers"),
+    ("[track]\nradius_m = 10.0\nradius = 3.0\n", "unknown key 'track.radius' .did you mean 'radius_m'"),
+    ("[track]\nradius_m = -1.0\n", "'track.radius_m' must be > 0"),
+    ("[track]\nradius_m = 10.0\ncentre_offset_m = [0.0, 1.0]\n", "'track.centre_offset_m' must be 3 numbers [x, y, z]"),
     ("[track]\nradius_m = 10.0\n[park]\nslider_deg = 120.0\n", "park position lies outside"),
     ("[track]\nradius_m = 10.0\n[motion]\nslider_axis = 2\n", "distinct ESP301 axes"),
     ("[limits]\nslider_min_deg = 0\n", "missing table [track]"),

@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from raysim.maps.fieldmap import load
+from tests.cli import run_cli
 
 SMALL = """
 name = "small"
@@ -33,12 +31,6 @@ n_phi = 60
 """
 
 
-def raysim(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    env = dict(os.environ, COLUMNS="200")
-    return subprocess.run([sys.executable, "-m", "raysim.cli", *args], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=300)
-
-
 @pytest.fixture()
 def scene_file(tmp_path: Path) -> Path:
     path = tmp_path / "small.toml"
@@ -48,7 +40,7 @@ def scene_file(tmp_path: Path) -> Path:
 
 def test_simulate_writes_a_fieldmap_and_one_summary_line(tmp_path: Path, scene_file: Path):
     out = tmp_path / "out" / "small.nc"
-    run = raysim("simulate", str(scene_file), "-o", str(out), cwd=tmp_path)
+    run = run_cli("simulate", str(scene_file), "-o", str(out), cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     line = run.stdout.strip()
     assert line.startswith(str(out)) and "1800 points" in line and "power balance" in line
@@ -64,7 +56,7 @@ def test_simulate_writes_a_fieldmap_and_one_summary_line(tmp_path: Path, scene_f
 
 def test_overrides_reach_the_output(tmp_path: Path, scene_file: Path):
     out = tmp_path / "o.nc"
-    run = raysim("simulate", str(scene_file), "-o", str(out), "--n-theta", "10", "--n-phi", "20",
+    run = run_cli("simulate", str(scene_file), "-o", str(out), "--n-theta", "10", "--n-phi", "20",
                  "--frequency", "3e9", cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     ds = load(out)
@@ -83,7 +75,7 @@ def test_overrides_reach_the_output(tmp_path: Path, scene_file: Path):
 )
 def test_user_errors_are_one_line_and_status_2(tmp_path: Path, scene_file: Path, args, message):
     args = [a.replace("{scene}", str(scene_file)) for a in args]
-    run = raysim(*args, cwd=tmp_path)
+    run = run_cli(*args, cwd=tmp_path)
     assert run.returncode == 2
     assert message in run.stderr
     assert "Traceback" not in run.stderr and len(run.stderr.strip().splitlines()) == 1
@@ -92,20 +84,20 @@ def test_user_errors_are_one_line_and_status_2(tmp_path: Path, scene_file: Path,
 def test_bad_scene_key_names_the_key(tmp_path: Path):
     bad = tmp_path / "bad.toml"
     bad.write_text(SMALL.replace("radius_m = 3.0", "radius_m = 9.0"))
-    run = raysim("simulate", str(bad), "-o", "x.nc", cwd=tmp_path)
+    run = run_cli("simulate", str(bad), "-o", "x.nc", cwd=tmp_path)
     assert run.returncode == 2 and "'sphere.radius_m' = 9 m must be smaller than the focal length" in run.stderr
 
 
 def test_a_failed_run_leaves_the_previous_output(tmp_path: Path, scene_file: Path):
     out = tmp_path / "keep.nc"
-    assert raysim("simulate", str(scene_file), "-o", str(out), cwd=tmp_path).returncode == 0
+    assert run_cli("simulate", str(scene_file), "-o", str(out), cwd=tmp_path).returncode == 0
     before = out.read_bytes()
-    run = raysim("simulate", str(scene_file), "-o", str(out), "--method", "magic", cwd=tmp_path)
+    run = run_cli("simulate", str(scene_file), "-o", str(out), "--method", "magic", cwd=tmp_path)
     assert run.returncode == 2 and out.read_bytes() == before
 
 
 def test_help_explains_units(tmp_path: Path):
-    run = raysim("--help", cwd=tmp_path)
+    run = run_cli("--help", cwd=tmp_path)
     assert run.returncode == 0 and "metres" in run.stdout and "Hz" in run.stdout
-    sim = raysim("simulate", "--help", cwd=tmp_path)
+    sim = run_cli("simulate", "--help", cwd=tmp_path)
     assert "(Hz)" in sim.stdout and "radians" in sim.stdout

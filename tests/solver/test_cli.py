@@ -1,21 +1,15 @@
 """``raysim invert``: files in, files out, one clear line and exit status 2 on user errors."""
 
-import sys
-
 import numpy as np
 import pytest
 
-from raysim.cli import main
 from raysim.maps.fieldmap import save
 from solver import surface
+from tests.cli import run_in_process
 
 
 def run(monkeypatch, capsys, *args):
-    monkeypatch.setattr(sys, "argv", ["raysim", *args])
-    with pytest.raises(SystemExit) as exit_info:
-        main()
-    captured = capsys.readouterr()
-    return exit_info.value.code, captured.out, captured.err
+    return tuple(run_in_process(capsys, *args))
 
 
 @pytest.fixture(scope="module")

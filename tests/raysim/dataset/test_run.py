@@ -6,7 +6,6 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -29,6 +28,8 @@ from raysim.dataset.models import RimAstigmatism
 from raysim.maps.fieldmap import validate
 from raysim.maps.sphere import ideal_go_cell_mean
 from raysim.surface.deformation import GaussianBumps, PanelRigid
+from tests.cli import cli_env, popen_cli, run_cli
+from tests.processes import free_port, kill_group, listening, wait_until, worker_processes
 from tests.reference_zernike import zernike_sum
 
 pytestmark = pytest.mark.slow
@@ -67,18 +68,6 @@ def reference(tmp_path_factory, spec, inproc):
     report = generate(spec, path, scheduler=inproc)
     assert report.done == spec.samples and report.failed == 0 and report.workers == 1
     return path
-
-
-def _env() -> dict[str, str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
-    env.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
-    return env
-
-
-def _cli(*args: str, **kwargs) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "raysim.cli", *args], env=_env(), capture_output=True,
-                          text=True, timeout=RUN_TIMEOUT, **kwargs)
 
 
 def _arrays(path: Path) -> dict[str, np.ndarray]:
@@ -192,8 +181,7 @@ def test_killed_client_resumes_to_the_same_store(reference, spec, tmp_path, inpr
     after the first sample, then resumed by another cluster: the same arrays as the
     reference made by one worker, and the samples done before the kill untouched."""
     store = tmp_path / "killed.zarr"
-    proc = subprocess.Popen([sys.executable, "-m", "raysim.cli", "dataset", str(DEMO), "-o", str(store),
-                             "--workers", "2"], env=_env(), stdout=subprocess.DEVNULL,
+    proc = popen_cli("dataset", str(DEMO), "-o", str(store), "--workers", "2", stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         deadline = time.monotonic() + RUN_TIMEOUT
@@ -203,7 +191,7 @@ def test_killed_client_resumes_to_the_same_store(reference, spec, tmp_path, inpr
         proc.send_signal(signal.SIGKILL)  # the client; its local workers lose their scheduler
         proc.wait(timeout=30)
     finally:
-        _kill_group(proc)
+        kill_group(proc)
     done = _markers(store)
     assert 0 < len(done) < spec.samples
     group = zarr.open_group(str(store), mode="r")
@@ -221,7 +209,7 @@ def test_a_store_of_another_spec_is_refused(reference, spec, tmp_path):
     other = tmp_path / "other.toml"
     other.write_text(DEMO.read_text().replace("seed = 20240917", "seed = 1"))
     before = _arrays(reference)
-    result = _cli("dataset", str(other), "-o", str(reference), "--resume")
+    result = run_cli("dataset", str(other), "-o", str(reference), "--resume", timeout=RUN_TIMEOUT)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in result.stderr and "different spec" in lines[0]
@@ -253,75 +241,28 @@ def test_failed_samples_are_recorded_and_the_others_go_on(reference, spec, tmp_p
     assert_same_store(reference, store)
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _kill_group(proc: subprocess.Popen) -> None:
-    """Stop a process started in its own session, and everything it started."""
-    with contextlib.suppress(ProcessLookupError):
-        os.killpg(proc.pid, signal.SIGTERM)
-    try:
-        proc.wait(timeout=15)
-    except subprocess.TimeoutExpired:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=15)
-    with contextlib.suppress(ProcessLookupError):  # children that outlived their parent
-        os.killpg(proc.pid, signal.SIGKILL)
-
-
-def _worker_processes(nanny_pid: int) -> list[int]:
-    """The worker processes a `dask worker` (nanny) process spawned (not its resource tracker)."""
-    out: list[int] = []
-    for task in Path(f"/proc/{nanny_pid}/task").iterdir():
-        for child in (task / "children").read_text().split():
-            with contextlib.suppress(OSError):
-                cmdline = Path(f"/proc/{child}/cmdline").read_bytes()
-                if b"spawn_main" in cmdline:
-                    out.append(int(child))
-    return out
-
-
-def _wait_until(predicate, timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
-        time.sleep(0.05)
-
-
-def _listening(port: int) -> bool:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.settimeout(0.2)
-        return s.connect_ex(("127.0.0.1", port)) == 0
-
-
 def test_separate_scheduler_and_worker_with_a_worker_killed(reference, spec, tmp_path):
     """A `dask scheduler` and a `dask worker` process on loopback, the CLI as client; the
     worker process is killed after the first sample and its nanny restarts it: the store
     completes, identical to the reference."""
-    port = _free_port()
+    port = free_port()
     address = f"tcp://127.0.0.1:{port}"
-    common = dict(env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    common = dict(env=cli_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host",
                                   "127.0.0.1", "--port", str(port), "--no-dashboard"], **common)
     nanny = None
     try:
-        _wait_until(lambda: _listening(port), 60, "the scheduler to listen")
+        wait_until(lambda: listening(port), 60, "the scheduler to listen")
         nanny = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--host",
                                   "127.0.0.1", "--nworkers", "1", "--nthreads", "1", "--no-dashboard"],
                                  **common)
         store = tmp_path / "distributed.zarr"
-        run = subprocess.Popen([sys.executable, "-m", "raysim.cli", "dataset", str(DEMO), "-o", str(store),
-                                "--scheduler", address], env=_env(), stdout=subprocess.PIPE,
+        run = popen_cli("dataset", str(DEMO), "-o", str(store), "--scheduler", address, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
         try:
-            _wait_until(lambda: bool(_markers(store)) or run.poll() is not None, RUN_TIMEOUT,
+            wait_until(lambda: bool(_markers(store)) or run.poll() is not None, RUN_TIMEOUT,
                         "a first sample")
-            workers = _worker_processes(nanny.pid)
+            workers = worker_processes(nanny.pid)
             killed = bool(workers) and run.poll() is None and len(_markers(store)) < spec.samples
             for pid in workers:  # the worker process under the nanny: the nanny restarts it
                 with contextlib.suppress(ProcessLookupError):
@@ -338,4 +279,4 @@ def test_separate_scheduler_and_worker_with_a_worker_killed(reference, spec, tmp
     finally:
         for proc in (nanny, scheduler):
             if proc is not None:
-                _kill_group(proc)
+                kill_group(proc)

@@ -81,7 +81,7 @@ def test_fingerprint_ignores_comments_but_not_content():
 
 @pytest.mark.parametrize(("change", "message"), [
     (("seed = 7", "sede = 7"), "did you mean 'seed'"),
-    (("samples = 4", "samples = 0"), "'samples' must be an integer in 1.."),
+    (("samples = 4", "samples = 0"), "'samples' must be >= 1, got 0"),
     (('type = "zernike"', 'type = "warp"'), "errors[0].type' must be one of"),
     (("{ uniform = [10.0, 20.0] }", "{ normal = [10.0, 5.0] }"), "must stay >= 0"),
     (("{ uniform = [10.0, 20.0] }", "{ uniform = [20.0, 10.0] }"), "needs lo <= hi"),

@@ -18,14 +18,8 @@ from raysim.distributed.partial import partial_path
 from raysim.maps.fieldmap import load
 from raysim.scene.scene import parse_scene
 from raysim.simulate import simulate
-from tests.raysim.dataset.test_run import (
-    _env,
-    _free_port,
-    _kill_group,
-    _listening,
-    _wait_until,
-    _worker_processes,
-)
+from tests.cli import cli_env
+from tests.processes import free_port, kill_group, listening, wait_until, worker_processes
 from tests.raysim.distributed.conftest import SMALL, assert_same_fieldmap
 
 pytestmark = pytest.mark.slow
@@ -47,7 +41,7 @@ def _markers(output: Path) -> int:
 def _simulate(scene: Path, output: Path, address: str, *extra: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "raysim.cli", "simulate", str(scene), "-o", str(output),
                              "--method", "po", "--scheduler", address, "--block-size", str(BLOCK), *extra],
-                            env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            env=cli_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
 def _finish(run: subprocess.Popen) -> tuple[str, str]:
@@ -75,26 +69,26 @@ def test_scheduler_and_two_workers_with_a_worker_and_the_client_killed(tmp_path)
     scene_path = tmp_path / "small.toml"
     scene_path.write_text(SCENE)
     reference = simulate(parse_scene(SCENE), "po")
-    port = _free_port()
+    port = free_port()
     address = f"tcp://127.0.0.1:{port}"
-    common = dict(env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    common = dict(env=cli_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host",
                                   "127.0.0.1", "--port", str(port), "--no-dashboard"], **common)
     nanny = None
     try:
-        _wait_until(lambda: _listening(port), 60, "the scheduler to listen")
+        wait_until(lambda: listening(port), 60, "the scheduler to listen")
         nanny = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--host",
                                   "127.0.0.1", "--nworkers", "2", "--nthreads", "1", "--no-dashboard"],
                                  **common)
-        _wait_until(lambda: len(_worker_processes(nanny.pid)) == 2, 120, "two worker processes")
+        wait_until(lambda: len(worker_processes(nanny.pid)) == 2, 120, "two worker processes")
 
         # 1. a worker process killed after a few blocks: its nanny restarts it, the run completes
         first = tmp_path / "first.nc"
         run = _simulate(scene_path, first, address)
-        _wait_until(lambda: _markers(first) >= 3 or run.poll() is not None, RUN_TIMEOUT, "three blocks")
+        wait_until(lambda: _markers(first) >= 3 or run.poll() is not None, RUN_TIMEOUT, "three blocks")
         killed = run.poll() is None and _markers(first) < N_BLOCKS
         with contextlib.suppress(ProcessLookupError):
-            os.kill(_worker_processes(nanny.pid)[0], signal.SIGKILL)
+            os.kill(worker_processes(nanny.pid)[0], signal.SIGKILL)
         out, _ = _finish(run)
         assert killed, "the run ended before a worker could be killed"
         ds = load(first)
@@ -106,7 +100,7 @@ def test_scheduler_and_two_workers_with_a_worker_and_the_client_killed(tmp_path)
         # 2. the client killed after a few blocks: the partial store stays; --resume completes it
         second = tmp_path / "second.nc"
         run = _simulate(scene_path, second, address)
-        _wait_until(lambda: _markers(second) >= 3 or run.poll() is not None, RUN_TIMEOUT, "three blocks")
+        wait_until(lambda: _markers(second) >= 3 or run.poll() is not None, RUN_TIMEOUT, "three blocks")
         run.send_signal(signal.SIGKILL)
         run.wait(timeout=15)
         _settled(second)  # blocks in flight when the client died finish and are kept
@@ -122,4 +116,4 @@ def test_scheduler_and_two_workers_with_a_worker_and_the_client_killed(tmp_path)
     finally:
         for proc in (nanny, scheduler):
             if proc is not None:
-                _kill_group(proc)
+                kill_group(proc)

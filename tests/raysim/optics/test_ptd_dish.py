@@ -12,10 +12,7 @@ whose triangles the mirror maps to differently wound ones.
 
 from __future__ import annotations
 
-import os
 import re
-import subprocess
-import sys
 from dataclasses import replace
 
 import numpy as np
@@ -30,6 +27,7 @@ from raysim.simulate import simulate
 from raysim.surface.edges import edge_quadrature
 from raysim.surface.mesh import paraboloid
 from raysim.surface.panels import PanelLayout
+from tests.cli import run_cli
 
 D, F = 12.0, 4.8  # a small dish, 12 wavelengths across at 0.3 GHz (m)
 GAP = 0.010
@@ -149,20 +147,15 @@ def test_edge_options_are_checked_before_any_work(method, edges, message):
         simulate(parse_scene(SCENE), method=method, edges=edges)
 
 
-def raysim_cli(*args: str, cwd) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "raysim.cli", *args], cwd=cwd, capture_output=True,
-                          text=True, timeout=300, env=dict(os.environ, COLUMNS="200"))
-
-
 def test_cli_edges(tmp_path):
     scene = tmp_path / "small.toml"
     scene.write_text(SCENE.replace("n_theta = 6", "n_theta = 3").replace("n_phi = 8", "n_phi = 4"))
-    run = raysim_cli("simulate", str(scene), "-o", "x.nc", "--method", "po+ptd", "--edges", "all",
+    run = run_cli("simulate", str(scene), "-o", "x.nc", "--method", "po+ptd", "--edges", "all",
                      cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     assert "all edges (" in run.stdout
     ds = load(tmp_path / "x.nc")
     assert ds.attrs["method"] == "po+ptd" and ds.attrs["edges"] == "all"
-    bad = raysim_cli("simulate", str(scene), "-o", "y.nc", "--edges", "all", cwd=tmp_path)
+    bad = run_cli("simulate", str(scene), "-o", "y.nc", "--edges", "all", cwd=tmp_path)
     assert bad.returncode == 2 and "--edges applies to --method po+ptd only" in bad.stderr
     assert not (tmp_path / "y.nc").exists()

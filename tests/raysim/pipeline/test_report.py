@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
+from raysim.errors import RaysimError
 from raysim.pipeline import report as report_module
 from raysim.render.backend import RenderError, colour_count
 from raysim.surface.deformation import PaperDeformation
@@ -157,3 +158,35 @@ def test_fig9_compares_the_equation_within_panels_not_across_their_edges():
     np.testing.assert_allclose(truth.laplacian(x, np.zeros_like(x)), 0.0, atol=1e-9)
     straddling = (truth(x, 0.01 + 0 * x) + truth(x, -0.01 + 0 * x) - 2 * truth(x, 0 * x)) / 1e-4
     assert np.nanmax(np.abs(straddling)) > 1e-2
+
+
+def test_a_failed_report_leaves_the_earlier_one_whole(tmp_path, monkeypatch):
+    """The report is built beside its folder and replaces it only when complete: a failure
+    while drawing leaves the old page and data as they were, and no stray folder."""
+    import raysim.simulate
+
+    old = tmp_path / "run"
+    old.mkdir()
+    for name, text in (("report.html", "old page"), ("surface.nc", "old surface")):
+        (old / name).write_text(text)
+    monkeypatch.setattr(raysim.simulate, "simulate", lambda scene, **kw: paper_field())
+    monkeypatch.setattr(report_module, "inversion", lambda: lambda field, **kw: recovered_surface(N=48))
+
+    def broken(field, surface):
+        raise RenderError("the renderer broke")
+
+    monkeypatch.setattr(report_module, "_figures", broken)
+    with pytest.raises(RenderError, match="broke"):
+        report_module.report(ROOT / "scenes" / "paper_go.toml", old)
+    assert sorted(p.name for p in old.iterdir()) == ["report.html", "surface.nc"]
+    assert (old / "report.html").read_text() == "old page"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+    # options are checked before any simulation
+    monkeypatch.setattr(raysim.simulate, "simulate", lambda *a, **k: pytest.fail("simulated first"))
+    with pytest.raises(RaysimError, match="unknown solver"):
+        report_module.report(ROOT / "scenes" / "paper_go.toml", old, solver="magic")
+    monkeypatch.setattr(report_module, "_figures", lambda field, surface: [
+        ("fig10_recovered", "Fig. 10", np.full((90, 120, 3), 200, dtype=np.uint8))])
+    monkeypatch.setattr(raysim.simulate, "simulate", lambda scene, **kw: paper_field())
+    report_module.report(ROOT / "scenes" / "paper_go.toml", old, invert=False)
+    assert not (old / "surface.nc").exists() and (old / "field.nc").is_file()  # no stale surface

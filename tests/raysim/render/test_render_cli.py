@@ -15,6 +15,7 @@ from raysim.maps.fieldmap import save
 from raysim.render import RenderError, parse_size, render
 from raysim.render.backend import colour_count
 from raysim.surface.deformation import GaussianBumps
+from tests.cli import run_in_process
 from tests.examples import equation_fieldmap, surfacemap
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -31,13 +32,7 @@ def files(tmp_path_factory):
 
 
 def run_cli(monkeypatch, capsys, *args: str) -> tuple[int, str, str]:
-    from raysim import cli
-
-    monkeypatch.setattr(sys, "argv", ["raysim", *args])
-    with pytest.raises(SystemExit) as stop:
-        cli.main()
-    captured = capsys.readouterr()
-    return int(stop.value.code or 0), captured.out, captured.err
+    return tuple(run_in_process(capsys, *args))
 
 
 def test_render_writes_a_png_of_the_asked_size(monkeypatch, capsys, files, tmp_path):

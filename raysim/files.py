@@ -1,0 +1,185 @@
+"""Files at the edge: the example inputs shipped with raysim, and the guard on outputs.
+
+- The examples (scenes, scan plans, the rig file, dataset specs) live in the repository's
+  ``scenes/`` folder and ship in the wheel as ``raysim/examples/``. Wherever a file is
+  accepted, a name that is not an existing path is looked up among them (``paper_go`` or
+  ``paper_go.toml``); a path that exists always wins.
+- :func:`check_output` refuses an output that is one of the command's inputs (after
+  resolving symbolic links and relative paths), before any work is done.
+- :func:`new_file_mode` is the mode a new file gets under the process's umask (0644 under
+  022), for files written through a private temporary file.
+
+A leaf module: it imports nothing of raysim but the error base class.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from pathlib import Path
+
+from raysim.errors import RaysimError
+
+EXAMPLE_SUFFIXES = (".toml",)
+
+
+def examples_dir() -> Path:
+    """The folder of the shipped examples: ``raysim/examples`` in a wheel, ``scenes/`` in a
+    checkout."""
+    package = Path(__file__).resolve().parent
+    installed = package / "examples"
+    if installed.is_dir():
+        return installed
+    return package.parent / "scenes"
+
+
+def example_names() -> list[str]:
+    """The names of the shipped examples (file names without ``.toml``), sorted."""
+    folder = examples_dir()
+    if not folder.is_dir():
+        return []
+    return sorted(p.stem for p in folder.iterdir() if p.suffix in EXAMPLE_SUFFIXES and p.is_file())
+
+
+def example(name: str) -> Path | None:
+    """The shipped example called ``name`` (with or without ``.toml``), or None."""
+    if not name or "/" in name or os.sep in name or name.startswith("."):
+        return None
+    folder = examples_dir()
+    for candidate in (folder / name, folder / f"{name}.toml"):
+        if candidate.suffix in EXAMPLE_SUFFIXES and candidate.is_file():
+            return candidate
+    return None
+
+
+def example_summary(path: Path) -> tuple[str, str]:
+    """(kind, one-line description) of an example file: scene, dataset spec, scan plan or rig,
+    described by its ``description`` key or else its first comment line."""
+    import tomllib
+
+    text = path.read_text(encoding="utf-8")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        data = {}
+    if "samples" in data:
+        kind = "dataset spec"
+    elif "reflector" in data and "grid" in data:
+        kind = "scan plan"
+    elif "track" in data:
+        kind = "rig file"
+    else:
+        kind = "scene"
+    description = data.get("description")
+    if not isinstance(description, str) or not description.strip():
+        comments = [line.lstrip("#").strip() for line in text.splitlines() if line.startswith("#")]
+        description = comments[0] if comments else ""
+    return kind, " ".join(description.split())
+
+
+def example_references(path: Path) -> list[str]:
+    """The files an example names beside itself (a plan's ``rig``, a spec's ``scene``)."""
+    import tomllib
+
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    refs = [data[key] for key in ("rig", "scene") if isinstance(data.get(key), str)]
+    return [r for r in refs if not Path(r).is_absolute()]
+
+
+def copy_example(name: str, folder: str | os.PathLike[str]) -> list[Path]:
+    """Copy the example ``name`` and the files it names into ``folder`` (created if needed);
+    return the written paths. An existing file is never overwritten."""
+    source = example(name)
+    if source is None:
+        known = ", ".join(example_names())
+        raise RaysimError(f"no example called {name!r} (known: {known})")
+    target = Path(folder).expanduser()
+    if target.exists() and not target.is_dir():
+        raise RaysimError(f"{target}: exists and is not a folder")
+    files = [source, *(source.parent / ref for ref in example_references(source))]
+    files = [f for f in files if f.is_file()]
+    for f in files:
+        if (target / f.name).exists():
+            raise RaysimError(f"{target / f.name}: exists; not overwritten (copy into another folder)")
+    target.mkdir(parents=True, exist_ok=True)
+    written = []
+    for f in files:
+        dest = target / f.name
+        with open(dest, "x", encoding="utf-8") as fh:
+            fh.write(f.read_text(encoding="utf-8"))
+        written.append(dest)
+    return written
+
+
+def find_input(path: str | os.PathLike[str], base: Path | None = None) -> Path:
+    """The file a user means by ``path``: the path itself when it exists, else the shipped
+    example of that name, else the path unchanged (so the caller's "no such file" names what
+    the user wrote).
+
+    ``base`` is the folder of the file that holds a reference (a plan's ``rig = "rig.toml"``):
+    the reference resolves beside that file, and only a bare name without a suffix
+    (``rig = "rig"``) may fall back to an example, so that a missing file beside a plan is an
+    error and never silently the example's."""
+    given = Path(path).expanduser()
+    candidate = given if base is None or given.is_absolute() else base / given
+    if candidate.exists():
+        return candidate
+    if base is not None and given.suffix:
+        return candidate
+    shipped = example(str(path))
+    return shipped if shipped is not None else candidate
+
+
+def same_file(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> bool:
+    """Whether two paths name one file (symbolic links and relative paths resolved; a path
+    that does not exist yet compares by its resolved name)."""
+    pa, pb = Path(a).expanduser(), Path(b).expanduser()
+    try:
+        if pa.exists() and pb.exists():
+            return os.path.samefile(pa, pb)
+    except OSError:
+        pass
+    return pa.resolve() == pb.resolve()
+
+
+def check_output(output: str | os.PathLike[str],
+                 inputs: Iterable[tuple[str, str | os.PathLike[str] | None]],
+                 error: type[RaysimError] = RaysimError) -> None:
+    """Refuse ``output`` when it is one of ``inputs`` ((what, path) pairs; None skipped)."""
+    for what, path in inputs:
+        if path is None or "://" in str(path):
+            continue
+        if same_file(output, path):
+            raise error(f"{output}: is the {what} ({path}); writing it would destroy the input, "
+                        "give another output path")
+
+
+def check_output_folder(folder: str | os.PathLike[str],
+                        inputs: Iterable[tuple[str, str | os.PathLike[str] | None]],
+                        error: type[RaysimError] = RaysimError) -> None:
+    """Refuse an output ``folder`` that would be replaced while an input lies inside it (or is
+    the folder itself)."""
+    target = Path(folder).expanduser().resolve()
+    for what, path in inputs:
+        if path is None:
+            continue
+        resolved = Path(path).expanduser().resolve()
+        if resolved == target or target in resolved.parents:
+            raise error(f"{folder}: holds the {what} ({path}); replacing the folder would destroy "
+                        "the input, give another output folder")
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def new_file_mode() -> int:
+    """Permission bits a newly created file gets under the current umask (0o644 under 022)."""
+    return 0o666 & ~_umask()
+
+
+def new_folder_mode() -> int:
+    """Permission bits a newly created folder gets under the current umask (0o755 under 022)."""
+    return 0o777 & ~_umask()

@@ -1,0 +1,400 @@
+"""Bad input, command by command: exit status 2, exactly one line on stderr, no traceback, and
+every file that was there before byte-identical afterwards (inputs included).
+
+One table of cases per command; each case names the arguments (``{name}`` stands for a file
+of the workspace) and a piece of the expected message. The commands run in this process
+(tests/cli.py), in a workspace holding every input the cases refer to.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from raysim.maps.fieldmap import fieldmap, save
+from raysim.maps.sphere import SphereGrid, ideal_go_intensity
+from tests.raysim.test_cli import SMALL
+
+F, D, R = 8.0, 20.0, 3.0
+
+SCENE = SMALL.replace("n_theta = 30", "n_theta = 10").replace("n_phi = 60", "n_phi = 20")
+
+PANELS = """
+[panels]
+ring_edges_m = {edges}
+panels_per_ring = [1]
+"""
+
+
+def _scene(extra: str = "", **replace: str) -> str:
+    text = SCENE
+    for old, new in replace.items():
+        text = text.replace(old.replace("__", " = "), new)
+    return text + extra
+
+
+def _map_scene(name: str) -> str:
+    return SCENE + f'[[deformation]]\ntype = "map"\nfile = "{name}"\n'
+
+
+SPEC = """
+name = "tiny"
+samples = 2
+seed = 1
+scene = "scene.toml"
+[[errors]]
+type = "zernike"
+rms_um = 10.0
+"""
+
+RIG = """
+[track]
+radius_m = 3.0
+[instruments]
+timeout_s = 0.5
+"""
+
+PLAN = """
+rig = "rig.toml"
+[reflector]
+focal_length_m = 8.0
+diameter_m = 20.0
+frequency_hz = 1.0e9
+[grid]
+theta_max_deg = 60.0
+theta_step_deg = 20.0
+phi_step_deg = 90.0
+[acquisition]
+samples_per_point = 1
+reference_samples = 1
+[simulator]
+time_scale = 0.0
+"""
+
+
+def _csv_map(rows) -> str:
+    return "x,y,dz\n" + "".join(f"{x},{y},{dz}\n" for x, y, dz in rows)
+
+
+def _grid_rows(dz=lambda x, y: 1e-4):
+    values = np.linspace(-11.0, 11.0, 6)
+    return [(x, y, dz(x, y)) for y in values for x in values]
+
+
+def _edit_row(text: str, row: int, column: int, value: str) -> str:
+    """``text`` (CSV) with the cell at data row ``row``, ``column`` replaced by ``value``."""
+    lines = text.splitlines()
+    cells = lines[row].split(",")
+    cells[column] = value
+    lines[row] = ",".join(cells)
+    return "\n".join(lines) + "\n"
+
+
+def _fieldmap(values=None):
+    grid = SphereGrid(R, 10, 20)
+    t, _ = np.meshgrid(grid.theta, grid.phi, indexing="ij")
+    ideal = ideal_go_intensity(t, F, R, D)
+    intensity = ideal * 1.001 if values is None else values(ideal)
+    return fieldmap(grid, intensity, ideal, focal_length=F, diameter=D, frequency_hz=1e9,
+                    method="go", sampling="cell_mean")
+
+
+def _write_mesh_in_mm(path: Path) -> None:
+    import trimesh
+
+    from raysim.surface.mesh import paraboloid
+
+    dish = paraboloid(D, F, 2.0)
+    trimesh.Trimesh(dish.vertices * 1000.0, dish.faces).export(path)
+
+
+def _silent_server() -> tuple[int, threading.Event]:
+    """A TCP server on loopback that accepts and never answers (stops when the event is set)."""
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    server.settimeout(0.2)
+    stop = threading.Event()
+    held = []
+
+    def serve() -> None:
+        while not stop.is_set():
+            try:
+                held.append(server.accept()[0])
+            except OSError:
+                pass
+        for conn in held:
+            conn.close()
+        server.close()
+
+    threading.Thread(target=serve, daemon=True).start()
+    return server.getsockname()[1], stop
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory):
+    """Every input the cases name, written once."""
+    ws = tmp_path_factory.mktemp("bad_inputs")
+    files = {
+        "scene.toml": SCENE,
+        "bad_toml.toml": "[dish\n",
+        "typo.toml": _scene(diameter_m__20="diametre_m = 20"),
+        "no_edges.toml": _scene(PANELS.format(edges="[]")),
+        "nan_edge.toml": _scene(PANELS.format(edges="[0.0, nan, 10.0]")),
+        "zernike_nan.toml": SCENE + '[[deformation]]\ntype = "zernike"\nterms = [[2, 2, nan]]\n',
+        "paper_huge.toml": SCENE + '[[deformation]]\ntype = "paper"\nscale = 1e7\n',
+        "fine_mesh.toml": _scene(resolution_m__0="resolution_m = 0.0006 #"),
+        "units_um.toml": _map_scene("map_um.csv"),
+        "text_cell.toml": _map_scene("map_text.csv"),
+        "inf_cell.toml": _map_scene("map_inf.csv"),
+        "nan_x.toml": _map_scene("map_nan_x.csv"),
+        "corrupt_map.toml": _map_scene("corrupt.nc"),
+        "mm_mesh.toml": SCENE.replace("diameter_m = 20.0\nfocal_length_m = 8.0",
+                                      'focal_length_m = 8.0\nmesh = "dish_mm.stl"'),
+        "big_sphere.toml": _scene(n_theta__10="n_theta = 100000"),
+        "method_bad.toml": 'method = "fdtd"\n' + SCENE,
+        "map_um.csv": _csv_map(_grid_rows(lambda x, y: 300.0)),
+        "map_text.csv": _edit_row(_csv_map(_grid_rows()), 3, 2, "abc"),
+        "map_inf.csv": _csv_map(_grid_rows(lambda x, y: np.inf if x > 10 else 1e-4)),
+        "map_nan_x.csv": _edit_row(_csv_map(_grid_rows()), 1, 0, "nan"),
+        "spec.toml": SPEC,
+        "spec_typo.toml": SPEC.replace("seed = 1", "sede = 1"),
+        "spec_nan.toml": SPEC.replace("rms_um = 10.0", "rms_um = nan"),
+        "spec_ghz.toml": SPEC.replace("seed = 1", "seed = 1\nfrequencies_hz = [0.3]"),
+        "rig.toml": RIG,
+        "rig_no_track.toml": "[limits]\nslider_min_deg = -95.0\n",
+        "plan.toml": PLAN,
+        "plan_setle.toml": PLAN.replace("samples_per_point = 1", "samples_per_point = 1\nsetle = 1.0"),
+        "plan_reach.toml": PLAN.replace('rig = "rig.toml"', 'rig = "rig_short.toml"'),
+        "rig_short.toml": RIG + "[limits]\nslider_max_deg = 40.0\n[park]\nslider_deg = 30.0\n",
+        "rim_centre.csv": "x,y,dz\n" + "".join(
+            f"{np.cos(a):.6f},{np.sin(a):.6f},0.0\n" for a in np.linspace(0, 6.0, 12)),
+        "rim_header.csv": "a,b,c\n1,2,3\n",
+        "rim_text.csv": "x,y,dz\n10.0,0.0,zero\n",
+        "notes.txt": "a file of the user's, not a report\n",
+    }
+    for name, text in files.items():
+        (ws / name).write_text(text)
+    (ws / "binary.toml").write_bytes(b"\x89PNG\r\n\x1a\n\x00\x01\x02")
+    (ws / "corrupt.nc").write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(range(200)))
+    _write_mesh_in_mm(ws / "dish_mm.stl")
+    save(_fieldmap(), ws / "f.nc")
+    _fieldmap(lambda ideal: ideal * 1.001 - 0.01).to_netcdf(ws / "negative.nc")  # save() refuses it
+    bad = _fieldmap()
+    bad["intensity"].values[3, 4] = np.inf
+    bad.to_netcdf(ws / "inf.nc")
+    (ws / "link.nc").symlink_to(ws / "scene.toml")
+    (ws / "report").mkdir()
+    save(_fieldmap(), ws / "report" / "field.nc")
+    (ws / "user_folder").mkdir()
+    (ws / "user_folder" / "notes.txt").write_text("keep me\n")
+    (ws / "existing_file").write_text("not a store\n")
+    from solver.run import run_invert
+
+    run_invert(ws / "f.nc", ws / "s.nc", N=32, refine=0)
+    return ws
+
+
+def _refused_port() -> int:
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    port = sock.getsockname()[1]
+    sock.close()
+    return port
+
+
+NOWHERE = "TCPIP::nosuchhost.invalid::5025::SOCKET"
+
+CASES: dict[str, list[tuple[list[str], str]]] = {
+    "simulate": [
+        (["simulate", "missing.toml", "-o", "o.nc"], "missing.toml: no such scene file"),
+        (["simulate", "scene.toml", "-o", "scene.toml"], "is the scene file"),
+        (["simulate", "scene.toml", "-o", "link.nc"], "is the scene file"),
+        (["simulate", "scene.toml", "-o", "sub/../scene.toml"], "is the scene file"),
+        (["simulate", "mm_mesh.toml", "-o", "dish_mm.stl"], "is the file the scene names"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--n-theta", "abc"], "Invalid value for '--n-theta'"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--bogus"], "No such option"),
+        (["simulate", "scene.toml"], "Missing option '-o'"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--n-theta", "100000", "--n-phi", "100000"],
+         "--n-theta must be an integer in 1..9000"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--n-theta", "9000", "--n-phi", "36000"],
+         "cells is over the limit"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--method", "po", "--frequency", "inf"],
+         "--frequency must be a finite frequency"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--frequency", "0.3"], "is in Hz"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--method", "po", "--frequency", "1e12"],
+         "source samples per reflector"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--method", "magic"], "unknown method 'magic'"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--device", "tpu"], "unknown device 'tpu'"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--edges", "all"], "--edges applies to --method po+ptd"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--method", "po", "--samples-per-wavelength", "-1"],
+         "must lie in (0, 20]"),
+        (["simulate", "scene.toml", "-o", "/proc/o.nc"], "cannot write in /proc"),
+        (["simulate", "binary.toml", "-o", "o.nc"], "not a text file"),
+        (["simulate", "bad_toml.toml", "-o", "o.nc"], "not valid TOML"),
+        (["simulate", "typo.toml", "-o", "o.nc"], "unknown key 'dish.diametre_m' (did you mean 'diameter_m'?)"),
+        (["simulate", "no_edges.toml", "-o", "o.nc"], "'panels.ring_edges_m' needs at least 2"),
+        (["simulate", "nan_edge.toml", "-o", "o.nc"], "'panels.ring_edges_m' must hold finite numbers"),
+        (["simulate", "zernike_nan.toml", "-o", "o.nc"], "must be a finite number"),
+        (["simulate", "paper_huge.toml", "-o", "o.nc"], "scale' = 1e+07 makes a"),
+        (["simulate", "fine_mesh.toml", "-o", "o.nc"], "million triangles"),
+        (["simulate", "units_um.toml", "-o", "o.nc"], "dz must be in metres"),
+        (["simulate", "text_cell.toml", "-o", "o.nc"], "is not all numbers"),
+        (["simulate", "inf_cell.toml", "-o", "o.nc"], "infinite value"),
+        (["simulate", "nan_x.toml", "-o", "o.nc"], "x and y must be finite numbers"),
+        (["simulate", "corrupt_map.toml", "-o", "o.nc"], "not a readable NetCDF file"),
+        (["simulate", "mm_mesh.toml", "-o", "o.nc"], "is the file in mm?"),
+        (["simulate", "big_sphere.toml", "-o", "o.nc"], "'sphere.n_theta' must be an integer in 1..9000"),
+        (["simulate", "method_bad.toml", "-o", "o.nc"], "'method' must be one of go, po, po+ptd"),
+    ],
+    "invert": [
+        (["invert", "missing.nc", "-o", "o.nc"], "missing.nc: no such file"),
+        (["invert", "f.nc", "-o", "f.nc"], "is the FieldMap"),
+        (["invert", "f.nc", "-o", "./sub/../f.nc"], "is the FieldMap"),
+        (["invert", "f.nc", "-o", "o.nc", "--grid", "100000"], "--grid) must be an integer in 16..4096"),
+        (["invert", "f.nc", "-o", "o.nc", "--grid", "8"], "must be an integer in 16..4096"),
+        (["invert", "f.nc", "-o", "o.nc", "--grid", "abc"], "Invalid value for '--grid'"),
+        (["invert", "f.nc", "-o", "o.nc", "--refine", "-1"], "--refine) must be an integer in 0..50"),
+        (["invert", "f.nc", "-o", "o.nc", "--solver", "magic"], "unknown solver 'magic'"),
+        (["invert", "f.nc", "-o", "o.nc", "--remove", "bogus"], "unknown term 'bogus'"),
+        (["invert", "f.nc", "-o", "o.nc", "--gain", "maybe"], "unknown gain mode"),
+        (["invert", "f.nc", "-o", "o.nc", "--model", "ray"], "unknown model 'ray'"),
+        (["invert", "corrupt.nc", "-o", "o.nc"], "not a readable NetCDF file"),
+        (["invert", "negative.nc", "-o", "o.nc"], "holds negative values"),
+        (["invert", "inf.nc", "-o", "o.nc"], "holds infinite values"),
+        (["invert", "f.nc", "-o", "o.nc", "--rim", "rim_centre.csv"], "must lie near the rim"),
+        (["invert", "f.nc", "-o", "o.nc", "--rim", "rim_header.csv"], "header x,y,dz"),
+        (["invert", "f.nc", "-o", "o.nc", "--rim", "rim_text.csv"], "row 2 is not three numbers"),
+        (["invert", "f.nc", "-o", "rim_centre.csv", "--rim", "rim_centre.csv"], "is the rim-target file"),
+        (["invert", "f.nc", "-o", "o.nc", "--panels-csv", "f.nc"], "is the FieldMap"),
+    ],
+    "render": [
+        (["render", "missing.nc", "-o", "o.png"], "missing.nc"),
+        (["render", "f.nc", "-o", "f.nc"], "is the file to draw"),
+        (["render", "f.nc", "-o", "o.png", "--kind", "bogus"], "bogus"),
+        (["render", "f.nc", "-o", "o.png", "--size", "10x"], "--size"),
+        (["render", "f.nc", "-o", "o.png", "--quantity", "foo"], "foo"),
+        (["render", "corrupt.nc", "-o", "o.png"], "not a readable NetCDF file"),
+        (["render", "scene.toml", "-o", "o.png"], "scene.toml"),
+        (["render", "s.nc", "-o", "/proc/o.png"], "cannot write in /proc"),
+        (["render", "s.nc", "-o", "s.nc"], "is the file to draw"),
+    ],
+    "report": [
+        (["report", "scene.toml", "-o", "rep_new", "--solver", "magic"], "unknown solver 'magic'"),
+        (["report", "scene.toml", "-o", "rep_new", "--grid", "100000"], "must be an integer in 16..4096"),
+        (["report", "scene.toml", "-o", "rep_new", "--refine", "99"], "must be an integer in 0..50"),
+        (["report", "scene.toml", "-o", "rep_new", "--method", "magic"], "unknown method 'magic'"),
+        (["report", "report/field.nc", "-o", "report"], "holds the FieldMap"),
+        (["report", "f.nc", "-o", "user_folder"], "holds files that are not a raysim report"),
+        (["report", "f.nc", "-o", "notes.txt"], "exists and is not a folder"),
+        (["report", "missing.toml", "-o", "rep_new"], "no such scene file"),
+        (["report", "corrupt.nc", "-o", "rep_new"], "not a readable NetCDF file"),
+    ],
+    "paper": [
+        (["paper", "--scale", "1e7"], "--scale must lie in (0, 50]"),
+        (["paper", "--scale", "nan"], "--scale must lie in (0, 50]"),
+        (["paper", "--grid", "3"], "must be an integer in 16..4096"),
+        (["paper", "--po", "--frequencies", "inf"], "--frequencies must be a finite frequency"),
+        (["paper", "--po", "--frequencies", "abc"], "--frequencies takes frequencies in Hz"),
+        (["paper", "--po", "--frequencies", "1e12"], "above the sweep's"),
+        (["paper", "--po", "--coarse-3ghz", "9x"], "--coarse-3ghz takes a sphere grid"),
+        (["paper", "--po", "--wave-max-ghz", "nan"], "--wave-max-ghz must be a finite number"),
+    ],
+    "dataset": [
+        (["dataset", "missing.toml", "-o", "d.zarr"], "no such dataset spec file"),
+        (["dataset", "spec_typo.toml", "-o", "d.zarr"], "unknown key 'sede' (did you mean 'seed'?)"),
+        (["dataset", "spec_nan.toml", "-o", "d.zarr"], "'errors[0].rms_um' must be a finite number"),
+        (["dataset", "spec_ghz.toml", "-o", "d.zarr"], "in Hz, not GHz"),
+        (["dataset", "spec.toml", "-o", "d.zarr", "--scheduler", "notanaddress"], "tcp://HOST:PORT"),
+        (["dataset", "spec.toml", "-o", "d.zarr", "--scheduler", "tcp://127.0.0.1:{silent}"],
+         "did not answer within"),
+        (["dataset", "spec.toml", "-o", "d.zarr", "--workers", "0"], "--workers must be an integer"),
+        (["dataset", "spec.toml", "-o", "d.zarr", "--threads", "0"], "--threads must be an integer"),
+        (["dataset", "spec.toml", "-o", "existing_file", "--resume"], "is not a Zarr store"),
+        (["dataset", "spec.toml", "-o", "spec.toml", "--resume"], "is the dataset spec"),
+        (["dataset", "spec.toml", "-o", "d.zarr", "--device", "tpu"], "unknown device 'tpu'"),
+    ],
+    "scan": [
+        (["scan", "missing.toml", "-o", "o.nc", "--simulate", "f.nc"], "no such scan plan file"),
+        (["scan", "plan_setle.toml", "-o", "o.nc", "--simulate", "f.nc"],
+         "unknown key 'acquisition.setle' (did you mean 'settle_s'?)"),
+        (["scan", "plan_reach.toml", "-o", "o.nc", "--simulate", "f.nc"], "(see [limits] in the rig file)"),
+        (["scan", "plan.toml", "-o", "f.nc", "--simulate", "f.nc"], "is the FieldMap the simulated rig scans"),
+        (["scan", "plan.toml", "-o", "x.nc", "--journal", "x.nc", "--simulate", "f.nc"], "is the journal"),
+        (["scan", "plan.toml", "-o", "plan.toml", "--simulate", "f.nc"], "is the plan or rig file"),
+        (["scan", "plan.toml", "-o", "o.nc", "--journal", "rig.toml", "--simulate", "f.nc"],
+         "is the plan or rig file"),
+        (["scan", "plan.toml", "-o", "o.nc", "--simulate", "f.nc", "--seed", "-1"], "seed"),
+        (["scan", "plan.toml", "-o", "o.nc", "--simulate", "f.nc", "--noise-db", "20"],
+         "noise_db (--noise-db, [simulator] noise_db) must be a number in 0..10"),
+        (["scan", "plan.toml", "-o", "o.nc", "--simulate", "f.nc", "--centre-offset", "1,2"],
+         "give three numbers"),
+        (["scan", "plan.toml", "-o", "o.nc", "--simulate", "f.nc", "--resource", f"meter={NOWHERE}"],
+         "not both"),
+        (["scan", "plan.toml", "-o", "o.nc", "--resource", "bogus"], "write ROLE=VISA"),
+        (["scan", "plan.toml", "-o", "o.nc", "--noise-db", "0.1"], "apply with --simulate only"),
+        (["scan", "plan.toml", "-o", "o.nc", "--resource", f"meter={NOWHERE}",
+          "--resource", f"motion={NOWHERE}"], "unknown host 'nosuchhost.invalid'"),
+        (["scan", "plan.toml", "-o", "o.nc", "--resource", "meter=TCPIP::127.0.0.1::{refused}::SOCKET",
+          "--resource", "motion=TCPIP::127.0.0.1::{refused}::SOCKET"], "is unreachable"),
+        (["scan", "plan.toml", "-o", "o.nc", "--resource", "meter=TCPIP::127.0.0.1::{silent}::SOCKET",
+          "--resource", "motion=TCPIP::127.0.0.1::{silent}::SOCKET"], "is silent"),
+        (["scan", "plan.toml", "-o", "o.nc", "--simulate", "negative.nc"], "holds negative values"),
+    ],
+    "rig park": [
+        (["rig", "park", "missing.toml", "--simulate"], "no such rig file"),
+        (["rig", "park", "rig_no_track.toml", "--simulate"], "missing table [track]"),
+        (["rig", "park", "rig.toml", "--simulate", "--resource", f"motion={NOWHERE}"], "not both"),
+        (["rig", "park", "rig.toml", "--resource", f"meter={NOWHERE}"],
+         "drives the motion controller only"),
+        (["rig", "park", "rig.toml", "--resource", f"motion={NOWHERE}"], "unknown host"),
+        (["rig", "park", "rig.toml", "--resource", "motion=TCPIP::127.0.0.1::{refused}::SOCKET"],
+         "is unreachable"),
+        (["rig", "park", "rig.toml", "--resource", "motion=TCPIP::127.0.0.1::{silent}::SOCKET"],
+         "is silent"),
+        (["rig", "park", "rig.toml"], "no motion controller address"),
+        (["rig", "park", "rig.toml", "--speed", "3"], "No such option"),
+    ],
+}
+
+
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes()
+            for p in sorted(folder.rglob("*")) if p.is_file() and not p.is_symlink()}
+
+
+def test_the_table_covers_every_command():
+    counts = {name: len(cases) for name, cases in CASES.items()}
+    assert sum(counts.values()) >= 60 and min(counts.values()) >= 5, counts
+
+
+@pytest.mark.parametrize(("args", "message"),
+                         [pytest.param(a, m, id=f"{name}-{i}") for name, cases in CASES.items()
+                          for i, (a, m) in enumerate(cases)])
+def test_bad_input_is_one_line_status_2_and_touches_nothing(workspace, raysim_cli, monkeypatch,
+                                                            args, message):
+    from raysim.dataset import run as dataset_run
+
+    monkeypatch.chdir(workspace)
+    monkeypatch.setattr(dataset_run, "SCHEDULER_TIMEOUT_S", 2.0)
+    silent, stop = _silent_server()
+    try:
+        ports = {"silent": silent, "refused": _refused_port()}
+        argv = [a.format(**ports) for a in args]
+        before = _snapshot(workspace)
+        result = raysim_cli(*argv)
+    finally:
+        stop.set()
+    assert result.code == 2, (result.code, result.stdout, result.stderr)
+    line = result.error()
+    assert "Traceback" not in result.stderr
+    assert line.startswith("error: "), line
+    assert message in line, line
+    after = _snapshot(workspace)
+    assert {name: after.get(name) for name in before} == before
+    assert not os.path.exists(workspace / "o.nc") and not os.path.exists(workspace / "rep_new")
