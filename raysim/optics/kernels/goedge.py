@@ -20,9 +20,10 @@ Time convention exp(+j w t), SI units, reflector frame; fields as (Re x, y, z, I
   point: E = -eta / (4 pi) exp(-j k R) / R [a p - b (R_hat . p) R_hat] with p = J0 exp(-j k
   k_i . r) * Int (M g . u) / (g^T M g) ds over the element's share of its edge, g the surface
   gradient of the phase (k_i - R_hat) in the tangent plane (t, u), linear in s (g0 + s H e_t,
-  H the surface Hessian of the path), M = adj|H| (its small eigenvalue floored at BETA times
-  the large one); the integral is done in closed form (:func:`endpoint_integral`): exact for
-  the near-singular elements beside a reflection boundary, and the point rule elsewhere.
+  H the surface Hessian of the path), M = adj(H) where H is definite and well conditioned,
+  the identity where not, a smooth blend between (:func:`endpoint_integral`); the integral is
+  in closed form near the zero of g (exact for the near-singular elements beside a reflection
+  boundary) and two terms of its Taylor series elsewhere.
 """
 
 from __future__ import annotations
@@ -32,11 +33,12 @@ import warp as wp
 from raysim.optics.kernels.f64 import F64_HALF, F64_ONE, F64_TWO, F64_ZERO
 from raysim.optics.kernels.go import lambert, sphere_entry
 from raysim.optics.kernels.ptd import ROWS as FRINGE_ROWS
-from raysim.optics.kernels.ptd import EdgeElement, fringe_pair, load_edge
+from raysim.optics.kernels.ptd import EdgeElement, fringe_currents, load_edge
 from raysim.optics.kernels.radiation import (
     cis,
     electric_bracket,
     green,
+    magnetic_bracket,
     radiation_kernels,
     times,
     vec6d,
@@ -46,9 +48,15 @@ wp.set_module_options({"enable_backward": False})
 
 # fringe rows (23), then Re J0 (3), Im J0 (3), k_i (3), curvature kappa_tt, tu, uu (3), s_lo, s_hi
 ROWS = FRINGE_ROWS + 14
-BETA = wp.constant(wp.float64(0.02))  # M = adj|H|: small eigenvalue floored at BETA x the large one
-DEFINITE = wp.constant(wp.float64(0.02 / 1.02**2))  # det / tr^2 above it: lambda_min / lambda_max > BETA
+# det / tr^2 of H (= l1 l2 / (l1 + l2)^2): M = adj(H) from RHO_2 (condition number 50), the
+# identity below RHO_1 (condition number 200, or indefinite), a smooth blend between
+RHO_2 = wp.constant(wp.float64(50.0 / 51.0**2))
+RHO_1 = wp.constant(wp.float64(200.0 / 201.0**2))
+NEAR = wp.constant(wp.float64(0.03))  # h |dg/ds| / |g| below it: the Taylor rule, no closed form
+INV_24 = wp.constant(wp.float64(1.0 / 24.0))
 TINY = wp.constant(wp.float64(1e-300))
+INV_3, INV_5, INV_7, INV_9, INV_11, INV_13, INV_15 = (wp.constant(wp.float64(1.0 / n))
+                                                      for n in (3, 5, 7, 9, 11, 13, 15))
 
 
 @wp.kernel
@@ -224,6 +232,17 @@ def load_diffraction(src: wp.array2d(dtype=wp.float64), s: int) -> Diffraction:
 
 
 @wp.func
+def arctan2(y: wp.float64, x: wp.float64) -> wp.float64:
+    """atan2(y, x); by its series where |y| <= x / 10 (error below 1e-17: no libm call)."""
+    if x > F64_ZERO and wp.abs(y) <= wp.float64(0.1) * x:
+        z = y / x
+        z2 = z * z
+        return z * (F64_ONE - z2 * (INV_3 - z2 * (INV_5 - z2 * (INV_7 - z2 * (INV_9 - z2 * (INV_11
+            - z2 * (INV_13 - z2 * INV_15)))))))
+    return wp.atan2(y, x)
+
+
+@wp.func
 def definite_integral(a0: wp.float64, b0: wp.float64, htt: wp.float64, htu: wp.float64,
                       det: wp.float64, s_lo: wp.float64, s_hi: wp.float64) -> wp.float64:
     """Int (M g . u) / (g^T M g) ds for M = adj(H), H definite: the numerator is constant,
@@ -232,51 +251,40 @@ def definite_integral(a0: wp.float64, b0: wp.float64, htt: wp.float64, htu: wp.f
     c = (htt * b0 - htu * a0) / sd
     x1 = a0 + htt * s_lo
     x2 = a0 + htt * s_hi
-    return wp.atan2(c * (x2 - x1), c * c + x1 * x2) / sd
+    return arctan2(c * (x2 - x1), c * c + x1 * x2) / sd
 
 
 @wp.func
 def general_integral(a0: wp.float64, b0: wp.float64, htt: wp.float64, htu: wp.float64,
-                     huu: wp.float64, s_lo: wp.float64, s_hi: wp.float64) -> wp.float64:
-    """The same integral for any H: M = adj|H| with the small eigenvalue floored (pos. def.);
-    numerator c0 + c1 s, denominator q(s) = g(s)^T M g(s) (a log and an arctan term)."""
-    m = F64_HALF * (htt + huu)
-    dd = wp.sqrt(F64_HALF * F64_HALF * (htt - huu) * (htt - huu) + htu * htu)
-    l1 = wp.abs(m + dd)
-    l2 = wp.abs(m - dd)
-    v = wp.vec2d(m + dd - huu, htu)
-    if htt < huu:
-        v = wp.vec2d(htu, m + dd - htt)
-    nv = wp.length(v)
-    if nv > F64_ZERO:
-        v = v / nv
-    else:
-        v = wp.vec2d(F64_ONE, F64_ZERO)
-    top = wp.max(wp.max(l1, l2), TINY)
-    l1 = wp.max(l1, BETA * top)
-    l2 = wp.max(l2, BETA * top)
-    # adj of |H| = l1 v v^T + l2 w w^T (w = v turned by 90 deg): l2 v v^T + l1 w w^T
-    m00 = l2 * v[0] * v[0] + l1 * v[1] * v[1]
-    m01 = (l2 - l1) * v[0] * v[1]
-    m11 = l2 * v[1] * v[1] + l1 * v[0] * v[0]
-    g1 = wp.vec2d(htt, htu)
-    mg1 = wp.vec2d(m00 * g1[0] + m01 * g1[1], m01 * g1[0] + m11 * g1[1])
-    q2 = wp.dot(g1, mg1)
+                     m00: wp.float64, m01: wp.float64, m11: wp.float64, s_lo: wp.float64,
+                     s_hi: wp.float64) -> wp.float64:
+    """The same integral for a positive definite M: numerator c(s) = (M g)_u linear,
+    denominator q(s) = g^T M g quadratic. Far from the zero of g (h |g1| < NEAR |g| at the
+    middle) two terms of its Taylor series about the middle, else the closed form (a log and
+    an arctangent)."""
     h = s_hi - s_lo
+    s_m = F64_HALF * (s_lo + s_hi)
+    g1 = wp.vec2d(htt, htu)
+    gm = wp.vec2d(a0 + s_m * htt, b0 + s_m * htu)
+    mgm = wp.vec2d(m00 * gm[0] + m01 * gm[1], m01 * gm[0] + m11 * gm[1])
+    mg1 = wp.vec2d(m00 * g1[0] + m01 * g1[1], m01 * g1[0] + m11 * g1[1])
+    q_m = wp.dot(gm, mgm)
+    q2 = wp.dot(g1, mg1)
+    if h * h * wp.dot(g1, g1) < NEAR * NEAR * wp.dot(gm, gm):
+        dq = F64_TWO * wp.dot(g1, mgm)
+        c = mgm[1]
+        f2 = (-F64_TWO * mg1[1] * dq - F64_TWO * c * q2) / (q_m * q_m) + F64_TWO * c * dq * dq / (q_m * q_m * q_m)
+        return h * (c / q_m + h * h * INV_24 * f2)
     g0 = wp.vec2d(a0, b0)
-    mg0 = wp.vec2d(m00 * a0 + m01 * b0, m01 * a0 + m11 * b0)
-    q0 = wp.dot(g0, mg0)
-    if q2 <= wp.float64(1e-24) * wp.max(q0, TINY):
-        return h * mg0[1] / wp.max(q0, TINY)
+    q1 = F64_TWO * wp.dot(g0, mg1)
     det_m = m00 * m11 - m01 * m01
     sd = wp.sqrt(det_m)
-    q1 = F64_TWO * wp.dot(g0, mg1)
     gamma = g1[0] * g0[1] - g1[1] * g0[0]
     jmg1 = wp.vec2d(-mg1[1], mg1[0])
     mjmg1_u = m01 * jmg1[0] + m11 * jmg1[1]
     y1 = F64_TWO * q2 * s_lo + q1
     y2 = F64_TWO * q2 * s_hi + q1
-    arc = wp.atan2(F64_TWO * sd * gamma * (y2 - y1), wp.float64(4.0) * det_m * gamma * gamma + y1 * y2)
+    arc = arctan2(F64_TWO * sd * gamma * (y2 - y1), wp.float64(4.0) * det_m * gamma * gamma + y1 * y2)
     ga = g0 + s_lo * g1
     gb = g0 + s_hi * g1
     qa = ga[0] * (m00 * ga[0] + m01 * ga[1]) + ga[1] * (m01 * ga[0] + m11 * ga[1])
@@ -288,23 +296,36 @@ def general_integral(a0: wp.float64, b0: wp.float64, htt: wp.float64, htu: wp.fl
 @wp.func
 def endpoint_integral(a0: wp.float64, b0: wp.float64, htt: wp.float64, htu: wp.float64,
                       huu: wp.float64, s_lo: wp.float64, s_hi: wp.float64) -> wp.float64:
-    """Int (M g . u) / (g^T M g) ds over s_lo..s_hi with g = (a0 + htt s, b0 + htu s)."""
+    """Int (M g . u) / (g^T M g) ds over s_lo..s_hi with g = (a0 + htt s, b0 + htu s).
+
+    M = adj(H) where H is definite with det / tr^2 >= RHO_2 (condition number <= 50); below
+    RHO_1 (indefinite or nearly singular H) M = I (Gordon's form); between them the blend
+    w sign(tr) adj(H) / |tr| + (1 - w) I with a smooth step w: positive definite and
+    continuous in H everywhere, so the field is continuous in P.
+    """
     det = htt * huu - htu * htu
     tr = htt + huu
-    if det > DEFINITE * tr * tr:
+    rho = det / wp.max(tr * tr, TINY)
+    if rho >= RHO_2:
         return definite_integral(a0, b0, htt, htu, det, s_lo, s_hi)
-    return general_integral(a0, b0, htt, htu, huu, s_lo, s_hi)
+    m00 = F64_ONE
+    m01 = F64_ZERO
+    m11 = F64_ONE
+    if rho > RHO_1:
+        x = (rho - RHO_1) / (RHO_2 - RHO_1)
+        w = x * x * (wp.float64(3.0) - F64_TWO * x)
+        scale = w / tr  # adj(H) / |tr| times sign(tr)
+        m00 = scale * huu + (F64_ONE - w)
+        m01 = -scale * htu
+        m11 = scale * htt + (F64_ONE - w)
+    return general_integral(a0, b0, htt, htu, m00, m01, m11, s_lo, s_hi)
 
 
 @wp.func
-def endpoint_pair(p: wp.vec3d, e: Diffraction, k: wp.float64, k_inv: wp.float64,
-                  table: wp.array(dtype=wp.vec2d)) -> vec6d:
-    """E (V/m) at P of the PO end-point current of the element e (module docstring)."""
+def endpoint_weight(r_hat: wp.vec3d, inv: wp.float64, e: Diffraction) -> wp.float64:
+    """The end-point integral of the element e seen along r_hat from distance 1 / inv (m):
+    g = k_i - R_hat in the edge frame, H the surface Hessian of the path (module docstring)."""
     f = e.edge
-    d = p - f.r
-    R2 = wp.dot(d, d)
-    inv = F64_ONE / wp.sqrt(R2)
-    r_hat = d * inv
     g = e.k_i - r_hat
     rt = wp.dot(r_hat, f.t)
     ru = wp.dot(r_hat, f.x)
@@ -312,15 +333,24 @@ def endpoint_pair(p: wp.vec3d, e: Diffraction, k: wp.float64, k_inv: wp.float64,
     htt = (F64_ONE - rt * rt) * inv + gn * e.kappa[0]
     htu = -rt * ru * inv + gn * e.kappa[1]
     huu = (F64_ONE - ru * ru) * inv + gn * e.kappa[2]
-    w = endpoint_integral(wp.dot(g, f.t), wp.dot(g, f.x), htt, htu, huu, e.s_lo, e.s_hi)
-    return times(electric_bracket(d, inv, inv * k_inv, w * e.j_re, w * e.j_im), green(k, R2, inv, table))
+    return endpoint_integral(wp.dot(g, f.t), wp.dot(g, f.x), htt, htu, huu, e.s_lo, e.s_hi)
 
 
 @wp.func
 def diffraction_pair(p: wp.vec3d, e: Diffraction, k: wp.float64, k_inv: wp.float64,
                      table: wp.array(dtype=wp.vec2d)) -> vec6d:
-    """The edge element's full diffraction at P: fringe plus PO end point (V/m)."""
-    return fringe_pair(p, e.edge, k, k_inv, table) + endpoint_pair(p, e, k, k_inv, table)
+    """E (V/m) at P of the edge element's full diffraction: the fringe currents of
+    :mod:`raysim.optics.kernels.ptd` and PO's end-point current, through one Green's function."""
+    f = e.edge
+    d = p - f.r
+    R2 = wp.dot(d, d)
+    inv = F64_ONE / wp.sqrt(R2)
+    current, moment = fringe_currents(d, inv, f)
+    w = endpoint_weight(d * inv, inv, e)
+    u = inv * k_inv
+    bracket = electric_bracket(d, inv, u, current[0] * f.t + w * e.j_re, current[1] * f.t + w * e.j_im) \
+        + magnetic_bracket(d, inv, u, moment[0] * f.t, moment[1] * f.t)
+    return times(bracket, green(k, R2, inv, table))
 
 
 radiate_diffraction, radiate_diffraction4 = radiation_kernels(load_diffraction, diffraction_pair)
