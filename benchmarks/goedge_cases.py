@@ -68,23 +68,24 @@ class Case:
     n_theta: int = 90
     n_phi: int = 360
     edges: str = "rim"
-    phi_max_deg: float | None = None  # a sector of the sphere (the panels case)
+    phi_max_deg: float | None = None  # a sector of the sphere (phi from 0)
 
     def scene(self):
         from raysim.scene.scene import load_scene, parse_scene
 
         if self.template == "panels":
-            scene = load_scene(ROOT / "scenes" / "panels_ptd.toml")
-            text = scene.text.replace("n_phi = 360", f"n_phi = {self.n_phi}\nphi_max_deg = "
-                                      f"{self.phi_max_deg}").replace("frequency_hz = 0.3e9",
-                                                                      f"frequency_hz = {self.frequency_hz}")
-            return parse_scene(text, source=self.name, base=ROOT / "scenes")
-        text = self.template.format(f=self.frequency_hz, n_theta=self.n_theta, n_phi=self.n_phi)
-        return parse_scene(text, source=self.name)
+            text = load_scene(ROOT / "scenes" / "panels_ptd.toml").text.replace(
+                "frequency_hz = 0.3e9", f"frequency_hz = {self.frequency_hz}")
+        else:
+            text = self.template.format(f=self.frequency_hz, n_theta=self.n_theta, n_phi=self.n_phi)
+        if self.phi_max_deg is not None:
+            text = text.replace("n_phi = 360", f"n_phi = {self.n_phi}").replace(
+                f"n_phi = {self.n_phi}", f"n_phi = {self.n_phi}\nphi_max_deg = {self.phi_max_deg}")
+        return parse_scene(text, source=self.name, base=ROOT / "scenes")
 
     @property
     def path(self) -> Path:
-        if self.template is PAPER:
+        if self.template is PAPER and self.phi_max_deg is None:
             return REF_DIR / f"paper_poptd_{self.frequency_hz / 1e9:g}GHz_{self.n_theta}x{self.n_phi}.nc"
         return REF_DIR / f"{self.name}_poptd_{self.n_theta}x{self.n_phi}.nc"
 
@@ -92,11 +93,13 @@ class Case:
 CASES = {c.name: c for c in (
     Case("paper_0.3GHz", PAPER, 0.3e9),
     Case("dish25_1GHz", DISH25, 1e9),
-    Case("dish25_3GHz", DISH25, 3e9),
     Case("paper_1GHz", PAPER, 1e9),
     Case("paper_3GHz", PAPER, 3e9, 90, 36),
+    Case("dish25_3GHz", DISH25, 3e9),
     Case("panels_3GHz", "panels", 3e9, 90, 60, edges="all", phi_max_deg=60.0),
-    Case("dish25_10GHz", DISH25, 10e9),
+    # the field's mirror symmetries in x and y (axisymmetric dish and shape, E along x): the
+    # quadrant phi 0..90 deg at the full grid's 1 deg cells holds the whole sphere's map
+    Case("dish25_10GHz", DISH25, 10e9, 90, 90, phi_max_deg=90.0),
 )}
 
 

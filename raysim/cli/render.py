@@ -35,7 +35,7 @@ def report(
     source: Path = typer.Argument(..., help="Scene TOML file, or a FieldMap (.nc) simulated or measured."),
     output: Path = typer.Option(..., "-o", "--output", help="Folder for report.html, its figures and data."),
     method: str | None = typer.Option(None, "--method",
-                                      help="Simulation method: go, po or po+ptd (default: the "
+                                      help="Simulation method: go, po, po+ptd or go+edge (default: the "
                                            "scene's method key, else go)."),
     device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
     solver: str | None = typer.Option(None, "--solver", help="Poisson solver (default: the solver's)."),

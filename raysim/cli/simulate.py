@@ -14,15 +14,16 @@ def simulate(
     scene: Path = typer.Argument(..., help="Scene TOML file (see scenes/)."),
     output: Path = typer.Option(..., "-o", "--output", help="FieldMap NetCDF file to write."),
     method: str | None = typer.Option(None, "--method",
-                                      help="go (geometric optics), po, or po+ptd (default: the "
+                                      help="go (geometric optics), po, po+ptd, or go+edge (GO wave plus edge "
+                                           "diffraction, for high frequencies) (default: the "
                                            "scene's method key, else go)."),
     frequency: float | None = typer.Option(None, "--frequency", help="Override the scene's frequency (Hz)."),
     n_theta: int | None = typer.Option(None, "--n-theta", help="Cells in theta (polar angle from -z)."),
     n_phi: int | None = typer.Option(None, "--n-phi", help="Cells in phi (azimuth)."),
     device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
-    total: bool = typer.Option(False, "--total", help="PO: intensity of scattered plus incident field."),
+    total: bool = typer.Option(False, "--total", help="Wave methods: intensity of scattered plus incident field."),
     save_field: bool = typer.Option(False, "--save-field",
-                                    help="PO: also store the complex field components E_re, E_im."),
+                                    help="Wave methods: also store the complex field components E_re, E_im."),
     samples_per_wavelength: float | None = typer.Option(
         None, "--samples-per-wavelength",
         help="PO: Gauss points per wavelength along mesh face edges (default 1.5; 3-4 for "

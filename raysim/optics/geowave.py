@@ -18,7 +18,10 @@ smooth surface (float64), reflected and followed to the sphere (:func:`reflect_r
   (the divergence of the tube; |E_r| = |E_i| on a perfect conductor);
 - polarisation E_r = -e_hat + 2 (n . e_hat) n at the hit, carried unchanged along the ray;
 - path L = k_hat . r_hit + |Q - r_hit|, the optical path from the incident wavefront through
-  the float64 reflection point to the sphere point Q.
+  the float64 reflection point to the sphere point Q;
+- the near-field factors of the free-space Green's function at the reflection point (see
+  :mod:`raysim.optics.kernels.goedge`): the field is PO's stationary-phase value, which the
+  edge currents of :mod:`raysim.optics.goedge` complete.
 
 Per tube: the number of caustics the tube crosses before the sphere (roots of its
 cross-section, a quadratic in the distance along the rays), each a factor j. The field at a
@@ -238,7 +241,8 @@ class GeometricWave:
         E = wp.zeros((6, n), dtype=wp.float64, device=dev)
         runtime.launch(K.geometric_field, n, [
             wp.array(lambert_chart(u), dtype=wp.vec2d, device=dev), wp.array(pts, dtype=wp.vec3d, device=dev),
-            a["chart"], a["exit_point"], a["direction"], a["path"], a["amplitude"], a["tubes"], a["turns"],
+            a["chart"], a["exit_point"], a["direction"], a["path"], a["distance"], a["amplitude"],
+            a["longitudinal"], a["tubes"], a["turns"],
             wp.array(b.start, dtype=wp.int32, device=dev), wp.array(b.tubes, dtype=wp.int32, device=dev),
             wp.vec2d(*b.origin), float(b.inv_size), b.nx, b.ny, float(self.k),
             wp.array(cis_table(), dtype=wp.vec2d, device=dev), E], dev, min_chunk=256)
@@ -290,8 +294,11 @@ def trace_wave(reflector: Reflector, focus, radius: float, wave: Illumination, s
     if valid.any():
         s_end = out["distance"].numpy()[tubes[valid]].mean(axis=1)
         turns[valid] = caustic_crossings(h[valid], d[tubes[valid]], s_end)
-    arrays = {name: out[name] for name in ("chart", "exit_point", "direction", "path")}
+    arrays = {name: out[name] for name in ("chart", "exit_point", "direction", "path", "distance")}
     arrays["amplitude"] = wp.array(amp[:, None] * out["polar"].numpy(), dtype=wp.vec3d, device=dev)
+    # PO's longitudinal part: -(d . (n x h_hat)) d per unit amplitude (E_r = -(n x h_hat) across d)
+    ell = np.sum(d * np.cross(normals, wave.h_hat), axis=1)
+    arrays["longitudinal"] = wp.array((-amp * ell)[:, None] * d, dtype=wp.vec3d, device=dev)
     arrays["tubes"] = wp.array(tubes, dtype=wp.vec3i, device=dev)
     arrays["turns"] = wp.array(turns, dtype=wp.int32, device=dev)
     buckets = bucket_tubes(out["chart"].numpy(), tubes, valid)

@@ -118,7 +118,7 @@ class Scene:
 
 
 # the simulation a scene is made for (``raysim simulate`` uses it unless --method says otherwise)
-SCENE_METHODS = ("go", "po", "po+ptd")
+SCENE_METHODS = ("go", "po", "po+ptd", "go+edge")
 
 # --- the schema: section -> key -> expected kind ------------------------------------------
 _SCHEMA: dict[str, dict[str, str]] = {

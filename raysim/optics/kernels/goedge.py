@@ -12,7 +12,11 @@ Time convention exp(+j w t), SI units, reflector frame; fields as (Re x, y, z, I
   folds add. Within a tube the ray amplitudes (vector, real) are interpolated barycentrically
   in the chart and so is the path, each ray's path first carried to the point along its own
   direction (L_v + d_v . (P - Q_v): second order in the tube's size); the phase factor is
-  exp(-j k L) times j per caustic the tube crossed. A point on an edge shared by two tubes
+  exp(-j k L) times j per caustic the tube crossed. The field carries the near-field factors
+  of the free-space Green's function at its reflection point, a = 1 - j u - u^2 on the
+  transverse part and a - b = 2 j u + 2 u^2 on PO's longitudinal part (u = 1 / (k s), s the
+  distance from the reflection point): PO's stationary-phase value, to which the edge
+  currents' reflection-boundary jump is matched. A point on an edge shared by two tubes
   belongs to exactly one (the edge functions are computed once per edge, in a canonical
   direction, and ties go to the tube for which the edge is a top-left edge).
 - :func:`diffraction_pair`: one edge element's field at a point, the fringe currents of
@@ -21,7 +25,7 @@ Time convention exp(+j w t), SI units, reflector frame; fields as (Re x, y, z, I
   k_i . r) * Int (M g . u) / (g^T M g) ds over the element's share of its edge, g the surface
   gradient of the phase (k_i - R_hat) in the tangent plane (t, u), linear in s (g0 + s H e_t,
   H the surface Hessian of the path), M = adj(H) where H is definite and well conditioned,
-  the identity where not, a smooth blend between (:func:`endpoint_integral`); the integral is
+  adj|H| (small eigenvalue floored) where not (:func:`endpoint_integral`); the integral is
   in closed form near the zero of g (exact for the near-singular elements beside a reflection
   boundary) and two terms of its Taylor series elsewhere.
 """
@@ -48,10 +52,8 @@ wp.set_module_options({"enable_backward": False})
 
 # fringe rows (23), then Re J0 (3), Im J0 (3), k_i (3), curvature kappa_tt, tu, uu (3), s_lo, s_hi
 ROWS = FRINGE_ROWS + 14
-# det / tr^2 of H (= l1 l2 / (l1 + l2)^2): M = adj(H) from RHO_2 (condition number 50), the
-# identity below RHO_1 (condition number 200, or indefinite), a smooth blend between
-RHO_2 = wp.constant(wp.float64(50.0 / 51.0**2))
-RHO_1 = wp.constant(wp.float64(200.0 / 201.0**2))
+BETA = wp.constant(wp.float64(0.25))  # M: small eigenvalue of |H| raised to BETA x the large one
+RHO_2 = wp.constant(wp.float64(0.25 / 1.25**2))  # det / tr^2 from which H is definite, l_min / l_max >= BETA
 NEAR = wp.constant(wp.float64(0.03))  # h |dg/ds| / |g| below it: the Taylor rule, no closed form
 INV_24 = wp.constant(wp.float64(1.0 / 24.0))
 TINY = wp.constant(wp.float64(1e-300))
@@ -141,7 +143,9 @@ def geometric_field(
     exit_point: wp.array(dtype=wp.vec3d),
     direction: wp.array(dtype=wp.vec3d),
     path: wp.array(dtype=wp.float64),
+    distance: wp.array(dtype=wp.float64),
     amplitude: wp.array(dtype=wp.vec3d),
+    longitudinal: wp.array(dtype=wp.vec3d),
     tubes: wp.array(dtype=wp.vec3i),
     turns: wp.array(dtype=wp.int32),
     bucket_start: wp.array(dtype=wp.int32),
@@ -163,8 +167,8 @@ def geometric_field(
     fy = (x[1] - origin[1]) * inv_size
     acc = vec6d()
     if fx >= F64_ZERO and fy >= F64_ZERO and fx < wp.float64(nx) and fy < wp.float64(ny):
-        b = int(wp.floor(fy)) * nx + int(wp.floor(fx))
-        for m in range(bucket_start[b], bucket_start[b + 1]):
+        cell = int(wp.floor(fy)) * nx + int(wp.floor(fx))
+        for m in range(bucket_start[cell], bucket_start[cell + 1]):
             t = bucket_tubes[m]
             tri = tubes[t]
             area = cross2(chart[tri[1]] - chart[tri[0]], chart[tri[2]] - chart[tri[0]])
@@ -186,15 +190,24 @@ def geometric_field(
             w1 = e20 / total
             w2 = e01 / total
             a = w0 * amplitude[tri[0]] + w1 * amplitude[tri[1]] + w2 * amplitude[tri[2]]
-            L = w0 * (path[tri[0]] + wp.dot(direction[tri[0]], p - exit_point[tri[0]])) \
-                + w1 * (path[tri[1]] + wp.dot(direction[tri[1]], p - exit_point[tri[1]])) \
-                + w2 * (path[tri[2]] + wp.dot(direction[tri[2]], p - exit_point[tri[2]]))
+            b = w0 * longitudinal[tri[0]] + w1 * longitudinal[tri[1]] + w2 * longitudinal[tri[2]]
+            x0 = wp.dot(direction[tri[0]], p - exit_point[tri[0]])
+            x1 = wp.dot(direction[tri[1]], p - exit_point[tri[1]])
+            x2 = wp.dot(direction[tri[2]], p - exit_point[tri[2]])
+            L = w0 * (path[tri[0]] + x0) + w1 * (path[tri[1]] + x1) + w2 * (path[tri[2]] + x2)
+            s = w0 * (distance[tri[0]] + x0) + w1 * (distance[tri[1]] + x1) + w2 * (distance[tri[2]] + x2)
             ph = cis_signed(k * L, table)
             c = wp.vec2d(ph[0], -ph[1])  # exp(-j k L)
             n_turn = turns[t] % 4  # j per caustic crossed
             for _q in range(n_turn):
                 c = wp.vec2d(-c[1], c[0])
-            acc += vec6d(c[0] * a[0], c[0] * a[1], c[0] * a[2], c[1] * a[0], c[1] * a[1], c[1] * a[2])
+            # the Green's function's near-field factors at the reflection point: a on the
+            # transverse field, a - b = 2 j u + 2 u^2 on the longitudinal one (u = 1 / (k s))
+            u = F64_ONE / (k * s)
+            ca = wp.vec2d(c[0] * (F64_ONE - u * u) + c[1] * u, c[1] * (F64_ONE - u * u) - c[0] * u)
+            cb = wp.vec2d(F64_TWO * u * (c[0] * u - c[1]), F64_TWO * u * (c[1] * u + c[0]))
+            acc += vec6d(ca[0] * a[0] + cb[0] * b[0], ca[0] * a[1] + cb[0] * b[1], ca[0] * a[2] + cb[0] * b[2],
+                         ca[1] * a[0] + cb[1] * b[0], ca[1] * a[1] + cb[1] * b[1], ca[1] * a[2] + cb[1] * b[2])
     for comp in range(6):
         E[comp, i] = acc[comp]
 
@@ -298,27 +311,28 @@ def endpoint_integral(a0: wp.float64, b0: wp.float64, htt: wp.float64, htu: wp.f
                       huu: wp.float64, s_lo: wp.float64, s_hi: wp.float64) -> wp.float64:
     """Int (M g . u) / (g^T M g) ds over s_lo..s_hi with g = (a0 + htt s, b0 + htu s).
 
-    M = adj(H) where H is definite with det / tr^2 >= RHO_2 (condition number <= 50); below
-    RHO_1 (indefinite or nearly singular H) M = I (Gordon's form); between them the blend
-    w sign(tr) adj(H) / |tr| + (1 - w) I with a smooth step w: positive definite and
-    continuous in H everywhere, so the field is continuous in P.
+    M = adj|H'|, |H'| the matrix absolute value of H with its small eigenvalue raised to BETA
+    times the large one: adj(H) up to sign where H is definite and better conditioned than
+    1 / BETA (the exact case), positive definite and continuous in H everywhere else, so the
+    field stays continuous in P. |H| = (H^2 + |det H| I) / (|l1| + |l2|) needs no eigenvectors.
     """
     det = htt * huu - htu * htu
     tr = htt + huu
-    rho = det / wp.max(tr * tr, TINY)
-    if rho >= RHO_2:
+    if det >= RHO_2 * tr * tr:
         return definite_integral(a0, b0, htt, htu, det, s_lo, s_hi)
-    m00 = F64_ONE
-    m01 = F64_ZERO
-    m11 = F64_ONE
-    if rho > RHO_1:
-        x = (rho - RHO_1) / (RHO_2 - RHO_1)
-        w = x * x * (wp.float64(3.0) - F64_TWO * x)
-        scale = w / tr  # adj(H) / |tr| times sign(tr)
-        m00 = scale * huu + (F64_ONE - w)
-        m01 = -scale * htu
-        m11 = scale * htt + (F64_ONE - w)
-    return general_integral(a0, b0, htt, htu, m00, m01, m11, s_lo, s_hi)
+    dd2 = wp.sqrt((htt - huu) * (htt - huu) + wp.float64(4.0) * htu * htu)  # l1 - l2
+    big = wp.max(wp.abs(tr), dd2)  # |l1| + |l2|
+    small = wp.min(wp.abs(tr), dd2)  # | |l1| - |l2| |
+    if big <= TINY:
+        return general_integral(a0, b0, htt, htu, F64_ONE, F64_ZERO, F64_ONE, s_lo, s_hi)
+    a_det = wp.abs(det)
+    p00 = (htt * htt + htu * htu + a_det) / big  # |H|
+    p01 = htu * (htt + huu) / big
+    p11 = (huu * huu + htu * htu + a_det) / big
+    mu = wp.max(F64_ZERO, BETA * F64_HALF * (big + small) - F64_HALF * (big - small))
+    p00 = p00 + mu
+    p11 = p11 + mu
+    return general_integral(a0, b0, htt, htu, p11, -p01, p00, s_lo, s_hi)  # adj of |H| + mu I
 
 
 @wp.func
