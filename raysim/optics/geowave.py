@@ -139,31 +139,6 @@ def _bend_onto_arcs(reflector: Reflector, m: int, W: NDArray, points: NDArray) -
 
 
 # --- tubes ---------------------------------------------------------------------------------
-def caustic_crossings(h: NDArray, d: NDArray, s_end: NDArray) -> NDArray[np.int32]:
-    """Caustics each tube crosses before the sphere: roots in (0, s_end) of its cross-section
-    A(s) = 1/2 [(h1 - h0 + s (d1 - d0)) x (h2 - h0 + s (d2 - d0))] . d_mean, a quadratic
-    (h (T, 3, 3) hits, d (T, 3, 3) unit directions, s_end (T,) mean distance to the sphere)."""
-    dm = d.mean(axis=1)
-    dh1, dh2 = h[:, 1] - h[:, 0], h[:, 2] - h[:, 0]
-    dd1, dd2 = d[:, 1] - d[:, 0], d[:, 2] - d[:, 0]
-    c0 = 0.5 * np.einsum("ij,ij->i", np.cross(dh1, dh2), dm)
-    c1 = 0.5 * np.einsum("ij,ij->i", np.cross(dh1, dd2) + np.cross(dd1, dh2), dm)
-    c2 = 0.5 * np.einsum("ij,ij->i", np.cross(dd1, dd2), dm)
-    scale = np.abs(c0) + np.abs(c1) * s_end + np.abs(c2) * s_end**2
-    count = np.zeros(len(c0), dtype=np.int32)
-    linear = np.abs(c2) * s_end**2 <= 1e-12 * scale
-    with np.errstate(divide="ignore", invalid="ignore"):
-        root = -c0 / c1
-        count += (linear & (root > 0) & (root < s_end)).astype(np.int32)
-        disc = c1 * c1 - 4.0 * c2 * c0
-        double = ~linear & (np.abs(disc) <= 1e-9 * (c1 * c1 + np.abs(4.0 * c2 * c0)))
-        sq = np.sqrt(np.where(double, 0.0, np.maximum(disc, 0.0)))
-        for sign in (-1.0, 1.0):
-            r = (-c1 + sign * sq) / (2.0 * c2)
-            count += (~linear & (disc > 0) | double) & (r > 0) & (r < s_end)
-    return count.astype(np.int32)
-
-
 @dataclass
 class Buckets:
     """Tubes listed by the chart cells (size 1 / inv_size) their bounding boxes meet."""
@@ -182,11 +157,15 @@ def bucket_tubes(chart: NDArray, tubes: NDArray, valid: NDArray, max_cells: int 
     ids = np.flatnonzero(valid)
     if len(ids) == 0:
         return Buckets(np.zeros(2), 1.0, 1, 1, np.zeros(2, dtype=np.int32), np.zeros(0, dtype=np.int32))
-    c = chart[tubes[ids]]  # (T, 3, 2)
-    lo, hi = c.min(axis=1), c.max(axis=1)
+    t = tubes[ids]
+    c0, c1, c2 = chart[t[:, 0]], chart[t[:, 1]], chart[t[:, 2]]
+    lo = np.minimum(np.minimum(c0, c1), c2)
+    hi = np.maximum(np.maximum(c0, c1), c2)
     origin = lo.min(axis=0)
     span = hi.max(axis=0) - origin
-    size = max(2.0 * float(np.median((hi - lo).max(axis=1))), float(span.max()) / max_cells, 1e-12)
+    extent = np.maximum(hi[:, 0] - lo[:, 0], hi[:, 1] - lo[:, 1])
+    typical = float(np.partition(extent, len(extent) // 2)[len(extent) // 2])
+    size = max(2.0 * typical, float(span.max()) / max_cells, 1e-12)
     nx, ny = (np.floor(span / size).astype(np.int64) + 1).tolist()
     i0 = np.floor((lo - origin) / size).astype(np.int64)
     i1 = np.minimum(np.floor((hi - origin) / size).astype(np.int64), [nx - 1, ny - 1])
@@ -275,33 +254,29 @@ def trace_wave(reflector: Reflector, focus, radius: float, wave: Illumination, s
         out["chart"], out["exit_point"], out["direction"], out["path"], out["distance"], out["polar"]], dev)
     ok_np = ok.numpy().astype(bool)
     tubes = lattice.tubes
-    valid = ok_np[tubes].all(axis=1)
-    Q, d = out["exit_point"].numpy(), out["direction"].numpy()
-    h = hits[tubes]
-    power = 0.5 * np.abs(np.cross(h[:, 1] - h[:, 0], h[:, 2] - h[:, 0]) @ k_hat)
-    q = Q[tubes]
-    d_mean = d[tubes].mean(axis=1)
-    d_mean /= np.maximum(np.linalg.norm(d_mean, axis=1, keepdims=True), 1e-300)
-    across = 0.5 * np.abs(np.einsum("ij,ij->i", np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]), d_mean))
-    sum_p = np.zeros(n_rays)
-    sum_a = np.zeros(n_rays)
-    for corner in range(3):
-        np.add.at(sum_p, tubes[valid, corner], power[valid])
-        np.add.at(sum_a, tubes[valid, corner], across[valid])
+    n_tubes = len(tubes)
+    geo = {name: wp.zeros(n_tubes, dtype=dtype, device=dev) for name, dtype in (
+        ("power", wp.float64), ("across", wp.float64), ("turns", wp.int32), ("valid", wp.int32))}
+    tubes_wp = wp.array(tubes, dtype=wp.vec3i, device=dev)
+    runtime.launch(K.tube_geometry, n_tubes, [
+        wp.array(hits, dtype=wp.vec3d, device=dev), out["exit_point"], out["direction"], out["distance"],
+        ok, tubes_wp, wp.vec3d(*k_hat), geo["power"], geo["across"], geo["turns"], geo["valid"]], dev)
+    valid = geo["valid"].numpy().astype(bool)
+    power, across = geo["power"].numpy(), geo["across"].numpy()
+    corner = tubes[valid].ravel()
+    sum_p = np.bincount(corner, np.repeat(power[valid], 3), minlength=n_rays)
+    sum_a = np.bincount(corner, np.repeat(across[valid], 3), minlength=n_rays)
     with np.errstate(divide="ignore", invalid="ignore"):
         amp = np.where(sum_a > 0, np.sqrt(sum_p / sum_a), 0.0)
-    turns = np.zeros(len(tubes), dtype=np.int32)
-    if valid.any():
-        s_end = out["distance"].numpy()[tubes[valid]].mean(axis=1)
-        turns[valid] = caustic_crossings(h[valid], d[tubes[valid]], s_end)
+    d = out["direction"].numpy()
     arrays = {name: out[name] for name in ("chart", "exit_point", "direction", "path", "distance")}
     arrays["amplitude"] = wp.array(amp[:, None] * out["polar"].numpy(), dtype=wp.vec3d, device=dev)
     # PO's longitudinal part: -(d . (n x h_hat)) d per unit amplitude (E_r = -(n x h_hat) across d)
     ell = np.sum(d * np.cross(normals, wave.h_hat), axis=1)
     arrays["longitudinal"] = wp.array((-amp * ell)[:, None] * d, dtype=wp.vec3d, device=dev)
-    arrays["tubes"] = wp.array(tubes, dtype=wp.vec3i, device=dev)
-    arrays["turns"] = wp.array(turns, dtype=wp.int32, device=dev)
+    arrays["tubes"] = tubes_wp
+    arrays["turns"] = geo["turns"]
     buckets = bucket_tubes(out["chart"].numpy(), tubes, valid)
-    return GeometricWave(dev, focus, float(radius), wave.k, arrays, buckets, n_rays, len(tubes),
+    return GeometricWave(dev, focus, float(radius), wave.k, arrays, buckets, n_rays, n_tubes,
                          int(lit.sum()), int((lit & ~ok_np).sum()), int(valid.sum()),
-                         int((turns[valid] > 0).sum()))
+                         int((geo["turns"].numpy()[valid] > 0).sum()))

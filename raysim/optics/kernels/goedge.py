@@ -6,6 +6,8 @@ Time convention exp(+j w t), SI units, reflector frame; fields as (Re x, y, z, I
   where it enters the probe sphere: the point Q, its Lambert chart coordinate, the unit ray
   direction, the optical path from the incident wavefront through the hit to Q (m) and the
   reflected polarisation E_r = -e + 2 (n . e) n of the unit incident E (PEC).
+- :func:`tube_geometry`: per tube, its incident and exit cross-sections (the divergence) and
+  the caustics it crosses before the sphere.
 - :func:`geometric_field`: the geometric wave at each field point. The point's chart
   coordinate is looked up in a bucket grid of the tubes (each bucket lists, in ascending order,
   the tubes whose chart bounding box meets it); every tube containing it adds its field, so
@@ -99,6 +101,75 @@ def reflect_rays(
     path[i] = wp.dot(k_hat, h) + s
     distance[i] = s
     polar[i] = F64_TWO * wp.dot(n, e_hat) * n - e_hat
+
+
+@wp.func
+def caustics_before(c0: wp.float64, c1: wp.float64, c2: wp.float64, s_end: wp.float64) -> int:
+    """Roots in (0, s_end) of A(s) = c0 + c1 s + c2 s^2 (a double root counts twice)."""
+    scale = wp.abs(c0) + wp.abs(c1) * s_end + wp.abs(c2) * s_end * s_end
+    count = int(0)
+    if wp.abs(c2) * s_end * s_end <= wp.float64(1e-12) * scale:
+        if c1 != F64_ZERO:
+            r = -c0 / c1
+            if r > F64_ZERO and r < s_end:
+                count = 1
+        return count
+    disc = c1 * c1 - wp.float64(4.0) * c2 * c0
+    if wp.abs(disc) <= wp.float64(1e-9) * (c1 * c1 + wp.abs(wp.float64(4.0) * c2 * c0)):
+        r = -c1 / (F64_TWO * c2)
+        if r > F64_ZERO and r < s_end:
+            count = 2
+        return count
+    if disc > F64_ZERO:
+        sq = wp.sqrt(disc)
+        r1 = (-c1 - sq) / (F64_TWO * c2)
+        r2 = (-c1 + sq) / (F64_TWO * c2)
+        if r1 > F64_ZERO and r1 < s_end:
+            count += 1
+        if r2 > F64_ZERO and r2 < s_end:
+            count += 1
+    return count
+
+
+@wp.kernel
+def tube_geometry(
+    hits: wp.array(dtype=wp.vec3d),
+    exit_point: wp.array(dtype=wp.vec3d),
+    direction: wp.array(dtype=wp.vec3d),
+    distance: wp.array(dtype=wp.float64),
+    ok: wp.array(dtype=wp.int32),
+    tubes: wp.array(dtype=wp.vec3i),
+    k_hat: wp.vec3d,
+    power: wp.array(dtype=wp.float64),
+    across: wp.array(dtype=wp.float64),
+    turns: wp.array(dtype=wp.int32),
+    valid: wp.array(dtype=wp.int32),
+    offset: int,
+):
+    """Per tube whose three rays reach the sphere: its incident cross-section (power, m^2),
+    its cross-section normal to the mean ray where it meets the sphere (m^2) and the caustics
+    it crosses on the way: roots in (0, s_end) of A(s) = 1/2 [(h1 - h0 + s (d1 - d0)) x
+    (h2 - h0 + s (d2 - d0))] . d_mean, a quadratic in the distance s along the rays."""
+    t = wp.tid() + offset
+    tri = tubes[t]
+    if ok[tri[0]] == 0 or ok[tri[1]] == 0 or ok[tri[2]] == 0:
+        return
+    valid[t] = 1
+    h0 = hits[tri[0]]
+    dh1 = hits[tri[1]] - h0
+    dh2 = hits[tri[2]] - h0
+    d0 = direction[tri[0]]
+    dd1 = direction[tri[1]] - d0
+    dd2 = direction[tri[2]] - d0
+    dm = wp.normalize(d0 + direction[tri[1]] + direction[tri[2]])
+    power[t] = F64_HALF * wp.abs(wp.dot(wp.cross(dh1, dh2), k_hat))
+    q0 = exit_point[tri[0]]
+    across[t] = F64_HALF * wp.abs(wp.dot(wp.cross(exit_point[tri[1]] - q0, exit_point[tri[2]] - q0), dm))
+    c0 = F64_HALF * wp.dot(wp.cross(dh1, dh2), dm)
+    c1 = F64_HALF * wp.dot(wp.cross(dh1, dd2) + wp.cross(dd1, dh2), dm)
+    c2 = F64_HALF * wp.dot(wp.cross(dd1, dd2), dm)
+    s_end = (distance[tri[0]] + distance[tri[1]] + distance[tri[2]]) / wp.float64(3.0)
+    turns[t] = caustics_before(c0, c1, c2, s_end)
 
 
 @wp.func
