@@ -144,10 +144,12 @@ def _curvature(reflector: Reflector, edges: Edges, t: NDArray, u: NDArray, y: ND
 
 
 def diffraction_elements(reflector: Reflector, edges: Edges, wave: Illumination,
-                         lit: NDArray[np.bool_] | None = None, taper: Taper | None = None) -> NDArray:
+                         lit: NDArray[np.bool_] | None = None, taper: Taper | None = None,
+                         fringe: bool = True) -> NDArray:
     """The ``(ROWS, N)`` layout of :mod:`raysim.optics.kernels.goedge` for the lit points of
     ``edges``: PTD's fringe rows, then the end-point moment (-eta / (4 pi)) J0 exp(-j k k_i . r),
-    k_i, the curvature and the element's share of its edge (see the module docstring)."""
+    k_i, the curvature and the element's share of its edge (see the module docstring).
+    ``fringe`` False keeps PO's end point alone (tests against PO's own closed forms)."""
     from raysim.optics import ptd
 
     keep = np.ones(len(edges), dtype=bool) if lit is None else np.asarray(lit, dtype=bool).copy()
@@ -155,20 +157,22 @@ def diffraction_elements(reflector: Reflector, edges: Edges, wave: Illumination,
     if taper is not None:
         weight = np.asarray(taper(edges.points[:, 0], edges.points[:, 1]), dtype=np.float64)
         keep &= weight != 0
-    fringe = ptd.fringe_elements(edges, wave, keep, taper)[:, keep]
-    t, u, y = fringe[3:6].T, fringe[6:9].T, fringe[9:12].T
+    rows = ptd.fringe_elements(edges, wave, keep, taper)[:, keep]
+    if not fringe:
+        rows[15:23] = 0.0  # the fringe coefficients CE, CH, CB, CM
+    t, u, y = rows[3:6].T, rows[6:9].T, rows[9:12].T
     pts = edges.points[keep]
-    J0 = 2.0 * np.cross(y, wave.h_hat) / ETA0
     phase = np.exp(-1j * wave.k * (pts @ wave.k_hat)) * weight[keep]
-    moment = (-ETA0 / (4.0 * np.pi)) * J0 * phase[:, None]
+
+    J0 = (-ETA0 / (4.0 * np.pi)) * (2.0 * np.cross(y, wave.h_hat) / ETA0) * phase[:, None]
     share = edges.share[keep]
     flip = np.sum(t * edges.tangent[keep], axis=1) < 0
     s_lo = np.where(flip, -share[:, 1], share[:, 0])
     s_hi = np.where(flip, -share[:, 0], share[:, 1])
     kappa = _curvature(reflector, _subset(edges, keep), t, u, y)
-    extra = np.vstack([moment.real.T, moment.imag.T, np.repeat(wave.k_hat[:, None], len(pts), axis=1),
+    extra = np.vstack([J0.real.T, J0.imag.T, np.repeat(wave.k_hat[:, None], len(pts), axis=1),
                        kappa.T, s_lo, s_hi])
-    return np.ascontiguousarray(np.vstack([fringe, extra]))
+    return np.ascontiguousarray(np.vstack([rows, extra]))
 
 
 def _subset(edges: Edges, keep: NDArray[np.bool_]) -> Edges:
@@ -268,11 +272,12 @@ def sphere_field(reflector: Reflector, grid: SphereGrid, wave: Illumination,
 def edge_field(reflector: Reflector, points: ArrayLike, wave: Illumination, edges: str = "all",
                points_per_wavelength: float = DEFAULT_POINTS_PER_WAVELENGTH,
                device: str | None = "cpu", taper: Taper | None = None,
-               curve: bool = True) -> NDArray[np.complex128]:
+               curve: bool = True, fringe: bool = True) -> NDArray[np.complex128]:
     """The edge part alone (end point plus fringe) at any ``points`` (n, 3), m: E (n, 3).
 
     The edge sampling is planned for the ball around the points; ``taper`` weights the
-    currents as PO's does, ``curve`` False keeps every edge straight (tests).
+    currents as PO's does, ``curve`` False keeps every edge straight, ``fringe`` False leaves
+    PO's end point alone (tests).
     """
     from raysim.optics import ptd
 
@@ -284,5 +289,5 @@ def edge_field(reflector: Reflector, points: ArrayLike, wave: Illumination, edge
                            edges, n_min=1, curve=curve)
     lit = ptd.lit_points(reflector, quad, wave, dev)
     radiator = Radiator(pts, wave.k, dev, block=1024)
-    radiator.add_packed(diffraction_elements(reflector, quad, wave, lit, taper), "diffraction")
+    radiator.add_packed(diffraction_elements(reflector, quad, wave, lit, taper, fringe), "diffraction")
     return radiator.field()

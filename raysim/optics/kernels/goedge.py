@@ -29,7 +29,7 @@ Time convention exp(+j w t), SI units, reflector frame; fields as (Re x, y, z, I
   H the surface Hessian of the path), M = adj(H) where H is definite and well conditioned,
   adj|H| (small eigenvalue floored) where not (:func:`endpoint_integral`); the integral is
   in closed form near the zero of g (exact for the near-singular elements beside a reflection
-  boundary) and two terms of its Taylor series elsewhere.
+  boundary), the Gauss point value away from it, a smooth blend between.
 """
 
 from __future__ import annotations
@@ -56,8 +56,8 @@ wp.set_module_options({"enable_backward": False})
 ROWS = FRINGE_ROWS + 14
 BETA = wp.constant(wp.float64(0.25))  # M: small eigenvalue of |H| raised to BETA x the large one
 RHO_2 = wp.constant(wp.float64(0.25 / 1.25**2))  # det / tr^2 from which H is definite, l_min / l_max >= BETA
-NEAR = wp.constant(wp.float64(0.03))  # h |dg/ds| / |g| below it: the Taylor rule, no closed form
-INV_24 = wp.constant(wp.float64(1.0 / 24.0))
+NEAR_1 = wp.constant(wp.float64(0.05))  # h |dg/ds| / |g| below it: the Gauss point value
+NEAR_2 = wp.constant(wp.float64(0.3))  # above it: the exact integral of the element's share
 TINY = wp.constant(wp.float64(1e-300))
 INV_3, INV_5, INV_7, INV_9, INV_11, INV_13, INV_15 = (wp.constant(wp.float64(1.0 / n))
                                                       for n in (3, 5, 7, 9, 11, 13, 15))
@@ -342,24 +342,12 @@ def definite_integral(a0: wp.float64, b0: wp.float64, htt: wp.float64, htu: wp.f
 def general_integral(a0: wp.float64, b0: wp.float64, htt: wp.float64, htu: wp.float64,
                      m00: wp.float64, m01: wp.float64, m11: wp.float64, s_lo: wp.float64,
                      s_hi: wp.float64) -> wp.float64:
-    """The same integral for a positive definite M: numerator c(s) = (M g)_u linear,
-    denominator q(s) = g^T M g quadratic. Far from the zero of g (h |g1| < NEAR |g| at the
-    middle) two terms of its Taylor series about the middle, else the closed form (a log and
-    an arctangent)."""
-    h = s_hi - s_lo
-    s_m = F64_HALF * (s_lo + s_hi)
-    g1 = wp.vec2d(htt, htu)
-    gm = wp.vec2d(a0 + s_m * htt, b0 + s_m * htu)
-    mgm = wp.vec2d(m00 * gm[0] + m01 * gm[1], m01 * gm[0] + m11 * gm[1])
-    mg1 = wp.vec2d(m00 * g1[0] + m01 * g1[1], m01 * g1[0] + m11 * g1[1])
-    q_m = wp.dot(gm, mgm)
-    q2 = wp.dot(g1, mg1)
-    if h * h * wp.dot(g1, g1) < NEAR * NEAR * wp.dot(gm, gm):
-        dq = F64_TWO * wp.dot(g1, mgm)
-        c = mgm[1]
-        f2 = (-F64_TWO * mg1[1] * dq - F64_TWO * c * q2) / (q_m * q_m) + F64_TWO * c * dq * dq / (q_m * q_m * q_m)
-        return h * (c / q_m + h * h * INV_24 * f2)
+    """The same integral for any positive definite M: numerator c(s) = (M g)_u linear,
+    denominator q(s) = g^T M g quadratic (a log and an arctangent)."""
     g0 = wp.vec2d(a0, b0)
+    g1 = wp.vec2d(htt, htu)
+    mg1 = wp.vec2d(m00 * g1[0] + m01 * g1[1], m01 * g1[0] + m11 * g1[1])
+    q2 = wp.dot(g1, mg1)
     q1 = F64_TWO * wp.dot(g0, mg1)
     det_m = m00 * m11 - m01 * m01
     sd = wp.sqrt(det_m)
@@ -378,47 +366,60 @@ def general_integral(a0: wp.float64, b0: wp.float64, htt: wp.float64, htu: wp.fl
 
 
 @wp.func
-def endpoint_integral(a0: wp.float64, b0: wp.float64, htt: wp.float64, htu: wp.float64,
-                      huu: wp.float64, s_lo: wp.float64, s_hi: wp.float64) -> wp.float64:
-    """Int (M g . u) / (g^T M g) ds over s_lo..s_hi with g = (a0 + htt s, b0 + htu s).
-
-    M = adj|H'|, |H'| the matrix absolute value of H with its small eigenvalue raised to BETA
-    times the large one: adj(H) up to sign where H is definite and better conditioned than
-    1 / BETA (the exact case), positive definite and continuous in H everywhere else, so the
-    field stays continuous in P. |H| = (H^2 + |det H| I) / (|l1| + |l2|) needs no eigenvectors.
-    """
+def path_metric(htt: wp.float64, htu: wp.float64, huu: wp.float64):
+    """K: H itself where it is definite and better conditioned than 1 / BETA, else |H| with its
+    small eigenvalue raised to BETA times the large one (positive definite, continuous in H;
+    |H| = (H^2 + |det H| I) / (|l1| + |l2|) needs no eigenvectors). Returns (definite, det H,
+    K00, K01, K11)."""
     det = htt * huu - htu * htu
     tr = htt + huu
     if det >= RHO_2 * tr * tr:
-        return definite_integral(a0, b0, htt, htu, det, s_lo, s_hi)
+        return True, det, htt, htu, huu
     dd2 = wp.sqrt((htt - huu) * (htt - huu) + wp.float64(4.0) * htu * htu)  # l1 - l2
-    big = wp.max(wp.abs(tr), dd2)  # |l1| + |l2|
+    big = wp.max(wp.max(wp.abs(tr), dd2), TINY)  # |l1| + |l2|
     small = wp.min(wp.abs(tr), dd2)  # | |l1| - |l2| |
-    if big <= TINY:
-        return general_integral(a0, b0, htt, htu, F64_ONE, F64_ZERO, F64_ONE, s_lo, s_hi)
     a_det = wp.abs(det)
-    p00 = (htt * htt + htu * htu + a_det) / big  # |H|
-    p01 = htu * (htt + huu) / big
-    p11 = (huu * huu + htu * htu + a_det) / big
     mu = wp.max(F64_ZERO, BETA * F64_HALF * (big + small) - F64_HALF * (big - small))
-    p00 = p00 + mu
-    p11 = p11 + mu
-    return general_integral(a0, b0, htt, htu, p11, -p01, p00, s_lo, s_hi)  # adj of |H| + mu I
+    return (False, det, (htt * htt + htu * htu + a_det) / big + mu, htu * tr / big,
+            (huu * huu + htu * htu + a_det) / big + mu)
 
 
 @wp.func
-def endpoint_weight(r_hat: wp.vec3d, inv: wp.float64, e: Diffraction) -> wp.float64:
-    """The end-point integral of the element e seen along r_hat from distance 1 / inv (m):
-    g = k_i - R_hat in the edge frame, H the surface Hessian of the path (module docstring)."""
-    f = e.edge
-    g = e.k_i - r_hat
-    rt = wp.dot(r_hat, f.t)
-    ru = wp.dot(r_hat, f.x)
-    gn = wp.dot(g, f.y)
-    htt = (F64_ONE - rt * rt) * inv + gn * e.kappa[0]
-    htu = -rt * ru * inv + gn * e.kappa[1]
-    huu = (F64_ONE - ru * ru) * inv + gn * e.kappa[2]
-    return endpoint_integral(wp.dot(g, f.t), wp.dot(g, f.x), htt, htu, huu, e.s_lo, e.s_hi)
+def endpoint_integral(a0: wp.float64, b0: wp.float64, htt: wp.float64, htu: wp.float64,
+                      definite: bool, det: wp.float64, k00: wp.float64, k01: wp.float64,
+                      k11: wp.float64, s_lo: wp.float64, s_hi: wp.float64) -> wp.float64:
+    """The element's end-point weight: Int (M g . u) / (g^T M g) ds over s_lo..s_hi, g = (a0 +
+    htt s, b0 + htu s), M = adj(K) (:func:`path_metric`); in m: the Gauss weight times the
+    integrand, or near a zero of g the exact integral of this linear model.
+
+    With K = H (definite) the exact case: the jump at a reflection boundary is 2 pi /
+    sqrt(det H). Rule: r = h |g1| / |g0| (h the share's length); the Gauss point value h c0 /
+    q0 while r < NEAR_1 (the integrand is smooth there and the edge's Gauss rule keeps its
+    order), the closed form beyond NEAR_2, a smooth blend of the two between.
+    """
+    m00 = k11
+    m01 = -k01
+    m11 = k00
+    h = s_hi - s_lo
+    g0_2 = a0 * a0 + b0 * b0
+    r2 = h * h * (htt * htt + htu * htu)
+    c0 = m01 * a0 + m11 * b0
+    q0 = a0 * (m00 * a0 + m01 * b0) + b0 * (m01 * a0 + m11 * b0)
+    point = F64_ZERO
+    if r2 < NEAR_2 * NEAR_2 * g0_2:
+        point = h * c0 / q0
+        if r2 <= NEAR_1 * NEAR_1 * g0_2:
+            return point
+    exact = F64_ZERO
+    if definite:
+        exact = definite_integral(a0, b0, htt, htu, det, s_lo, s_hi)
+    else:
+        exact = general_integral(a0, b0, htt, htu, m00, m01, m11, s_lo, s_hi)
+    if r2 >= NEAR_2 * NEAR_2 * g0_2:
+        return exact
+    x = (wp.sqrt(r2 / g0_2) - NEAR_1) / (NEAR_2 - NEAR_1)
+    chi = x * x * (wp.float64(3.0) - F64_TWO * x)
+    return point + chi * (exact - point)
 
 
 @wp.func
@@ -430,8 +431,19 @@ def diffraction_pair(p: wp.vec3d, e: Diffraction, k: wp.float64, k_inv: wp.float
     d = p - f.r
     R2 = wp.dot(d, d)
     inv = F64_ONE / wp.sqrt(R2)
+    r_hat = d * inv
     current, moment = fringe_currents(d, inv, f)
-    w = endpoint_weight(d * inv, inv, e)
+    g = e.k_i - r_hat
+    a0 = wp.dot(g, f.t)
+    b0 = wp.dot(g, f.x)
+    rt = wp.dot(r_hat, f.t)
+    ru = wp.dot(r_hat, f.x)
+    gn = wp.dot(g, f.y)
+    htt = (F64_ONE - rt * rt) * inv + gn * e.kappa[0]
+    htu = -rt * ru * inv + gn * e.kappa[1]
+    huu = (F64_ONE - ru * ru) * inv + gn * e.kappa[2]
+    definite, det, k00, k01, k11 = path_metric(htt, htu, huu)
+    w = endpoint_integral(a0, b0, htt, htu, definite, det, k00, k01, k11, e.s_lo, e.s_hi)
     u = inv * k_inv
     bracket = electric_bracket(d, inv, u, current[0] * f.t + w * e.j_re, current[1] * f.t + w * e.j_im) \
         + magnetic_bracket(d, inv, u, moment[0] * f.t, moment[1] * f.t)
