@@ -219,8 +219,8 @@ class GeometricWave:
         dev, a, b = self.device, self.arrays, self.buckets
         E = wp.zeros((6, n), dtype=wp.float64, device=dev)
         runtime.launch(K.geometric_field, n, [
-            wp.array(lambert_chart(u), dtype=wp.vec2d, device=dev), wp.array(pts, dtype=wp.vec3d, device=dev),
-            a["chart"], a["exit_point"], a["direction"], a["path"], a["distance"], a["amplitude"],
+            wp.array(lambert_chart(u), dtype=wp.vec2d, device=dev), a["chart"], a["path"], a["distance"],
+            a["amplitude"],
             a["longitudinal"], a["tubes"], a["turns"],
             wp.array(b.start, dtype=wp.int32, device=dev), wp.array(b.tubes, dtype=wp.int32, device=dev),
             wp.vec2d(*b.origin), float(b.inv_size), b.nx, b.ny, float(self.k),
@@ -269,7 +269,7 @@ def trace_wave(reflector: Reflector, focus, radius: float, wave: Illumination, s
     with np.errstate(divide="ignore", invalid="ignore"):
         amp = np.where(sum_a > 0, np.sqrt(sum_p / sum_a), 0.0)
     d = out["direction"].numpy()
-    arrays = {name: out[name] for name in ("chart", "exit_point", "direction", "path", "distance")}
+    arrays = {name: out[name] for name in ("chart", "path", "distance")}
     arrays["amplitude"] = wp.array(amp[:, None] * out["polar"].numpy(), dtype=wp.vec3d, device=dev)
     # PO's longitudinal part: -(d . (n x h_hat)) d per unit amplitude (E_r = -(n x h_hat) across d)
     ell = np.sum(d * np.cross(normals, wave.h_hat), axis=1)

@@ -11,9 +11,11 @@ Time convention exp(+j w t), SI units, reflector frame; fields as (Re x, y, z, I
 - :func:`geometric_field`: the geometric wave at each field point. The point's chart
   coordinate is looked up in a bucket grid of the tubes (each bucket lists, in ascending order,
   the tubes whose chart bounding box meets it); every tube containing it adds its field, so
-  folds add. Within a tube the ray amplitudes (vector, real) are interpolated barycentrically
-  in the chart and so is the path, each ray's path first carried to the point along its own
-  direction (L_v + d_v . (P - Q_v): second order in the tube's size); the phase factor is
+  folds add. Within a tube the ray amplitudes (vector, real), the paths and the distances from
+  the reflection points are interpolated barycentrically in the chart (the path along the
+  sphere is smooth: an exact constant for the ideal paraboloid, whose wavefront is the
+  sphere; carrying each ray's path on along its direction would add the chord's sag); the
+  phase factor is
   exp(-j k L) times j per caustic the tube crossed. The field carries the near-field factors
   of the free-space Green's function at its reflection point, a = 1 - j u - u^2 on the
   transverse part and a - b = 2 j u + 2 u^2 on PO's longitudinal part (u = 1 / (k s), s the
@@ -209,10 +211,7 @@ def edge_function(ia: int, ib: int, chart: wp.array(dtype=wp.vec2d), x: wp.vec2d
 @wp.kernel
 def geometric_field(
     point_chart: wp.array(dtype=wp.vec2d),
-    points: wp.array(dtype=wp.vec3d),
     chart: wp.array(dtype=wp.vec2d),
-    exit_point: wp.array(dtype=wp.vec3d),
-    direction: wp.array(dtype=wp.vec3d),
     path: wp.array(dtype=wp.float64),
     distance: wp.array(dtype=wp.float64),
     amplitude: wp.array(dtype=wp.vec3d),
@@ -230,10 +229,10 @@ def geometric_field(
     E: wp.array2d(dtype=wp.float64),
     offset: int,
 ):
-    """E (6, n) of the geometric wave at each field point (module docstring)."""
+    """E (6, n) of the geometric wave at each field point on the sphere, given by its chart
+    coordinate (module docstring)."""
     i = wp.tid() + offset
     x = point_chart[i]
-    p = points[i]
     fx = (x[0] - origin[0]) * inv_size
     fy = (x[1] - origin[1]) * inv_size
     acc = vec6d()
@@ -262,11 +261,8 @@ def geometric_field(
             w2 = e01 / total
             a = w0 * amplitude[tri[0]] + w1 * amplitude[tri[1]] + w2 * amplitude[tri[2]]
             b = w0 * longitudinal[tri[0]] + w1 * longitudinal[tri[1]] + w2 * longitudinal[tri[2]]
-            x0 = wp.dot(direction[tri[0]], p - exit_point[tri[0]])
-            x1 = wp.dot(direction[tri[1]], p - exit_point[tri[1]])
-            x2 = wp.dot(direction[tri[2]], p - exit_point[tri[2]])
-            L = w0 * (path[tri[0]] + x0) + w1 * (path[tri[1]] + x1) + w2 * (path[tri[2]] + x2)
-            s = w0 * (distance[tri[0]] + x0) + w1 * (distance[tri[1]] + x1) + w2 * (distance[tri[2]] + x2)
+            L = w0 * path[tri[0]] + w1 * path[tri[1]] + w2 * path[tri[2]]
+            s = w0 * distance[tri[0]] + w1 * distance[tri[1]] + w2 * distance[tri[2]]
             ph = cis_signed(k * L, table)
             c = wp.vec2d(ph[0], -ph[1])  # exp(-j k L)
             n_turn = turns[t] % 4  # j per caustic crossed
