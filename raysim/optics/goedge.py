@@ -71,7 +71,7 @@ from raysim.maps.sphere import SphereGrid
 from raysim.optics import runtime
 from raysim.optics.bvh import ReflectorBVH
 from raysim.optics.geowave import GeometricWave, trace_wave
-from raysim.optics.illumination import ETA0, Illumination, Taper
+from raysim.optics.illumination import ETA0, Illumination, Taper, incident_field
 from raysim.optics.radiator import Radiator
 from raysim.surface.edges import Edges, SpacingRule, edge_quadrature
 from raysim.surface.mesh import Reflector
@@ -215,6 +215,7 @@ class GOEdge:
         spacing = float(ray_spacing) if ray_spacing is not None else reflector.D / RAYS_PER_DIAMETER
         self.subdivisions = ray_subdivisions(reflector, spacing, subdivisions)
         bvh = bvh if bvh is not None else ReflectorBVH.build(reflector, self.device)
+        self.bvh, self.incident = bvh, wave
         self.wave: GeometricWave = trace_wave(reflector, focus, grid.radius, wave, self.subdivisions,
                                               self.device, bvh)
         self.seconds_trace = time.perf_counter() - start
@@ -226,9 +227,18 @@ class GOEdge:
         self.seconds_edges = 0.0
 
     def field(self, points: ArrayLike) -> GOEdgeField:
-        """Geometric and edge fields at ``points`` (n, 3) on the sphere (m, reflector frame)."""
+        """Geometric and edge fields at ``points`` (n, 3) on the sphere (m, reflector frame).
+
+        The geometric part is the reflected wave plus, at points in the reflector's shadow
+        (another face meets the incident ray first), the shadow-forming wave -E_inc that
+        cancels the incident one there. Call before the BVH (when shared) is refitted.
+        """
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         E_geo = self.wave.field(pts)
+        w = self.incident
+        shadow = ~self.bvh.lit(pts, w.k_hat)
+        if shadow.any():
+            E_geo[shadow] -= incident_field(pts[shadow], w.k, w.k_hat, w.e_hat)
         start = time.perf_counter()
         radiator = Radiator(pts, self.k, self.device, block=1024)
         radiator.add_packed(self.elements, "diffraction")
