@@ -21,7 +21,8 @@ def simulate(
     n_theta: int | None = typer.Option(None, "--n-theta", help="Cells in theta (polar angle from -z)."),
     n_phi: int | None = typer.Option(None, "--n-phi", help="Cells in phi (azimuth)."),
     device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
-    total: bool = typer.Option(False, "--total", help="Wave methods: intensity of scattered plus incident field."),
+    total: bool = typer.Option(False, "--total",
+                               help="Wave methods: intensity of scattered plus incident field."),
     save_field: bool = typer.Option(False, "--save-field",
                                     help="Wave methods: also store the complex field components E_re, E_im."),
     samples_per_wavelength: float | None = typer.Option(

@@ -94,7 +94,7 @@ def shared_lattice(reflector: Reflector, m: int, curve: bool = True) -> RayLatti
     panel = np.repeat(reflector.face_panel[:, None], len(W), axis=1)
     if curve and reflector.surface is not None:
         _bend_onto_arcs(reflector, m, W, points)
-    used, first, compact = np.unique(gid.ravel(), return_index=True, return_inverse=True)
+    _, first, compact = np.unique(gid.ravel(), return_index=True, return_inverse=True)
     normals = normals.reshape(-1, 3)[first]
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     tubes = compact.reshape(n_faces, len(W))[:, local].reshape(-1, 3)
@@ -105,7 +105,7 @@ def shared_lattice(reflector: Reflector, m: int, curve: bool = True) -> RayLatti
 def _bend_onto_arcs(reflector: Reflector, m: int, W: NDArray, points: NDArray) -> None:
     """Move the lattice points of faces with a free arc edge onto the arc (in place)."""
     v = reflector.vertices
-    b, c, a, face = free_edges(reflector.faces)
+    b, c, _, face = free_edges(reflector.faces)
     r = np.hypot(v[:, 0], v[:, 1])
     arc = (r[b] > 0) & (np.abs(r[b] - r[c]) <= ARC_RTOL * np.maximum(r[b], r[c]))
     b, c, face = b[arc], c[arc], face[arc]

@@ -77,7 +77,7 @@ from raysim.surface.edges import Edges, SpacingRule, edge_quadrature
 from raysim.surface.mesh import Reflector
 
 DEFAULT_POINTS_PER_WAVELENGTH = 4.0  # edge points per wavelength of the edge integrand's phase
-MIN_PHASE_RATE = 0.25  # the integrand's phase rate along an edge is floored at this times k
+MIN_PHASE_RATE = 0.15  # the integrand's phase rate along an edge is floored at this times k
 RAYS_PER_DIAMETER = 400  # default ray spacing: D / this (m)
 CURVATURE_STEP = 1e-3  # m: the finite-difference step of the surface normal at edge points
 EDGE_THEORY = ("PO end-point currents (Hessian-weighted line integral, exact across reflection "

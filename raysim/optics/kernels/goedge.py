@@ -273,8 +273,9 @@ def geometric_field(
             u = F64_ONE / (k * s)
             ca = wp.vec2d(c[0] * (F64_ONE - u * u) + c[1] * u, c[1] * (F64_ONE - u * u) - c[0] * u)
             cb = wp.vec2d(F64_TWO * u * (c[0] * u - c[1]), F64_TWO * u * (c[1] * u + c[0]))
-            acc += vec6d(ca[0] * a[0] + cb[0] * b[0], ca[0] * a[1] + cb[0] * b[1], ca[0] * a[2] + cb[0] * b[2],
-                         ca[1] * a[0] + cb[1] * b[0], ca[1] * a[1] + cb[1] * b[1], ca[1] * a[2] + cb[1] * b[2])
+            e_re = ca[0] * a + cb[0] * b
+            e_im = ca[1] * a + cb[1] * b
+            acc += vec6d(e_re[0], e_re[1], e_re[2], e_im[0], e_im[1], e_im[2])
     for comp in range(6):
         E[comp, i] = acc[comp]
 
