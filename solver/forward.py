@@ -189,6 +189,9 @@ class GOEdgeForward(WaveForward):
     the paraboloid plus a gridded delta (ray tubes on the ``face_m`` mesh, subdivided to the
     engine's ray spacing) and the diffraction of its rim, at the cell centres."""
 
+    # the geometric wave answers to fine shapes as GO does: no Fresnel smoothing to undo
+    fresnel_smoothing = False
+
     @property
     def name(self) -> str:
         return "go+edge"
