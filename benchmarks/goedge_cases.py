@@ -18,44 +18,29 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 REF_DIR = ROOT / "out" / "goedge_ref"
 
-PAPER = """
-name = "paper_po_table3"
-description = "Paper Table 3: D = 110 m, F = 33 m, R = 10 m, E along x, Eq. 8 deformation"
+_DISH = """
+name = "{name}"
+description = "{text}, E along x, Eq. 8 deformation for its D and F"
 [dish]
-diameter_m = 110.0
-focal_length_m = 33.0
-resolution_m = 5.0
+diameter_m = {D}
+focal_length_m = {F}
+resolution_m = {faces}
 [[deformation]]
 type = "paper"
 scale = 1.0
 [source]
-frequency_hz = {f}
+frequency_hz = {{f}}
 polarization_deg = 0.0
 [sphere]
-radius_m = 10.0
-n_theta = {n_theta}
-n_phi = {n_phi}
+radius_m = {R}
+n_theta = {{n_theta}}
+n_phi = {{n_phi}}
 """
-
+PAPER = _DISH.format(name="paper_po_table3", text="Paper Table 3: D = 110 m, F = 33 m, R = 10 m",
+                     D=110.0, F=33.0, faces=5.0, R=10.0)
 # a 25 m dish with the paper's F / D and R / F, the Eq. 8 shape at its own scale (D, F)
-DISH25 = """
-name = "dish25"
-description = "25 m dish, F = 7.5 m, R = 2.5 m, E along x, Eq. 8 deformation for D = 25, F = 7.5"
-[dish]
-diameter_m = 25.0
-focal_length_m = 7.5
-resolution_m = 1.25
-[[deformation]]
-type = "paper"
-scale = 1.0
-[source]
-frequency_hz = {f}
-polarization_deg = 0.0
-[sphere]
-radius_m = 2.5
-n_theta = {n_theta}
-n_phi = {n_phi}
-"""
+DISH25 = _DISH.format(name="dish25", text="25 m dish, F = 7.5 m, R = 2.5 m", D=25.0, F=7.5,
+                      faces=1.25, R=2.5)
 
 
 @dataclass(frozen=True)

@@ -166,17 +166,25 @@ class WaveForward:
         reflector = ideal if deformation is None else ideal.deformed(deformation)
         e_hat = (np.cos(self.polarization), np.sin(self.polarization), 0.0)
         wave = po.Illumination.plane_wave(self.frequency_hz, (0.0, 0.0, -1.0), e_hat)
-        spw = po.DEFAULT_SAMPLES_PER_WAVELENGTH if self.samples_per_wavelength is None \
-            else self.samples_per_wavelength
-        E = po.sphere_field(reflector, sphere, wave, spw, self.device, progress=progress).E
-        if self.ptd:
-            E = E + _ptd_field(reflector, sphere, wave, self.device)
+        E = self._scattered(reflector, sphere, wave, progress)
         if self.total:
             points = sphere.points(F)
             E = E + po.incident_field(points.reshape(-1, 3), wave.k, wave.k_hat,
                                       wave.e_hat).reshape(E.shape)
         self.calls += 1
         self.seconds += time.perf_counter() - start
+        return E
+
+    def _scattered(self, reflector, sphere: SphereGrid, wave,
+                   progress: Progress | None) -> NDArray[np.complex128]:
+        """The scattered field (n_theta, n_phi, 3) of ``reflector``: PO, with PTD's rim."""
+        from raysim.optics import po
+
+        spw = po.DEFAULT_SAMPLES_PER_WAVELENGTH if self.samples_per_wavelength is None \
+            else self.samples_per_wavelength
+        E = po.sphere_field(reflector, sphere, wave, spw, self.device, progress=progress).E
+        if self.ptd:
+            E = E + _ptd_field(reflector, sphere, wave, self.device)
         return E
 
 
@@ -201,25 +209,11 @@ class GOEdgeForward(WaveForward):
                 f"{self.frequency_hz / 1e9:g} GHz, E at {np.degrees(self.polarization):g} deg from x, "
                 f"{'total' if self.total else 'scattered'} field, {self.face_m:g} m faces")
 
-    def _field(self, sphere: SphereGrid, F: float, D: float, deformation,
-               progress: Progress | None) -> NDArray[np.complex128]:
-        import time
+    def _scattered(self, reflector, sphere: SphereGrid, wave,
+                   progress: Progress | None) -> NDArray[np.complex128]:
+        from raysim.optics import goedge
 
-        from raysim.optics import goedge, po
-
-        start = time.perf_counter()
-        ideal = _paraboloid(float(D), float(F), float(self.face_m))
-        reflector = ideal if deformation is None else ideal.deformed(deformation)
-        e_hat = (np.cos(self.polarization), np.sin(self.polarization), 0.0)
-        wave = po.Illumination.plane_wave(self.frequency_hz, (0.0, 0.0, -1.0), e_hat)
-        E = goedge.sphere_field(reflector, sphere, wave, device=self.device).E
-        if self.total:
-            points = sphere.points(F)
-            E = E + po.incident_field(points.reshape(-1, 3), wave.k, wave.k_hat,
-                                      wave.e_hat).reshape(E.shape)
-        self.calls += 1
-        self.seconds += time.perf_counter() - start
-        return E
+        return goedge.sphere_field(reflector, sphere, wave, device=self.device).E
 
 
 @lru_cache(maxsize=4)
