@@ -10,8 +10,10 @@ more as the frequency rises: the geometric wave comes from ray tubes
 wavelength of its own phase (linear in f).
 
 Formulation: equivalent edge currents integrated along the edges, with the geometric wave
-from the tubes. Write PO's field as Int_S F(r) exp(-j k psi(r)) dA with psi = k_i . r + |P - r|
-and F the dyadic Green's bracket of the current 2 n x H_inc (:mod:`raysim.optics.kernels.radiation`).
+from the tubes (the reflected wave, and -E_inc where a point lies in the reflector's shadow:
+the shadow-forming wave, whose boundary the same edge integral smooths). Write PO's field as
+Int_S F(r) exp(-j k psi(r)) dA with psi = k_i . r + |P - r| and F the dyadic Green's bracket
+of the current 2 n x H_inc (:mod:`raysim.optics.kernels.radiation`).
 For any tangent field v with (grad_s psi) . v = 1 / (-j k), the divergence theorem splits it
 exactly into a boundary integral Int F exp(-j k psi) (v . nu) dl and an area remainder whose
 only leading-order part is the stationary (specular) point, where div v has a delta. Gordon's
@@ -34,10 +36,15 @@ a Lorentzian narrower than any fixed sampling, the closed form integrates it exa
 jump of the edge integral there (2 pi / sqrt(det H) times the amplitude) cancels the jump of the
 geometric wave: the sum is finite and continuous across the rim's image on the sphere, with the
 Fresnel transition PO gives. H is computed per pair in float64 from the edge's surface
-curvature and the distance to P (the near field: nothing assumes a far zone), and M is made
-positive definite (adj of |H|, small eigenvalue floored) where H is not definite, which keeps
-the integrand finite everywhere (exact continuity needs a definite H at the specular point:
-no caustic between the edge and P, true on the probe sphere of a focusing dish). Added to it,
+curvature and the distance to P (the near field: nothing assumes a far zone). Where H is not
+definite, or worse conditioned than 4 (the kernels' BETA), M is adj of |H| with its small
+eigenvalue raised to a quarter of the large: positive definite and continuous in H, so the
+integrand stays finite and the field continuous in P. Exact cancellation at a reflection
+boundary needs H at the specular point definite with condition number <= 4: no caustic between
+the edge and P; on the probe sphere of a focusing dish with the paper's F / D it is 1.7 (H
+definite at the rim image for the 110, 25 and 10 m dishes alike). Off the specular points the
+choice of M changes the line integral at O(1/k) only (on the Keller cone every M gives
+Michaeli's value); among the choices tried, |H| floored at 1/4 agreed best with PO. Added to it,
 the fringe currents of :mod:`raysim.optics.ptd` (Michaeli's, the same kernels): PO end point
 plus fringe is the half-plane's full diffraction (Ufimtsev, *Fundamentals of the Physical
 Theory of Diffraction*, Wiley, 2007), radiated by the full dyadic Green's function. The
@@ -51,9 +58,20 @@ transition functions; equivalent currents share the PTD engine's fringe part and
 stay finite at caustics by construction and evaluate any set of field points independently.
 
 Validity and limits: leading order in 1/(k L) (L the distances and radii of curvature, metres),
-so the difference from PO + PTD falls as the frequency rises; shadow boundaries inside a
-surface (self-shadowing at oblique incidence) carry no edge term; a gap's two edges are
-isolated half-planes (as in PTD). A block of field points gives the same field bit for bit as
+so the difference from PO + PTD falls as the frequency rises. Measured: the disk's on-axis
+edge wave (the caustic) within 1.5 % of PO's closed form at 0.3 GHz, 0.15 % at 3 GHz; the
+half-plane (Sommerfeld) errors fall as (k rho)^-1.2 at normal incidence, (k rho)^-0.95 under
+skew incidence, and for E across the edge within the reflection boundary's transition zone
+they stay larger than PO + PTD's (3.7 % of the incident field at k rho = 100): the amplitude's
+slope across the edge (PO's integrand in the near field) has a uniform end-point term of that
+order that the leading-order form leaves out (a correction derived for the flat plate mended
+the plate but not the dish, so it is not used). The geometric wave answers to a deformation's
+fine structure as GO does, without the Fresnel smoothing wave optics applies to features
+smaller than sqrt(lambda z) (z the reflected wave's path to its focus): on the paper's dish the
+FA difference from PO + PTD is 21 % of FA's RMS at 1 GHz and 4.7 % at 3 GHz. Shadow boundaries
+inside a surface (self-shadowing at oblique incidence) carry no edge term, and the shadow
+test of the -E_inc wave follows the mesh's facets; a gap's two edges are isolated half-planes
+(as in PTD). A block of field points gives the same field bit for bit as
 the whole sphere: the rays, tubes and edge points are planned for the whole sphere once
 (:class:`GOEdge`), and each point's sums run in a fixed order.
 """
