@@ -11,7 +11,7 @@ gaps), the lattice is bent onto the arc, so the tubes end on the same curve as t
 quadrature of :mod:`raysim.surface.edges`: the geometric wave's boundary on the sphere is then
 the image of the very edge whose diffraction completes it. Each lit ray is lifted onto the
 smooth surface (float64), reflected and followed to the sphere (:func:`reflect_rays` in
-:mod:`raysim.optics.kernels.goedge`). Per ray:
+:mod:`raysim.optics.kernels.geowave`). Per ray:
 
 - amplitude |E| = sqrt(sum P_t / sum A_t) over the tubes t around it: P_t the tube's
   incident cross-section, A_t its cross-section normal to the ray where it meets the sphere
@@ -20,7 +20,7 @@ smooth surface (float64), reflected and followed to the sphere (:func:`reflect_r
 - path L = k_hat . r_hit + |Q - r_hit|, the optical path from the incident wavefront through
   the float64 reflection point to the sphere point Q;
 - the near-field factors of the free-space Green's function at the reflection point (see
-  :mod:`raysim.optics.kernels.goedge`): the field is PO's stationary-phase value, which the
+  :mod:`raysim.optics.kernels.geowave`): the field is PO's stationary-phase value, which the
   edge currents of :mod:`raysim.optics.goedge` complete.
 
 Per tube: the number of caustics the tube crosses before the sphere (roots of its
@@ -206,7 +206,7 @@ class GeometricWave:
 
     def field(self, points: NDArray) -> NDArray[np.complex128]:
         """E (n, 3) of the geometric wave at ``points`` (n, 3) on the sphere (m); each point alone."""
-        from raysim.optics.kernels import goedge as K
+        from raysim.optics.kernels import geowave as K
         from raysim.optics.kernels.radiation import cis_table
 
         wp = runtime.init()
@@ -233,7 +233,7 @@ def trace_wave(reflector: Reflector, focus, radius: float, wave: Illumination, s
                device: str | None = "cpu", bvh: ReflectorBVH | None = None) -> GeometricWave:
     """Trace the lattice of ``reflector`` (m-fold, m = ``subdivisions``) to the sphere of
     ``radius`` (m) about ``focus`` and prepare its geometric wave (module docstring)."""
-    from raysim.optics.kernels import goedge as K
+    from raysim.optics.kernels import geowave as K
 
     wp = runtime.init()
     dev = runtime.resolve_device(device)

@@ -109,7 +109,7 @@ def test_blocks_give_the_same_bits(dish):
 def _gather(chart, tubes, queries):
     """Run the gather kernel on rays at ``chart`` (unit amplitude along x, zero path)."""
     from raysim.optics.geowave import bucket_tubes
-    from raysim.optics.kernels import goedge as K
+    from raysim.optics.kernels import geowave as K
     from raysim.optics.kernels.radiation import cis_table
 
     wp = runtime.init()
@@ -149,7 +149,7 @@ def test_points_on_shared_edges_and_vertices_count_once():
 @pytest.mark.parametrize(("focal", "expected"), [((1.0, 1.0), 2), ((1.0, 1e9), 1), ((5.0, 5.0), 0)])
 def test_caustics_before_the_sphere(focal, expected):
     """Rays converging to focal lines at distances f1, f2 (m), sphere at 2 m: j per caustic."""
-    from raysim.optics.kernels import goedge as K
+    from raysim.optics.kernels import geowave as K
 
     wp = runtime.init()
     h = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]])
