@@ -6,10 +6,11 @@ adding an engine is one entry here and its branch in :func:`raysim.simulate.simu
 A leaf module, so that every layer (the FieldMap contract at the bottom included) can read it.
 """
 
-METHODS: tuple[str, ...] = ("go", "po", "po+ptd")
-"""Simulation methods: geometric optics, physical optics, PO plus the edges' fringe field."""
+METHODS: tuple[str, ...] = ("go", "po", "po+ptd", "go+edge")
+"""Simulation methods: geometric optics, physical optics, PO plus the edges' fringe field, and
+the high-frequency wave engine (the geometric wave of the ray tubes plus edge diffraction)."""
 
-WAVE_METHODS: tuple[str, ...] = ("po", "po+ptd")
+WAVE_METHODS: tuple[str, ...] = ("po", "po+ptd", "go+edge")
 """The methods that give intensities at the cell centres (``sampling = centre``)."""
 
 MEASURED = "measured"

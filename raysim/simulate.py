@@ -91,8 +91,10 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
     Parameters
     ----------
     scene : a validated scene (``raysim.load_scene``).
-    method : ``go`` (geometric optics), ``po`` (physical optics) or ``po+ptd`` (PO plus the
-        fringe field of the edges, :mod:`raysim.optics.ptd`); None takes the scene's ``method``.
+    method : ``go`` (geometric optics), ``po`` (physical optics), ``po+ptd`` (PO plus the
+        fringe field of the edges, :mod:`raysim.optics.ptd`) or ``go+edge`` (the geometric wave
+        plus every free edge's diffraction, :mod:`raysim.optics.goedge`: wave optics at a cost
+        that does not grow as f^2); None takes the scene's ``method``.
     device : ``cpu`` or ``cuda`` (Warp device).
     progress : optional callback (stage name, fraction done in 0..1).
     total : wave methods only: intensity of the total field (scattered plus incident) at the
@@ -126,7 +128,7 @@ def check_method(scene: Scene, method: str | None, options: Options,
     if method not in ENGINES:
         raise RaysimError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
     _check_options(method, options)
-    if method in WAVE_METHODS and scene.dish.diameter is not None:
+    if method in ("po", "po+ptd") and scene.dish.diameter is not None:
         from raysim.optics.po import DEFAULT_SAMPLES_PER_WAVELENGTH
 
         spw = options.samples_per_wavelength or DEFAULT_SAMPLES_PER_WAVELENGTH
@@ -169,6 +171,8 @@ def _check_options(method: str, options: Options) -> None:
     if method not in WAVE_METHODS and wave_only:
         raise RaysimError("--total, --save-field and --samples-per-wavelength apply to --method po "
                           "and po+ptd only")
+    if method == "go+edge" and options.samples_per_wavelength is not None:
+        raise RaysimError("--samples-per-wavelength applies to --method po and po+ptd only")
     spw = options.samples_per_wavelength
     if spw is not None and not (math.isfinite(spw) and 0 < spw <= 20):
         raise RaysimError(f"--samples-per-wavelength must lie in (0, 20], got {spw:g}")
@@ -365,6 +369,51 @@ def _wave_run(scene: Scene, options: Options, context: dict, arrays: dict[str, N
     return run
 
 
+def _run_go_edge(scene: Scene, ideal: Reflector, deformed: Reflector, options: Options,
+                 device: str | None, report: Progress) -> Run:
+    """Method ``go+edge`` (:mod:`raysim.optics.goedge`): the geometric wave of ray tubes plus
+    the diffraction of every free edge, on both reflectors; intensities at the cell centres."""
+    from raysim.optics import goedge, po
+    from raysim.optics.bvh import ReflectorBVH
+
+    wave = po.Illumination.plane_wave(scene.source.frequency_hz, scene.source.direction,
+                                      scene.source.e_hat)
+    bvh = ReflectorBVH.build(ideal, device)
+    results = {}
+    for k, (name, reflector) in enumerate((("ideal", ideal), ("deformed", deformed))):
+        report(f"{name}: rays and edges", 0.05 + 0.45 * k)
+        if k == 1:
+            bvh.refit(deformed)  # same triangulation: the ideal BVH moved
+        results[name] = goedge.sphere_field(reflector, scene.sphere, wave, None, scene.subdivisions,
+                                            device=device, bvh=bvh)
+    r_def, r_ideal = results["deformed"], results["ideal"]
+    fields = {"E": r_def.E, "E_ideal": r_ideal.E}
+    attrs = {
+        "field": "total" if options.total else "scattered",
+        "edges": "all",
+        "edge_theory": goedge.EDGE_THEORY,
+        "edge_points_per_wavelength": float(goedge.DEFAULT_POINTS_PER_WAVELENGTH),
+        "edge_points": int(r_def.n_edge_points),
+        "edge_points_lit": int(r_def.n_edge_lit),
+        "subdivisions": int(r_def.subdivisions),
+        "rays": int(r_def.n_rays + r_ideal.n_rays),
+        "tubes": int(r_def.n_tubes),
+        "seconds_trace": r_def.seconds_trace + r_ideal.seconds_trace,
+        "seconds_edges": r_def.seconds_edges + r_ideal.seconds_edges,
+    }
+    if options.total:
+        E_inc = po.incident_field(scene.sphere.points(deformed.F), wave.k, wave.k_hat, wave.e_hat)
+        fields = {name: E + E_inc.reshape(E.shape) for name, E in fields.items()}
+    run = Run(np.sum(np.abs(fields["E"]) ** 2, axis=-1), np.sum(np.abs(fields["E_ideal"]) ** 2, axis=-1),
+              "centre", attrs)
+    if options.save_field:
+        fields.update({"E_geo": r_def.E_geo, "E_geo_ideal": r_ideal.E_geo, "E_edges": r_def.E_edge,
+                       "E_edges_ideal": r_ideal.E_edge})
+        run.extra = field_variables(fields, attrs["field"])
+        run.coords = {"component": ("component", ["x", "y", "z"])}
+    return run
+
+
 EDGE_THEORY = "Michaeli fringe equivalent edge currents of a half-plane (raysim.optics.ptd)"
 
 
@@ -406,7 +455,8 @@ def _wave_engine(method: str) -> BlockEngine:
 
 
 BLOCK_ENGINES: dict[str, BlockEngine] = {"po": _wave_engine("po"), "po+ptd": _wave_engine("po+ptd")}
-ENGINES: dict[str, Engine] = {"go": _run_go, "po": run_one_block("po"), "po+ptd": run_one_block("po+ptd")}
+ENGINES: dict[str, Engine] = {"go": _run_go, "po": run_one_block("po"), "po+ptd": run_one_block("po+ptd"),
+                              "go+edge": _run_go_edge}
 
 
 def ideal_resolution(scene: Scene) -> float:
@@ -418,6 +468,11 @@ def summary(ds: xr.Dataset) -> str:
     """One line: points, rays, time and power balance of a simulated FieldMap."""
     n = ds.sizes["theta"] * ds.sizes["phi"]
     lit = np.isfinite(ds["intensity"].values) & (ds["intensity"].values > 0)
+    if ds.attrs.get("method") == "go+edge":
+        return (f"{n} points, {ds.attrs.get('rays', 0):,} rays, {ds.attrs.get('edge_points', 0):,} edge "
+                f"points per reflector, {ds.attrs.get('seconds_total', float('nan')):.1f} s (trace "
+                f"{ds.attrs.get('seconds_trace', float('nan')):.1f} s, edges "
+                f"{ds.attrs.get('seconds_edges', float('nan')):.1f} s)")
     if ds.attrs.get("method") in WAVE_METHODS:
         edges = (f"{ds.attrs['edges']} edges ({ds.attrs.get('edge_points', 0):,} points), "
                  if "edges" in ds.attrs else "")

@@ -101,13 +101,17 @@ def refinement_setup(inverse: LinearInverse, chosen: ModelChoice, iterations: in
                              lambda stage, f: report(f"ideal reflector: {stage}",
                                                      f / (iterations + 1)))
     weight = inverse.weight if inverse.weight is not None else np.ones_like(scan.intensity_ideal)
+    fresnel = bool(getattr(forward, "fresnel_smoothing", True))
     correct = WaveCorrection(inverse, E0, float(scan.attrs["frequency_hz"]),
-                             float(scan.attrs.get("polarization", 0.0)), weight, fit_gain)
-    axis, rim = correct.filter.shortest_period()
+                             float(scan.attrs.get("polarization", 0.0)), weight, fit_gain, fresnel)
+    rest = "the GO inversion"
+    if correct.filter is not None:
+        axis, rim = correct.filter.shortest_period()
+        rest += (f" after a Fresnel filter (periods down to {axis:.1f} m on the axis, {rim:.1f} m "
+                 f"at the rim)")
     text = (f"two-level wave preconditioner: the focus-like shape B"
-            f"{' and the scan scale' if fit_gain else ''} by least squares with PO's "
-            f"edge-wave response, the rest by the GO inversion after a Fresnel filter (periods "
-            f"down to {axis:.1f} m on the axis, {rim:.1f} m at the rim)")
+            f"{' and the scan scale' if fit_gain else ''} by least squares with the model's "
+            f"edge-wave response, the rest by {rest}")
     return RefinementSetup(forward, correct, fit_gain, progress, name, chosen.choice,
                            chosen.description, text)
 

@@ -182,10 +182,13 @@ class WaveCorrection:
     ``rim_update(delta)``. ``E0`` is the ideal reflector's complex field (n_theta, n_phi, 3),
     ``weight`` the amplitude weight the misfits carry. Calling it with (misfit, delta) returns
     the update (m, (N, N)) and, with ``fit_gain``, the relative step of the scan's scale.
+    ``fresnel`` False leaves out the Fresnel filter, for a model that answers to fine shapes
+    as GO does (go+edge: the geometric wave plus edge waves has no Fresnel smoothing).
     """
 
     def __init__(self, inverse: LinearInverse, E0: NDArray[np.complex128], frequency_hz: float,
-                 polarization: float, weight: NDArray[np.float64], fit_gain: bool) -> None:
+                 polarization: float, weight: NDArray[np.float64], fit_gain: bool,
+                 fresnel: bool = True) -> None:
         scan, grid = inverse.scan, inverse.grid
         k = wavenumber(frequency_hz)
         p, q = interference(E0, scan.sphere, scan.F, k, polarization)
@@ -201,7 +204,7 @@ class WaveCorrection:
         if fit_gain:
             columns.append(-np.nan_to_num(inverse.to_aperture(weight)[mask], nan=1.0))
         self.columns = np.stack(columns, axis=1)
-        self.filter = FresnelFilter(grid, scan.F, scan.R, C0 / frequency_hz)
+        self.filter = FresnelFilter(grid, scan.F, scan.R, C0 / frequency_hz) if fresnel else None
 
     def __call__(self, misfit: NDArray[np.float64], delta: NDArray[np.float64]):
         inverse, grid = self.inverse, self.inverse.grid
@@ -210,7 +213,7 @@ class WaveCorrection:
         coef, *_ = np.linalg.lstsq(self.columns, np.nan_to_num(m[mask]), rcond=None)
         rest = np.full((grid.N, grid.N), np.nan)
         rest[mask] = (np.nan_to_num(m[mask]) - self.columns @ coef) / self.p
-        fine = inverse.poisson(self.filter(rest))[mask]
+        fine = inverse.poisson(self.filter(rest) if self.filter is not None else rest)[mask]
         fine -= (fine @ self.B) / (self.B @ self.B) * self.B  # B is the coarse level's
         update = np.full((grid.N, grid.N), np.nan)
         update[mask] = fine + coef[0] * self.B

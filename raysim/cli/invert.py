@@ -23,9 +23,10 @@ def invert_command(
     refine: int = typer.Option(3, help="Model refinement iterations, 0 to 50 (0: the paper's "
                                        "linear answer)."),
     model: str | None = typer.Option(
-        None, help="Forward model of the refinement: go, po or po+ptd (default: the one that made "
-                   "the data, its FieldMap method; go for a measured scan). Each PO iteration is "
-                   "a PO run: about a minute at 0.3 GHz on two cores, growing with f^2."),
+        None, help="Forward model of the refinement: go, po, po+ptd or go+edge (default: the one "
+                   "that made the data, its FieldMap method; go for a measured scan). Each PO "
+                   "iteration is a PO run: about a minute at 0.3 GHz on two cores, growing with "
+                   "f^2; go+edge (geometric wave plus rim diffraction) takes seconds, growing with f."),
     panels_csv: Path | None = typer.Option(None, help="Write the per-panel adjustment table."),
     gain: str = typer.Option("power", help="power (estimate the scan's scale) or none."),
     iterations: int | None = typer.Option(None, help="Fixed sweeps for gauss-seidel / sor."),

@@ -39,7 +39,7 @@ def report(
                                 help="Folder for report.html, its figures and data (a new folder, or "
                                      "an earlier report's, replaced once the new one is complete)."),
     method: str | None = typer.Option(None, "--method",
-                                      help="Simulation method: go, po or po+ptd (default: the "
+                                      help="Simulation method: go, po, po+ptd or go+edge (default: the "
                                            "scene's method key, else go)."),
     device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
     solver: str | None = typer.Option(None, "--solver", help="Poisson solver (default: the solver's)."),

@@ -26,9 +26,10 @@ def simulate(
                                 f"n-theta x n-phi at most {MAX_CELLS:,} (as in the scene file)."),
     n_phi: int | None = typer.Option(None, "--n-phi", help=f"Cells in phi (azimuth), 1 to {MAX_N_PHI}."),
     device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
-    total: bool = typer.Option(False, "--total", help="PO: intensity of scattered plus incident field."),
+    total: bool = typer.Option(False, "--total",
+                               help="Wave methods: intensity of scattered plus incident field."),
     save_field: bool = typer.Option(False, "--save-field",
-                                    help="PO: also store the complex field components E_re, E_im."),
+                                    help="Wave methods: also store the complex field components E_re, E_im."),
     samples_per_wavelength: float | None = typer.Option(
         None, "--samples-per-wavelength",
         help="PO: Gauss points per wavelength along mesh face edges (default 1.5; 3-4 for "

@@ -8,7 +8,7 @@ solver, the renderer) shares:
 - ``intensity``: |E|^2 of the deformed (or measured) reflector relative to the incident wave;
   ``intensity_ideal`` on the same grid; optional ``intensity_std``; NaN where no sample exists;
 - attributes ``focal_length``, ``diameter``, ``sphere_radius`` (m), ``frequency_hz`` (Hz),
-  ``method`` (go, po, po+ptd, measured), ``sampling`` (``cell_mean`` or ``centre``), and
+  ``method`` (go, po, po+ptd, go+edge, measured), ``sampling`` (``cell_mean`` or ``centre``), and
   ``scene`` (the scene's TOML text) when a scene made it. A reader works from the attributes
   alone, since a measured scan has no scene.
 """

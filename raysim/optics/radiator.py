@@ -9,7 +9,9 @@ different kinds on the same points add (superposition).
 
 Kinds: ``electric`` and ``magnetic`` (:mod:`raysim.optics.kernels.po`, (9, N): position,
 moment J dA / I dl in A m or M dA / K dl in V m), ``fringe`` (:mod:`raysim.optics.kernels.ptd`,
-(23, N), prefactors already inside the coefficients).
+(23, N), prefactors already inside the coefficients), ``diffraction``
+(:mod:`raysim.optics.kernels.goedge`: fringe plus PO end-point currents of an edge, prefactors
+inside).
 """
 
 from __future__ import annotations
@@ -42,16 +44,19 @@ PREFACTORS: dict[str, Any] = {
     "electric": lambda k: -1j * k * ETA0 / (4.0 * np.pi),
     "magnetic": lambda k: 1j * k / (4.0 * np.pi),
     "fringe": lambda k: 1.0,
+    "diffraction": lambda k: 1.0,  # go+edge: prefactors inside the coefficients, as fringe
 }
 
 
 def _kinds() -> dict[str, Kind]:
-    from raysim.optics.kernels import po, ptd
+    from raysim.optics.kernels import goedge, po, ptd
 
     return {
         "electric": Kind(po.ROWS, (po.radiate_electric, po.radiate_electric4), PREFACTORS["electric"]),
         "magnetic": Kind(po.ROWS, (po.radiate_magnetic, po.radiate_magnetic4), PREFACTORS["magnetic"]),
         "fringe": Kind(ptd.ROWS, (ptd.radiate_fringe, ptd.radiate_fringe4), PREFACTORS["fringe"]),
+        "diffraction": Kind(goedge.ROWS, (goedge.radiate_diffraction, goedge.radiate_diffraction4),
+                            PREFACTORS["diffraction"]),
     }
 
 

@@ -58,7 +58,7 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
     source : scene TOML file (or a shipped example's name), or a FieldMap NetCDF (``.nc``)
         already simulated or measured.
     out_dir : folder for ``report.html``, ``field.nc``, ``surface.nc`` and ``figures/``.
-    method : simulation method (``go``, ``po``, ``po+ptd``); None takes the scene's ``method``.
+    method : simulation method (``go``, ``po``, ``po+ptd``, ``go+edge``); None takes the scene's ``method``.
     device : Warp device, ``cpu`` or ``cuda``.
     solver, grid, refine : the inversion's Poisson solver, aperture grid points N and GO
         refinement iterations (0: the paper's linear answer); None: the solver's defaults.

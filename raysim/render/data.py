@@ -195,7 +195,8 @@ def frequency_text(hz: float) -> str:
 
 
 def method_text(method: str) -> str:
-    return {"go": "GO", "po": "PO", "po+ptd": "PO+PTD", "measured": "measured scan"}.get(method, method)
+    return {"go": "GO", "po": "PO", "po+ptd": "PO+PTD", "go+edge": "GO+edge",
+            "measured": "measured scan"}.get(method, method)
 
 
 def field_title(ds: xr.Dataset, what: str) -> str:

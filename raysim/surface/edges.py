@@ -18,6 +18,7 @@ opposite vertex).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,7 +39,9 @@ class Edges:
     ``points`` (N, 3); ``tangent``, ``normal``, ``inward`` (N, 3) unit vectors (see the module
     docstring); ``length`` (N,) the Gauss weight times the edge's arc length (m); ``facet``
     (N, 3) a point on the face's flat facet just inside the edge and ``face`` (N,) the face,
-    for the shadow test; ``rim`` (N,) True on the outer rim.
+    for the shadow test; ``rim`` (N,) True on the outer rim; ``share`` (N, 2) the arc-length
+    offsets (m, along ``tangent``) of the start and end of the part of its edge a point stands
+    for (the Gauss rule's weights laid end to end), so the shares of one edge tile it.
     """
 
     points: NDArray[np.float64]
@@ -49,6 +52,7 @@ class Edges:
     facet: NDArray[np.float64]
     face: NDArray[np.int64]
     rim: NDArray[np.bool_]
+    share: NDArray[np.float64] | None = None
 
     def __len__(self) -> int:
         return len(self.face)
@@ -58,9 +62,16 @@ def _unit(v: NDArray) -> NDArray:
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-def edge_quadrature(reflector: Reflector, spacing: float, which: str = "all", n_min: int = 3,
-                    curve: bool = True) -> Edges:
+#: a spacing rule per edge: (chord midpoints (E, 3), unit chord directions (E, 3), lengths (E,))
+#: -> spacing (E,) in m
+SpacingRule = Callable[[NDArray, NDArray, NDArray], NDArray]
+
+
+def edge_quadrature(reflector: Reflector, spacing: float | SpacingRule, which: str = "all",
+                    n_min: int = 3, curve: bool = True) -> Edges:
     """Gauss points about ``spacing`` (m) apart along the free edges of ``reflector``.
+
+    ``spacing`` is one length for every edge, or a rule giving each mesh edge its own.
 
     ``which`` is ``rim`` (the outer rim alone: both ends within 0.1 % of the largest radius
     from the axis) or ``all`` (every free edge: rim, hole and panel gaps). ``curve`` False
@@ -68,7 +79,7 @@ def edge_quadrature(reflector: Reflector, spacing: float, which: str = "all", n_
     """
     if which not in EDGE_SETS:
         raise RaysimError(f"unknown edge set {which!r}: use rim or all")
-    if not spacing > 0:
+    if not callable(spacing) and not spacing > 0:
         raise RaysimError(f"edge spacing must be > 0 m, got {spacing:g}")
     v = reflector.vertices
     b, c, a, face = free_edges(reflector.faces)
@@ -85,7 +96,16 @@ def edge_quadrature(reflector: Reflector, spacing: float, which: str = "all", n_
     dphi = np.angle(np.exp(1j * (np.arctan2(v[c, 1], v[c, 0]) - np.arctan2(v[b, 1], v[b, 0]))))
     length = np.where(arc, 0.5 * (r[b] + r[c]) * np.abs(dphi),
                       np.linalg.norm(v[c] - v[b], axis=1))
-    n = np.maximum(n_min, np.ceil(length / spacing)).astype(np.int64)
+    if callable(spacing):
+        chord = v[c] - v[b]
+        size = np.linalg.norm(chord, axis=1)
+        h = np.asarray(spacing(0.5 * (v[b] + v[c]), chord / np.maximum(size, 1e-300)[:, None], length),
+                       dtype=np.float64)
+        if not np.all(h > 0):
+            raise RaysimError("edge spacing rule gave a spacing <= 0 m")
+    else:
+        h = spacing
+    n = np.maximum(n_min, np.ceil(length / h)).astype(np.int64)
     parts = []
     for order in np.unique(n):
         sel = np.flatnonzero(n == order)
@@ -94,7 +114,7 @@ def edge_quadrature(reflector: Reflector, spacing: float, which: str = "all", n_
     if not parts:
         empty = np.zeros((0, 3))
         return Edges(empty, empty, empty, empty, np.zeros(0), empty, np.zeros(0, dtype=np.int64),
-                     np.zeros(0, dtype=bool))
+                     np.zeros(0, dtype=bool), np.zeros((0, 2)))
     return Edges(*(np.concatenate([getattr(p, f) for p in parts]) for f in Edges.__dataclass_fields__))
 
 
@@ -136,5 +156,7 @@ def _edge_points(refl: Reflector, b, c, a, face, arc, dphi, on_rim, order: int) 
     towards = (np.repeat(va.reshape(-1, 3), P, axis=0) - points)
     inward *= np.where(np.sum(inward * towards, axis=1) < 0, -1.0, 1.0)[:, None]
     facet = (chord + 1e-3 * (va - chord)).reshape(-1, 3)
+    ends = np.cumsum(w)
+    share = np.column_stack([np.tile(ends - w - u, E), np.tile(ends - u, E)]) * speed[:, None]
     return Edges(points, tangent, normal, inward, speed * np.tile(w, E), facet, np.repeat(face, P),
-                 np.repeat(on_rim, P))
+                 np.repeat(on_rim, P), share)

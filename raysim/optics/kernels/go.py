@@ -25,6 +25,29 @@ vec8d = wp.types.vector(length=8, dtype=wp.float64)
 
 
 
+@wp.func
+def sphere_entry(hit: wp.vec3d, n: wp.vec3d, k_hat: wp.vec3d, focus: wp.vec3d, radius: wp.float64):
+    """The ray k_hat reflected at ``hit`` (unit normal n), r = k - 2 (k . n) n, and the distance
+    s along it to where it enters the sphere |P - focus| = radius (the nearer root); s <= 0
+    when it misses."""
+    r = k_hat - F64_TWO * wp.dot(k_hat, n) * n
+    w = hit - focus
+    b = wp.dot(r, w)
+    c = wp.dot(w, w) - radius * radius
+    disc = b * b - c
+    s = -F64_ONE
+    if disc >= F64_ZERO:
+        s = -b - wp.sqrt(disc)
+    return r, s
+
+
+@wp.func
+def lambert(u: wp.vec3d) -> wp.vec2d:
+    """The Lambert equal-area chart about -z of the unit vector u (module docstring)."""
+    scale = wp.sqrt(F64_TWO / wp.max(F64_ONE - u[2], wp.float64(1e-300)))
+    return wp.vec2d(scale * u[0], scale * u[1])
+
+
 @wp.kernel
 def reflect_to_sphere(
     hits: wp.array(dtype=wp.vec3d),
@@ -38,28 +61,17 @@ def reflect_to_sphere(
 ):
     """Reflect k_hat at each hit (float64) and meet the sphere |P - focus| = radius.
 
-    The reflected ray r = k - 2 (k . n) n enters the sphere at the nearer root; chart[i] is
-    that point's Lambert coordinate. ok[i] is cleared when the ray misses the sphere.
+    chart[i] is the Lambert coordinate of the point where the reflected ray enters the
+    sphere (:func:`sphere_entry`); ok[i] is cleared when the ray misses the sphere.
     """
     i = wp.tid() + offset
     if ok[i] == 0:
         return
-    n = normals[i]
-    r = k_hat - F64_TWO * wp.dot(k_hat, n) * n
-    w = hits[i] - focus
-    b = wp.dot(r, w)
-    c = wp.dot(w, w) - radius * radius
-    disc = b * b - c
-    if disc < F64_ZERO:
-        ok[i] = 0
-        return
-    s = -b - wp.sqrt(disc)
+    r, s = sphere_entry(hits[i], normals[i], k_hat, focus, radius)
     if s <= F64_ZERO:
         ok[i] = 0
         return
-    u = (w + s * r) / radius
-    scale = wp.sqrt(F64_TWO / wp.max(F64_ONE - u[2], wp.float64(1e-300)))
-    chart[i] = wp.vec2d(scale * u[0], scale * u[1])
+    chart[i] = lambert((hits[i] - focus + s * r) / radius)
 
 
 @wp.func

@@ -85,12 +85,9 @@ def load_edge(src: wp.array2d(dtype=wp.float64), s: int) -> EdgeElement:
 
 
 @wp.func
-def fringe_pair(p: wp.vec3d, e: EdgeElement, k: wp.float64, k_inv: wp.float64,
-                table: wp.array(dtype=wp.vec2d)) -> vec6d:
-    """E (V/m) at P of the edge element e's fringe currents, as (Re x, y, z, Im x, y, z)."""
-    d = p - e.r
-    R2 = wp.dot(d, d)
-    inv = F64_ONE / wp.sqrt(R2)
+def fringe_currents(d: wp.vec3d, inv: wp.float64, e: EdgeElement):
+    """I dl and M dl (complex, as (Re, Im)) of the edge element e seen along d = P - r
+    (1 / |d| = inv): the module docstring's currents, both along e.t."""
     s_hat = d * inv
     st = wp.dot(s_hat, e.t)
     sx = wp.dot(s_hat, e.x)
@@ -105,6 +102,17 @@ def fringe_pair(p: wp.vec3d, e: EdgeElement, k: wp.float64, k_inv: wp.float64,
     f_m = q * sy / sin2
     current = e.CE * (F64_ONE / g) + e.CH + e.CB * f_i  # I dl (complex)
     moment = e.CM * f_m  # M dl (complex)
+    return current, moment
+
+
+@wp.func
+def fringe_pair(p: wp.vec3d, e: EdgeElement, k: wp.float64, k_inv: wp.float64,
+                table: wp.array(dtype=wp.vec2d)) -> vec6d:
+    """E (V/m) at P of the edge element e's fringe currents, as (Re x, y, z, Im x, y, z)."""
+    d = p - e.r
+    R2 = wp.dot(d, d)
+    inv = F64_ONE / wp.sqrt(R2)
+    current, moment = fringe_currents(d, inv, e)
     u = inv * k_inv
     bracket = electric_bracket(d, inv, u, current[0] * e.t, current[1] * e.t) \
         + magnetic_bracket(d, inv, u, moment[0] * e.t, moment[1] * e.t)

@@ -81,7 +81,7 @@ def test_source_direction_and_polarisation_off_axis():
         ({"radius_m = 10.0": "radius_m = 10.0\ntheta_min_deg = 85.0"}, "beyond the rim image at 79.61 deg"),
         ({"radius_m = 10.0": "radius_m = 10.0\nn_theta = 0"}, "'sphere.n_theta' must be an integer in 1..9000"),
         ({"[sphere]": "[spheres]"}, "unknown key 'spheres'"),
-        ({"[dish]": 'method = "fdtd"\n[dish]'}, "'method' must be one of go, po, po+ptd, got 'fdtd'"),
+        ({"[dish]": 'method = "fdtd"\n[dish]'}, "'method' must be one of go, po, po+ptd, go+edge, got 'fdtd'"),
     ],
 )
 def test_bad_values_name_the_key(change, message):
