@@ -218,6 +218,10 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["simulate", "scene.toml", "-o", "sub/../scene.toml"], "is the scene file"),
         (["simulate", "mm_mesh.toml", "-o", "dish_mm.stl"], "is the file the scene names"),
         (["simulate", "scene.toml", "-o", "o.nc", "--n-theta", "abc"], "Invalid value for '--n-theta'"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--method", "po", "--scheduler",
+          "tcp://127.0.0.1:{silent}"], "did not answer within"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--method", "po", "--scheduler",
+          "tcp://127.0.0.1:{refused}"], "connection refused"),
         (["simulate", "scene.toml", "-o", "o.nc", "--bogus"], "No such option"),
         (["simulate", "scene.toml"], "Missing option '-o'"),
         (["simulate", "scene.toml", "-o", "o.nc", "--n-theta", "100000", "--n-phi", "100000"],
@@ -378,10 +382,10 @@ def test_the_table_covers_every_command():
                           for i, (a, m) in enumerate(cases)])
 def test_bad_input_is_one_line_status_2_and_touches_nothing(workspace, raysim_cli, monkeypatch,
                                                             args, message):
-    from raysim.dataset import run as dataset_run
+    from raysim.distributed import cluster
 
     monkeypatch.chdir(workspace)
-    monkeypatch.setattr(dataset_run, "SCHEDULER_TIMEOUT_S", 2.0)
+    monkeypatch.setattr(cluster, "CONNECT_TIMEOUT_S", 2.0)
     silent, stop = _silent_server()
     try:
         ports = {"silent": silent, "refused": _refused_port()}

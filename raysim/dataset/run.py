@@ -13,13 +13,10 @@ workers can import raysim and reach the store's path.
 
 from __future__ import annotations
 
-import contextlib
-import logging
-import os
 import shutil
 import time
 import uuid
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,9 +25,8 @@ import numpy as np
 from raysim.dataset import store as zstore
 from raysim.dataset.spec import DatasetError, DatasetSpec, load_spec
 from raysim.dataset.worker import DatasetWorkerPlugin, run_ideal, run_sample
+from raysim.distributed.cluster import connect, scheduler_address
 from raysim.progress import Progress
-
-WORKER_WAIT_S = 120.0
 
 
 @dataclass(frozen=True)
@@ -94,42 +90,37 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
     check_run_options(spec, store, workers=workers, scheduler=scheduler, device=device,
                       threads=threads, resume=resume)
     path = _store_path(store)
-    if zstore.exists(path):
-        if not resume:
-            raise DatasetError(f"{path}: already exists; add --resume to complete it, or give a new path")
-        group = zstore.open_checked(path, spec)
-        created = False
+    group, created = _existing_store(path, spec, resume), False
+    if group is None:  # a new store: every sample and every frequency's ideal is pending
+        pending, ideal_pending = np.arange(spec.samples), np.arange(len(spec.frequencies))
     else:
-        if scheduler:  # before the store exists: a dead scheduler leaves nothing behind
-            _probe_scheduler(scheduler)
-        group = zstore.create(path, spec)
-        created = True
-    pending = np.flatnonzero(zstore.status(group) != zstore.DONE)
-    ideal_pending = np.flatnonzero(zstore.ideal_status(group) != zstore.DONE)
+        pending = np.flatnonzero(zstore.status(group) != zstore.DONE)
+        ideal_pending = np.flatnonzero(zstore.ideal_status(group) != zstore.DONE)
     skipped = spec.samples - len(pending)
     report = _sample_progress(progress)
-    report(skipped, 0, spec.samples)
     failures: list[tuple[int, str]] = []
     ideal_failures: list[tuple[int, str]] = []
     n_workers = 0
     if len(pending) or len(ideal_pending):
-        writer = zstore.Writer(group)
-        try:
-            with _client(scheduler, workers, threads,
-                         len(pending) + len(ideal_pending)) as (client, n_workers):
-                try:
-                    client.register_plugin(DatasetWorkerPlugin(threads, device))
-                except Exception as exc:  # e.g. a device the workers lack, Warp failing to load
-                    raise DatasetError(f"the Dask workers could not be prepared ({type(exc).__name__}: "
-                                       f"{' '.join(str(exc).split())})") from exc
-                _run(client, path, spec, device, pending, ideal_pending, writer, report, skipped,
-                     failures, ideal_failures)
-        except BaseException:
-            # a store this run created and that holds no finished sample is no store to resume:
-            # remove it, so that the same command can simply be run again
-            if created and np.all(zstore.status(group) == zstore.PENDING):
-                shutil.rmtree(path, ignore_errors=True)
-            raise
+        # the cluster first: a scheduler that cannot be reached leaves no store behind
+        with connect(scheduler, workers=workers, threads=threads,
+                     tasks=len(pending) + len(ideal_pending)) as cluster:
+            if group is None:
+                group, created = zstore.create(path, spec), True
+            report(skipped, 0, spec.samples)
+            n_workers = cluster.workers
+            try:
+                _prepare_workers(cluster.client, threads, device)
+                _run(cluster.client, path, spec, device, pending, ideal_pending,
+                     zstore.Writer(group), report, skipped, failures, ideal_failures)
+            except BaseException:
+                # a store this run created and that holds no finished sample is no store to
+                # resume: remove it, so that the same command can simply be run again
+                if created and np.all(zstore.status(group) == zstore.PENDING):
+                    shutil.rmtree(path, ignore_errors=True)
+                raise
+    else:
+        report(skipped, 0, spec.samples)
     final = zstore.status(group)
     return RunReport(
         store=path, samples=spec.samples, done=int(np.sum(final == zstore.DONE)),
@@ -153,7 +144,6 @@ def _sample_progress(progress: Progress | None) -> SampleReport:
 
 MAX_WORKERS = 1024
 MAX_THREADS = 256
-SCHEDULER_TIMEOUT_S = 20.0
 
 
 def check_run_options(spec: DatasetSpec, store: str | Path, *, workers: int | None = None,
@@ -169,7 +159,7 @@ def check_run_options(spec: DatasetSpec, store: str | Path, *, workers: int | No
                                   or not 1 <= value <= hi):
             raise DatasetError(f"{name} must be an integer in 1..{hi}, got {value!r}")
     if scheduler is not None:
-        scheduler_address(scheduler)
+        scheduler_address(scheduler)  # ClusterError, one line
     elif device != "cpu":  # local workers see this machine's devices
         from raysim.optics import runtime as warp_runtime
 
@@ -186,51 +176,6 @@ def check_run_options(spec: DatasetSpec, store: str | Path, *, workers: int | No
         path.resolve().parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise DatasetError(f"{path}: cannot create its folder ({exc.strerror})") from exc
-
-
-def scheduler_address(address: str) -> str:
-    """A Dask scheduler address ``tcp://HOST:PORT`` (or ``tls://``), checked; DatasetError else."""
-    from urllib.parse import urlsplit
-
-    parts = urlsplit(address)
-    try:
-        port = parts.port
-    except ValueError:
-        port = None
-    if parts.scheme == "inproc":  # a scheduler in this process (tests, notebooks)
-        return address
-    if parts.scheme not in ("tcp", "tls") or not parts.hostname or port is None or parts.path:
-        raise DatasetError(f"--scheduler {address!r}: give the scheduler's address as "
-                           "tcp://HOST:PORT")
-    return address
-
-
-def _probe_scheduler(address: str, timeout_s: float | None = None) -> None:
-    """Connect to the scheduler and wait for its answer to one ``identity`` request, all within
-    ``timeout_s``: a host that is unknown, refuses, or accepts and never answers fails here
-    with its address named, instead of hanging the client."""
-    import asyncio
-
-    from distributed.comm import connect
-
-    timeout_s = SCHEDULER_TIMEOUT_S if timeout_s is None else timeout_s
-
-    async def probe() -> None:
-        comm = await connect(address, timeout=timeout_s)
-        try:
-            await comm.write({"op": "identity", "reply": True})
-            await comm.read()
-        finally:
-            comm.abort()
-
-    try:
-        asyncio.run(asyncio.wait_for(probe(), timeout_s))
-    except TimeoutError:
-        raise DatasetError(f"the Dask scheduler at {address} did not answer within "
-                           f"{timeout_s:g} s") from None
-    except (OSError, ValueError) as exc:
-        raise DatasetError(f"cannot reach the Dask scheduler at {address} "
-                           f"({' '.join(str(exc).split()) or type(exc).__name__})") from None
 
 
 def _run(client, path: str, spec: DatasetSpec, device: str, pending: np.ndarray,
@@ -254,7 +199,7 @@ def _run(client, path: str, spec: DatasetSpec, device: str, pending: np.ndarray,
         futures += client.map(run_sample, [path] * n, [fp] * n, indices, [device] * n, key=keys)
         jobs.update({k: ("sample", i) for k, i in zip(keys, indices, strict=True)})
     done = skipped
-    for future in as_completed(futures):
+    for future in as_completed(futures, loop=client.loop):
         kind, index = jobs[future.key]
         try:
             out = future.result()
@@ -280,70 +225,23 @@ def _run(client, path: str, spec: DatasetSpec, device: str, pending: np.ndarray,
         report(done, len(failures), spec.samples)
 
 
-@contextlib.contextmanager
-def _client(scheduler: str | None, workers: int | None, threads: int, tasks: int) -> Iterator[tuple]:
-    """A Dask client (and its local cluster, unless ``scheduler`` is given); closed on exit."""
-    from distributed import Client, LocalCluster
+def _existing_store(path: str, spec: DatasetSpec, resume: bool):
+    """The store at ``path`` opened for ``spec`` when it exists (it must, with ``resume``, be
+    one made by the same spec), else None."""
+    if not zstore.exists(path):
+        return None
+    if not resume:
+        raise DatasetError(f"{path}: already exists; add --resume to complete it, or give a new path")
+    return zstore.open_checked(path, spec)
 
-    if scheduler:
-        try:
-            client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S:g}s")
-        except (OSError, TimeoutError) as exc:
-            raise DatasetError(f"cannot reach the Dask scheduler at {scheduler} "
-                               f"({' '.join(str(exc).split())})") from exc
-        try:
-            try:
-                client.wait_for_workers(1, timeout=WORKER_WAIT_S)
-            except TimeoutError as exc:
-                raise DatasetError(f"no worker joined the Dask scheduler at {scheduler} within "
-                                   f"{WORKER_WAIT_S:g} s") from exc
-            yield client, len(client.scheduler_info()["workers"])
-        finally:
-            client.close()
-        return
-    n = workers or max(1, usable_cores() // threads)
-    n = max(1, min(n, tasks))
+
+def _prepare_workers(client, threads: int, device: str) -> None:
+    """Register the dataset's worker plugin (Warp threads and device, the per-worker caches)."""
     try:
-        # the scheduler's HTTP routes always listen: on a free loopback port, never the shared
-        # default 8787 (another cluster on this machine would draw a warning)
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR,
-                               env={"RAYSIM_THREADS": str(threads)})
-    except (RuntimeError, OSError) as exc:
-        raise DatasetError(f"could not start a local Dask cluster of {n} workers ({exc})") from exc
-    try:
-        client = Client(cluster)
-        try:
-            yield client, n
-        finally:
-            client.close()
-            _stop_workers(cluster)
-    finally:
-        cluster.close()
-
-
-def _stop_workers(cluster, timeout_s: float = 30.0) -> None:
-    """Stop the local workers before the scheduler: scale the cluster to none and wait until
-    the scheduler has seen every worker leave.
-
-    Closing the cluster at once stops the scheduler first; a worker whose heartbeat is in
-    flight at that moment logs a 30-line "Failed to communicate with scheduler during
-    heartbeat" traceback after a successful run. Workers that have left send no heartbeat.
-    """
-    cluster.scale(0)
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if not cluster.scheduler_info.get("workers") and not cluster.workers:
-            return
-        time.sleep(0.05)
-
-
-def usable_cores() -> int:
-    """CPU cores this process may run on."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - non-Linux
-        return os.cpu_count() or 1
+        client.register_plugin(DatasetWorkerPlugin(threads, device))
+    except Exception as exc:  # e.g. a device the workers lack, Warp failing to load
+        raise DatasetError(f"the Dask workers could not be prepared ({type(exc).__name__}: "
+                           f"{' '.join(str(exc).split())})") from exc
 
 
 def _store_path(store: str | Path) -> str:

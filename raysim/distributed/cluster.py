@@ -23,6 +23,7 @@ import os
 import re
 import socket
 import sys
+import time
 import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -79,15 +80,19 @@ def gpu_count() -> int:
 
 @contextlib.contextmanager
 def connect(scheduler: str | None = None, *, workers: int | None = None, threads: int = 1,
-            device: str = "cpu", tasks: int | None = None, timeout: float = CONNECT_TIMEOUT_S,
-            worker_wait: float = WORKER_WAIT_S) -> Iterator[Cluster]:
+            device: str = "cpu", tasks: int | None = None, timeout: float | None = None,
+            worker_wait: float | None = None) -> Iterator[Cluster]:
     """A Dask client on ``scheduler`` or on a new local cluster, closed on exit.
 
     ``workers``: local worker processes (default: one per usable core divided by ``threads``,
     one per GPU for ``cuda``; never more than ``tasks`` when given); ignored with a scheduler.
-    ``threads``: ``RAYSIM_THREADS`` of the local workers.
+    ``threads``: ``RAYSIM_THREADS`` of the local workers. ``timeout`` (s, default
+    :data:`CONNECT_TIMEOUT_S`): for the scheduler's first answer; ``worker_wait`` (s, default
+    :data:`WORKER_WAIT_S`): for its first worker.
     """
     if scheduler:
+        timeout = CONNECT_TIMEOUT_S if timeout is None else timeout
+        worker_wait = WORKER_WAIT_S if worker_wait is None else worker_wait
         with _remote(scheduler_address(scheduler), timeout, worker_wait) as cluster:
             yield cluster
         return
@@ -151,8 +156,24 @@ def _local(workers: int | None, threads: int, device: str, tasks: int | None) ->
             yield Cluster(client, n, "local")
         finally:
             client.close()
+            _stop_workers(cluster)
     finally:
         cluster.close()
+
+
+def _stop_workers(cluster: Any, timeout_s: float = 30.0) -> None:
+    """Stop a local cluster's workers before its scheduler, and wait until it has seen them go.
+
+    Closing the cluster at once stops the scheduler first; a worker whose heartbeat is in
+    flight then logs a long "Failed to communicate with scheduler during heartbeat" traceback
+    after a run that succeeded. Workers that have left send no heartbeat.
+    """
+    cluster.scale(0)
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if not cluster.scheduler_info.get("workers") and not cluster.workers:
+            return
+        time.sleep(0.05)
 
 
 def worker_device(device: str, name: Any) -> str:
@@ -166,7 +187,12 @@ def worker_device(device: str, name: Any) -> str:
 
 
 def _probe(address: str, timeout: float) -> None:
-    """Fail fast, in one line, when nothing accepts a TCP connection at ``address``."""
+    """Fail fast, in one line, unless a Dask scheduler answers at ``address`` within ``timeout``.
+
+    A plain TCP connection first (a refused port or an unknown host fails at once: Dask's own
+    connect retries those until its timeout), then one ``identity`` request, so that a server
+    that accepts and never answers fails after ``timeout`` instead of hanging the client.
+    """
     match = _ADDRESS.fullmatch(address)
     if match is None or match["scheme"] not in (None, "tcp", "tls", "ws", "wss"):
         return  # inproc, ucx: no plain TCP port to try
@@ -182,6 +208,32 @@ def _probe(address: str, timeout: float) -> None:
     except OSError as exc:
         raise ClusterError(f"cannot reach the Dask scheduler at {address} "
                            f"({exc.strerror or _reason(exc)})") from exc
+    _ask_identity(address, timeout)
+
+
+def _ask_identity(address: str, timeout: float) -> None:
+    """Send the scheduler one ``identity`` request and wait for its reply, within ``timeout``."""
+    import asyncio
+
+    from distributed.comm import connect as comm_connect
+
+    async def ask() -> None:
+        comm = await comm_connect(address, timeout=timeout)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            await comm.read()
+        finally:
+            comm.abort()
+
+    with _quiet_logs():
+        try:
+            asyncio.run(asyncio.wait_for(ask(), timeout))
+        except TimeoutError:
+            raise ClusterError(f"the Dask scheduler at {address} did not answer within "
+                               f"{timeout:g} s (something else listening there?)") from None
+        except (OSError, ValueError) as exc:
+            raise ClusterError(f"cannot reach the Dask scheduler at {address} "
+                               f"({_reason(exc)})") from None
 
 
 @contextlib.contextmanager
