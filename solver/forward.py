@@ -126,25 +126,28 @@ def model_for_method(method: str) -> str:
 
 @dataclass
 class GOForward(ForwardModel):
-    """The project's GO engine (:func:`raysim.optics.go.forward_intensity`): cell means of the
-    ray-tube intensity, no diffraction. The ideal reflector's map depends only on (sphere
-    grid, F, D) and is kept per geometry for the model's life (the engine keeps its mesh)."""
+    """The project's GO engine (:class:`raysim.optics.go.ParaboloidTracer`): cell means of the
+    ray-tube intensity, no diffraction. The model owns its tracer (the ideal mesh and BVH per
+    geometry) and the ideal reflector's map per (sphere grid, F, D), for the model's life."""
 
     device: str | None = "cpu"
     name = "go"
     _ideal: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    _tracer: Any = field(default=None, init=False, repr=False, compare=False)
 
     def __call__(self, sphere, F, D, x, y, delta, progress=None):
-        from raysim.optics.go import forward_intensity
+        if self._tracer is None:
+            from raysim.optics.go import ParaboloidTracer
 
+            self._tracer = ParaboloidTracer(self.device)
         if delta is None:
             key = (sphere, float(F), float(D))
             if key not in self._ideal:
-                self._ideal[key] = forward_intensity(sphere, float(F), float(D), None, device=self.device)
+                self._ideal[key] = self._tracer.intensity(sphere, float(F), float(D))
             return self._ideal[key].copy()
         from raysim.surface.gridded import GriddedMap
 
-        return forward_intensity(sphere, F, D, GriddedMap(x, y, delta), device=self.device)
+        return self._tracer.intensity(sphere, F, D, GriddedMap(x, y, delta))
 
     def describe(self) -> str:
         return "raysim.optics.go GO engine (cell means, no diffraction)"

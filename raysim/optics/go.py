@@ -305,29 +305,46 @@ class Tracer:
         )
 
 
-@lru_cache(maxsize=4)
-def _ideal_paraboloid(D: float, F: float, resolution: float) -> Reflector:
-    return paraboloid(D, F, resolution)
+class ParaboloidTracer:
+    """GO cell-mean intensity of the paraboloid (D, F in m) plus a deformation, on sphere grids.
 
+    The forward model of the inversion: it needs only what every FieldMap carries. The ideal
+    mesh (``resolution`` m faces) and one :class:`Tracer` per (D, F, grid) are made once by
+    this object and kept while it lives (the last ``keep``); a deformed mesh displaces the ideal
+    one and is traced with the BVH refitted. Whoever needs repeated traces holds one (the
+    refinement's GO model does).
+    """
 
-@lru_cache(maxsize=2)
-def _forward_tracer(D: float, F: float, resolution: float, grid: SphereGrid, subdivisions: int,
-                    device: str) -> Tracer:
-    return Tracer(_ideal_paraboloid(D, F, resolution), grid, ON_AXIS, subdivisions, device)
+    def __init__(self, device: str | None = "cpu", resolution: float = 0.15,
+                 subdivisions: int = 1, keep: int = 2) -> None:
+        self.device = runtime.resolve_device(device)
+        self.resolution, self.subdivisions, self.keep = float(resolution), int(subdivisions), keep
+        self._tracers: dict[tuple, Tracer] = {}
+
+    def tracer(self, grid: SphereGrid, F: float, D: float) -> Tracer:
+        """The :class:`Tracer` of the ideal paraboloid (D, F) on ``grid``, made on first use."""
+        key = (grid, float(F), float(D))
+        if key not in self._tracers:
+            while len(self._tracers) >= self.keep:
+                self._tracers.pop(next(iter(self._tracers)))
+            ideal = paraboloid(float(D), float(F), self.resolution)
+            self._tracers[key] = Tracer(ideal, grid, ON_AXIS, self.subdivisions, self.device)
+        return self._tracers[key]
+
+    def intensity(self, grid: SphereGrid, F: float, D: float,
+                  deformation: Deformation | None = None) -> NDArray[np.float64]:
+        """GO cell-mean intensity (n_theta, n_phi) on ``grid``, relative to the incident one."""
+        tracer = self.tracer(grid, F, D)
+        ideal = tracer.template
+        reflector = ideal if deformation is None or isinstance(deformation, NoDeformation) \
+            else ideal.deformed(deformation)
+        return tracer.trace(reflector).intensity
 
 
 def forward_intensity(grid: SphereGrid, F: float, D: float, deformation: Deformation | None = None,
                       device: str | None = "cpu", resolution: float = 0.15,
                       subdivisions: int = 1) -> NDArray[np.float64]:
-    """GO cell-mean intensity on ``grid`` of the paraboloid (D, F in m) plus ``deformation``.
-
-    The forward model of the inversion: it needs only what every FieldMap carries. The ideal
-    mesh and its :class:`Tracer` are made once per (D, F, resolution, grid) and reused; the
-    deformed mesh displaces the ideal one and is traced with the BVH refitted.
-    """
-    tracer = _forward_tracer(float(D), float(F), float(resolution), grid, int(subdivisions),
-                             runtime.resolve_device(device))
-    ideal = tracer.template
-    reflector = ideal if deformation is None or isinstance(deformation, NoDeformation) \
-        else ideal.deformed(deformation)
-    return tracer.trace(reflector).intensity
+    """GO cell-mean intensity on ``grid`` of the paraboloid (D, F in m) plus ``deformation``,
+    in one call (:class:`ParaboloidTracer` builds the ideal mesh and its tracer; hold one of
+    those for repeated calls)."""
+    return ParaboloidTracer(device, resolution, subdivisions).intensity(grid, F, D, deformation)

@@ -39,12 +39,13 @@ class Row:
 
 def paper_fieldmap(scale: float = 1.0, device: str | None = "cpu") -> xr.Dataset:
     """GO FieldMap of the paper's case from the project's engine (Eq. 8 times ``scale``)."""
-    from raysim.optics.go import forward_intensity
+    from raysim.optics.go import ParaboloidTracer
     from raysim.surface.deformation import PaperDeformation
 
     grid = SphereGrid(R, 90, 360)
-    ideal = forward_intensity(grid, F, D, None, device=device)
-    deformed = forward_intensity(grid, F, D, PaperDeformation(D, F, scale), device=device)
+    go = ParaboloidTracer(device)  # one ideal mesh and BVH for both traces
+    ideal = go.intensity(grid, F, D)
+    deformed = go.intensity(grid, F, D, PaperDeformation(D, F, scale))
     return fieldmap(grid, deformed, ideal, focal_length=F, diameter=D, frequency_hz=FREQUENCY_HZ,
                     method="go", sampling="cell_mean",
                     attrs={"deformation": f"paper Eq. 8 x {scale:g}"})
