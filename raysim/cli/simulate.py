@@ -90,17 +90,14 @@ def simulate(
 
 def _simulate_blocks(scene, output: Path, method: str, device: str, **options) -> None:
     """``simulate`` in blocks of sphere points on Dask (raysim.distributed), a bar over blocks."""
-    from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
-
     from raysim.distributed import simulate as run
     from raysim.simulate import summary
 
-    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
-    with progress_bar(*columns) as bar:
-        task = bar.add_task(f"{method} {scene.name}: blocks", total=None)
+    with progress_bar() as bar:
+        task = bar.add_task(f"{method} {scene.name}: blocks", total=1.0)
 
-        def report(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
+        def report(stage: str, fraction: float) -> None:
+            bar.update(task, completed=fraction, description=f"{method} {scene.name}: {stage}")
 
         ds = run(scene, output, method, device, report, **options)
     a = ds.attrs

@@ -21,7 +21,6 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -31,6 +30,7 @@ import xarray as xr
 from raysim.distributed.blocks import block_bounds, block_size_for, run_blocks
 from raysim.distributed.cluster import ClusterError, connect
 from raysim.distributed.partial import PartialStore, partial_path
+from raysim.progress import Progress
 from raysim.scene import Scene
 from raysim.scene.scene import parse_scene
 from raysim.simulate import BLOCK_ENGINES, BlockContext, Options, check_method, fieldmap_of
@@ -44,7 +44,6 @@ RUN_ATTRS = ("created", "seconds_mesh", "seconds_total", "seconds_edges", "pair_
              "blocks_computed_twice", "block_element_sets", "seconds_blocks", "seconds_blocks_cpu",
              "seconds_context", "seconds_context_total")
 
-BlockProgress = Callable[[int, int], None]  # (blocks done, blocks in all)
 
 
 @dataclass(frozen=True)
@@ -119,7 +118,7 @@ def _check_rebuilds(scene: Scene, job: SceneJob) -> None:
 
 
 def simulate(scene: Scene, output: str | Path, method: str | None = None, device: str = "cpu",
-             progress: BlockProgress | None = None, *, scheduler: str | None = None,
+             progress: Progress | None = None, *, scheduler: str | None = None,
              workers: int | None = None, threads: int = 1, resume: bool = False,
              block_size: int | None = None, total: bool = False, save_field: bool = False,
              samples_per_wavelength: float | None = None, edges: str | None = None) -> xr.Dataset:
@@ -130,7 +129,8 @@ def simulate(scene: Scene, output: str | Path, method: str | None = None, device
     cuda); ``threads`` (CPU threads of each Warp launch in a worker); ``resume`` (complete the
     partial store an interrupted run left; without it an existing one is refused);
     ``block_size`` (points per block, a multiple of 4; default 1024 on the CPU, 32768 on CUDA);
-    ``progress(done, total)`` over blocks.
+    ``progress(stage, fraction)`` over blocks (:mod:`raysim.progress`; the stage reads
+    ``N of M blocks``).
     """
     start = time.perf_counter()
     options = Options(total, save_field, samples_per_wavelength, edges)
@@ -178,17 +178,21 @@ def simulate(scene: Scene, output: str | Path, method: str | None = None, device
 class _Run:
     """Counts blocks as they come in and reports them."""
 
-    def __init__(self, n_blocks: int, reused: int, progress: BlockProgress | None) -> None:
+    def __init__(self, n_blocks: int, reused: int, progress: Progress | None) -> None:
         self.n_blocks, self.reused, self.computed, self.skipped = n_blocks, reused, 0, 0
-        self.report = progress or (lambda done, total: None)
-        self.report(reused, n_blocks)
+        self.progress = progress
+        self.report(reused)
+
+    def report(self, done: int) -> None:
+        if self.progress is not None:
+            self.progress(f"{done} of {self.n_blocks} blocks", done / self.n_blocks if self.n_blocks else 1.0)
 
     def block(self, meta: dict) -> None:
         if meta.get("skipped"):
             self.skipped += 1
         else:
             self.computed += 1
-        self.report(self.reused + self.computed + self.skipped, self.n_blocks)
+        self.report(self.reused + self.computed + self.skipped)
 
 
 def _partial(path: Path, job: SceneJob, description: dict[str, str], resume: bool) -> PartialStore:

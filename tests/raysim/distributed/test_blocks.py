@@ -63,7 +63,7 @@ def test_blocks_give_the_single_process_fieldmap(scene, single, inproc, tmp_path
     out = tmp_path / "field.nc"
     seen = []
     ds = simulate_blocks(scene, out, method, scheduler=inproc, block_size=block_size,
-                         save_field=method == "po+ptd", progress=lambda done, total: seen.append((done, total)))
+                         save_field=method == "po+ptd", progress=lambda stage, f: seen.append((stage, f)))
     n_blocks = -(-scene.sphere.n_theta * scene.sphere.n_phi // block_size)
     assert_same_fieldmap(single[method], ds)
     assert_same_fieldmap(single[method], load(out))
@@ -71,7 +71,8 @@ def test_blocks_give_the_single_process_fieldmap(scene, single, inproc, tmp_path
     assert (a["blocks"], a["blocks_computed"], a["blocks_reused"], a["blocks_computed_twice"]) == \
         (n_blocks, n_blocks, 0, 0)
     assert a["block_element_sets"] == 1 and a["workers"] == 2
-    assert seen[0] == (0, n_blocks) and seen[-1] == (n_blocks, n_blocks)
+    assert seen[0] == (f"0 of {n_blocks} blocks", 0.0)
+    assert seen[-1] == (f"{n_blocks} of {n_blocks} blocks", 1.0)
     assert not partial_path(out).exists()
 
 
