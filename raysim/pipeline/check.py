@@ -33,7 +33,6 @@ from raysim.pipeline.check_inputs import CheckError
 from raysim.pipeline.check_measures import (
     bands,
     gap_signature,
-    relative_rms,
     rms_ratio,
     usable,
 )
@@ -125,7 +124,7 @@ def _one_frequency(dish: inputs.Dish, f: float, engine: tuple[str, str], truth, 
             "deformed_go": go["intensity"].values, "deformed_wave": wave["intensity"].values,
             "fa_go": fa(go), "fa_wave": fa(wave)}
     out = {"method": method, "why": why, "maps": maps, "seconds": seconds,
-           "ideal_difference": relative_rms(maps["ideal_go"], maps["ideal_wave"], use),
+           "ideal_difference": rms_ratio(maps["ideal_go"], maps["ideal_wave"], use),
            "fa_difference": rms_ratio(maps["fa_go"], maps["fa_wave"], use),
            "bands": bands(sphere, dish.D, dish.F, maps),
            "gaps": gap_signature(sphere, dish.D, dish.F, maps["ideal_go"], maps["ideal_wave"])}
@@ -155,7 +154,7 @@ def _invert(field: xr.Dataset, model: str, truth, N: int, refine: int, device: s
 
 # --- the dataset ---------------------------------------------------------------------------
 SCALARS = {
-    "ideal_difference": ("1", "RMS of (I_GO - I_wave) / I_wave, ideal reflector, usable cells"),
+    "ideal_difference": ("1", "RMS(I_GO - I_wave) / RMS(I_wave), ideal reflector, usable cells"),
     "fa_difference": ("1", "RMS(FA_GO - FA_wave) / RMS(FA_wave), usable cells"),
 }
 
@@ -180,7 +179,7 @@ def _dataset(dish: inputs.Dish, freqs, results: list[dict], described: str, sour
     b0 = results[0]["bands"]
     for key, text in (("fa_rms", "RMS of FA_wave in the band"),
                       ("fa_difference", "RMS(FA_GO - FA_wave) / RMS(FA_wave) in the band"),
-                      ("ideal_difference", "RMS of (I_GO - I_wave) / I_wave in the band")):
+                      ("ideal_difference", "RMS(I_GO - I_wave) / RMS(I_wave) in the band")):
         data[f"band_{key}"] = (("frequency", "band"), np.stack([getattr(r["bands"], key) for r in results]),
                                {"units": "1", "long_name": text})
     for key, text in (("dark_cells", "usable cells GO darkens (gap lines)"),
@@ -217,42 +216,42 @@ def _map_name(key: str) -> str:
 
 
 def _with_surfaces(ds: xr.Dataset, results: list[dict]) -> xr.Dataset:
-    """Add the truth and each inversion's error map (frequency, y, x) and RMS / RRMS."""
+    """Add the truth and each inversion's maps (frequency, y, x), RMS, RRMS and cost."""
     first = next((s for r in results for s in r["surfaces"].values()), None)
     if first is None:
         return ds
-    ds = ds.assign_coords(x=("x", first["x"].values, {"units": "m"}), y=("y", first["y"].values, {"units": "m"}))
+    ds = ds.assign_coords(x=("x", first["x"].values, {"units": "m"}),
+                          y=("y", first["y"].values, {"units": "m"}))
     if "truth" in first:
-        ds["truth"] = (("y", "x"), first["truth"].values, {"units": "m", "long_name": "deformation tested"})
-        ds.attrs["truth_rms"] = float(np.sqrt(np.nanmean(first["truth"].values ** 2)))
-        ds.attrs["truth_peak_to_peak"] = float(np.nanmax(first["truth"].values) - np.nanmin(first["truth"].values))
-    labels = {"go_data": "GO data, GO refinement (baseline)", "go_model": "wave data, GO refinement",
-              "wave_model": "wave data, wave-aware refinement"}
+        truth = first["truth"].values
+        ds["truth"] = (("y", "x"), truth, {"units": "m", "long_name": "deformation tested"})
+        ds.attrs["truth_rms"] = float(np.sqrt(np.nanmean(truth**2)))
+        ds.attrs["truth_peak_to_peak"] = float(np.nanmax(truth) - np.nanmin(truth))
+    nan_map = np.full(first["deformation"].shape, np.nan)
     for name in INVERSIONS:
-        have = [name in r["surfaces"] for r in results]
-        if not any(have):
+        surfaces = [r["surfaces"].get(name) for r in results]
+        if all(s is None for s in surfaces):
             continue
-        nan_map = np.full(first["deformation"].shape, np.nan)
-
-        def pick(key: str, r: dict, name: str = name) -> np.ndarray:
-            s = r["surfaces"].get(name)
-            return s[key].values if s is not None and key in s else nan_map
-
-        ds[f"deformation_{name}"] = (("frequency", "y", "x"), np.stack([pick("deformation", r) for r in results]),
-                                     {"units": "m", "long_name": f"recovered: {labels[name]}"})
-        ds[f"error_{name}"] = (("frequency", "y", "x"), np.stack([pick("error", r) for r in results]),
-                               {"units": "m", "long_name": f"recovered - truth: {labels[name]}"})
+        label = LABELS[name]
+        for key, text in (("deformation", "recovered"), ("error", "recovered - truth")):
+            stack = np.stack([s[key].values if s is not None and key in s else nan_map for s in surfaces])
+            ds[f"{key}_{name}"] = (("frequency", "y", "x"), stack,
+                                   {"units": "m", "long_name": f"{text}: {label}"})
         if name != "go_data" and "deformation_go_data" in ds:
             diff = ds[f"deformation_{name}"].values - ds["deformation_go_data"].values
             ds[f"cost_{name}"] = ("frequency", np.sqrt(np.nanmean(diff**2, axis=(1, 2))),
-                                  {"units": "m", "long_name": f"RMS of ({labels[name]}) - (GO data, "
-                                   "GO refinement): what the physics GO lacks costs"})
+                                  {"units": "m", "long_name": f"RMS of ({label}) - (GO data, GO "
+                                   "refinement): what the physics GO lacks costs"})
         for attr, unit in (("rms_m", "m"), ("rrms", "1")):
-            ds[f"{attr.removesuffix('_m')}_{name}"] = (
-                "frequency", [float(r["surfaces"][name].attrs.get(attr, math.nan)) if name in r["surfaces"]
-                              else math.nan for r in results], {"units": unit, "long_name": labels[name]})
+            values = [float(s.attrs.get(attr, math.nan)) if s is not None else math.nan for s in surfaces]
+            ds[f"{attr.removesuffix('_m')}_{name}"] = ("frequency", values,
+                                                       {"units": unit, "long_name": label})
         ds[f"model_{name}"] = ("frequency", [r["models"].get(name, "") for r in results])
     return ds
+
+
+LABELS = {"go_data": "GO data, GO refinement (baseline)", "go_model": "wave data, GO refinement",
+          "wave_model": "wave data, wave-aware refinement"}
 
 
 # --- the verdict ---------------------------------------------------------------------------
@@ -275,12 +274,16 @@ def verdict_lines(ds: xr.Dataset) -> list[str]:
         text = (f"at {f / 1e9:g} GHz ({v['wave_method']}) GO {word}: it reproduces FA to "
                 f"{100 * v['fa_difference']:.1f} % of its RMS for theta <= {limit:.0f} deg, the ideal "
                 f"intensity to {100 * v['ideal_difference']:.1f} %")
-        if "rms_go_model" in v:
-            text += (f"; inverting the wave data with GO costs {1e6 * v['rms_go_model']:.1f} um RMS "
-                     f"({100 * v['rms_go_model'] / truth_rms:.0f} % of the deformation's "
-                     f"{1e6 * truth_rms:.0f} um; GO's own data: {1e6 * v['rms_go_data']:.1f} um)")
-        if "rms_wave_model" in v and math.isfinite(float(v["rms_wave_model"])):
-            text += f"; the {v['model_wave_model']} refinement recovers {1e6 * v['rms_wave_model']:.1f} um"
+        if "cost_go_model" in v:
+            text += (f"; the GO assumption costs {1e6 * v['cost_go_model']:.1f} um RMS in the recovered "
+                     f"surface ({100 * v['cost_go_model'] / truth_rms:.0f} % of the deformation's "
+                     f"{1e6 * truth_rms:.0f} um; error against the truth {1e6 * v['rms_go_model']:.1f} um, "
+                     f"RRMS {100 * v['rrms_go_model']:.1f} %, against {1e6 * v['rms_go_data']:.1f} um "
+                     "from GO's own data)")
+        if "cost_wave_model" in v and math.isfinite(float(v["cost_wave_model"])):
+            text += (f"; the {v['model_wave_model']} refinement brings that to "
+                     f"{1e6 * v['cost_wave_model']:.1f} um (error {1e6 * v['rms_wave_model']:.1f} um, "
+                     f"RRMS {100 * v['rrms_wave_model']:.1f} %)")
         lines.append(text + gap_text(ds, i))
     return lines
 
@@ -294,35 +297,41 @@ def gap_text(ds: xr.Dataset, i: int) -> str:
     name = f"the {gap * 1e3:g} mm gaps" if math.isfinite(gap) and gap > 0 else "the mesh's gaps"
     wave_dip, noise = float(ds["gap_wave_dip"].values[i]), float(ds["gap_wave_dip_elsewhere"].values[i])
     seen = "visible in the wave data" if abs(wave_dip) > 2 * noise else "lost in the wave data's ripple"
-    return (f"; {name}: GO draws dark lines on {dark} cells ({100 * dark / int(ds['gap_usable_cells'].values[i]):.1f} %)"
+    share = 100 * dark / int(ds["gap_usable_cells"].values[i])
+    return (f"; {name}: GO draws dark lines on {dark} cells ({share:.1f} %)"
             f" at {100 * float(ds['gap_go_dip'].values[i]):+.0f} %, the wave data dip "
             f"{100 * wave_dip:+.2f} % there (elsewhere +-{100 * noise:.2f} %): {seen}")
 
 
 def summary_rows(ds: xr.Dataset) -> list[list[str]]:
     """The table across frequencies: header row first, then one row per frequency."""
-    head = ["f (GHz)", "wave engine", "ideal diff", "FA diff", "GO", "GO data err (um)",
-            "GO-inverted wave (um)", "wave-refined (um)", "gap dip GO / wave", "time (s)"]
+    head = ["f (GHz)", "wave engine", "ideal diff", "FA diff", "GO", "GO cost (um)",
+            "wave-refined cost (um)", "error: GO data / GO-inverted / wave-refined (um)",
+            "RRMS GO-inverted", "gap dip GO / wave", "time (s)"]
     rows = [head]
     for i, f in enumerate(ds["frequency"].values):
         def um(name: str, i: int = i) -> str:
             return f"{1e6 * float(ds[name].values[i]):.1f}" if name in ds else "-"
 
         dark = int(ds["gap_dark_cells"].values[i])
-        gaps = (f"{100 * float(ds['gap_go_dip'].values[i]):+.0f} / {100 * float(ds['gap_wave_dip'].values[i]):+.2f} %"
+        go_dip, wave_dip = float(ds["gap_go_dip"].values[i]), float(ds["gap_wave_dip"].values[i])
+        gaps = (f"{100 * go_dip:+.0f} / {100 * wave_dip:+.2f} %"
                 if dark else "-")
         seconds = sum(float(ds[k].values[i]) for k in ds.data_vars if k.startswith("seconds_")
                       and math.isfinite(float(ds[k].values[i])))
+        errors = " / ".join(um(f"rms_{n}") for n in INVERSIONS)
+        rrms = f"{100 * float(ds['rrms_go_model'].values[i]):.1f} %" if "rrms_go_model" in ds else "-"
         rows.append([f"{f / 1e9:g}", str(ds["wave_method"].values[i]),
                      f"{100 * float(ds['ideal_difference'].values[i]):.2f} %",
                      f"{100 * float(ds['fa_difference'].values[i]):.1f} %",
-                     verdict_word(float(ds["fa_difference"].values[i])), um("rms_go_data"),
-                     um("rms_go_model"), um("rms_wave_model"), gaps, f"{seconds:.0f}"])
+                     verdict_word(float(ds["fa_difference"].values[i])), um("cost_go_model"),
+                     um("cost_wave_model"), errors, rrms, gaps, f"{seconds:.0f}"])
     return rows
 
 
 # --- the outputs ---------------------------------------------------------------------------
-def write_check(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], **options) -> tuple[Path, xr.Dataset]:
+def write_check(source: str | os.PathLike[str], out_dir: str | os.PathLike[str],
+                **options) -> tuple[Path, xr.Dataset]:
     """Run :func:`check` and write ``out_dir/check.nc`` and ``out_dir/check.html`` (figures in
     ``figures/``), built in a folder beside ``out_dir`` that replaces an earlier check only when
     complete; a folder holding other files, or holding an input, is refused before any work.

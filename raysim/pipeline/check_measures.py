@@ -6,7 +6,9 @@ Maps are (n_theta, n_phi) arrays on the probe sphere (theta from -z at the focus
 rim's own diffraction, which no inversion uses, dominates. Relative figures are dimensionless
 (multiply by 100 for per cent).
 
-- ideal difference: RMS over the usable cells of (I_GO - I_wave) / I_wave, ideal reflector.
+- ideal difference: RMS(I_GO - I_wave) / RMS(I_wave) over the usable cells, ideal reflector
+  (a ratio of RMS values, so the wave's dark diffraction rings, where I_wave is near zero, do
+  not dominate it as they do a per-cell relative difference).
 - FA difference: RMS(FA_GO - FA_wave) / RMS(FA_wave), FA = I_ideal / I_def - 1: what the
   inversion sees, relative to the signal.
 - gap signature: the cells GO darkens (ideal cell mean below 99 % of the smooth paraboloid's,
@@ -33,13 +35,6 @@ DARK = 0.99  # a GO cell below 99 % of the smooth dish's intensity lies on a gap
 def usable(sphere: SphereGrid, D: float, F: float) -> NDArray[np.bool_]:
     """Theta rows (n_theta,) at or inside the rim image minus 2 deg."""
     return sphere.theta <= theta_rim(D, F) - USABLE_MARGIN
-
-
-def relative_rms(a: NDArray, b: NDArray, mask: NDArray[np.bool_]) -> float:
-    """RMS over ``mask`` of (a - b) / b (cells where either is not finite are left out)."""
-    rel = (a - b) / b
-    keep = mask & np.isfinite(rel)
-    return float(np.sqrt(np.mean(rel[keep] ** 2))) if keep.any() else math.nan
 
 
 def rms_ratio(a: NDArray, b: NDArray, mask: NDArray[np.bool_]) -> float:
@@ -77,7 +72,7 @@ def bands(sphere: SphereGrid, D: float, F: float, maps: dict[str, NDArray]) -> B
     for a, b in zip(lo, hi, strict=True):
         band = ((sphere.theta >= a) & (sphere.theta < b))[:, None] & np.ones((1, sphere.n_phi), bool)
         rows.append((rms_of(maps["fa_wave"], band), rms_ratio(maps["fa_go"], maps["fa_wave"], band),
-                     relative_rms(maps["ideal_go"], maps["ideal_wave"], band)))
+                     rms_ratio(maps["ideal_go"], maps["ideal_wave"], band)))
     out = np.array(rows, dtype=np.float64).reshape(-1, 3)
     return Bands(lo, hi, out[:, 0], out[:, 1], out[:, 2])
 
