@@ -122,8 +122,8 @@ def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None
         raise CheckError(f"--sphere-radius must lie in (0, F = {fit.F:.4g}) m, got {R:g}")
     if scene is None:
         text = (f'name = "{path.stem}"\n[dish]\nmesh = "{path.resolve().as_posix()}"\n'
-                f"focal_length_m = {fit.F!r}\n[source]\nfrequency_hz = 1e9\n"
-                f"[sphere]\nradius_m = {R!r}\n")
+                f"focal_length_m = {float(fit.F)!r}\n[source]\nfrequency_hz = 1e9\n"
+                f"[sphere]\nradius_m = {float(R)!r}\n")
         scene = parse_scene(text, source=str(path), base=path.parent)
     scene = replace(scene, dish=replace(scene.dish, diameter=D, focal_length=fit.F))
     note = (f"mesh {path.name}: {len(ideal.faces):,} faces, {int(ideal.n_panels)} pieces, best-fit "
@@ -151,7 +151,7 @@ def with_grid(dish: Dish, grid: tuple[int, int] | None) -> Dish:
     if grid is None:
         return dish
     n_theta, n_phi = grid
-    check_sphere_cells(n_theta, n_phi, ("--grid n_theta", "--grid n_phi"))
+    check_sphere_cells(n_theta, n_phi, ("--sphere n_theta", "--sphere n_phi"))
     return replace(dish, go=dish.go.with_overrides(None, n_theta, n_phi),
                    wave=dish.wave.with_overrides(None, n_theta, n_phi))
 
@@ -163,7 +163,7 @@ def parse_grid(text: str | None) -> tuple[int, int] | None:
     try:
         n_theta, n_phi = (int(n) for n in text.lower().split("x"))
     except ValueError:
-        raise CheckError(f"--grid takes the sphere's cells as NTHETAxNPHI (90x360), got {text!r}") from None
+        raise CheckError(f"--sphere takes the sphere's cells as NTHETAxNPHI (90x360), got {text!r}") from None
     return n_theta, n_phi
 
 
