@@ -11,10 +11,11 @@ rim's own diffraction, which no inversion uses, dominates. Relative figures are 
   not dominate it as they do a per-cell relative difference).
 - FA difference: RMS(FA_GO - FA_wave) / RMS(FA_wave), FA = I_ideal / I_def - 1: what the
   inversion sees, relative to the signal.
-- gap signature: the cells GO darkens (ideal cell mean below 99 % of the smooth paraboloid's,
-  :func:`raysim.maps.sphere.ideal_go_cell_mean`) and the mean intensity there relative to the
-  median of its theta row, in GO and in the wave data: GO's lines are black, the wave's are
-  shallow dips spread over a Fresnel zone.
+- gap signature: the cells GO darkens (ideal cell mean over the smooth paraboloid's,
+  :func:`raysim.maps.sphere.ideal_go_cell_mean`, below 99 % of that ratio's median over the
+  usable cells: on a coarse grid every cell holds some gap) and the mean intensity there
+  relative to the median of its theta row, in GO and in the wave data: GO's lines are black,
+  the wave's are shallow dips spread over a Fresnel zone, or lost in its ripple.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from raysim.maps.sphere import SphereGrid, ideal_go_cell_mean, theta_rim
 
 USABLE_MARGIN = math.radians(2.0)  # rad inside the rim image
 BAND_WIDTH = math.radians(10.0)
-DARK = 0.99  # a GO cell below 99 % of the smooth dish's intensity lies on a gap line
+DARK = 0.99  # a GO cell 1 % darker than the typical cell (against the smooth dish) is on a gap line
 
 
 def usable(sphere: SphereGrid, D: float, F: float) -> NDArray[np.bool_]:
@@ -95,7 +96,9 @@ def gap_signature(sphere: SphereGrid, D: float, F: float, ideal_go: NDArray,
     th = sphere.theta_edges
     smooth = ideal_go_cell_mean(th[:-1], th[1:], F, sphere.radius)[:, None]
     use = usable(sphere, D, F)[:, None] & np.ones((1, sphere.n_phi), bool)
-    dark = use & (ideal_go / smooth < DARK)
+    ratio = ideal_go / smooth
+    level = np.nanmedian(np.where(use, ratio, np.nan))  # the gaps' mean loss shifts every cell
+    dark = use & (ratio < DARK * level)
 
     def dip(I: NDArray, where: NDArray[np.bool_], absolute: bool = False) -> float:
         with np.errstate(invalid="ignore", divide="ignore"):
