@@ -271,14 +271,14 @@ def wave_pairs(dish: Dish, frequency_hz: float, n_points: int) -> float:
     return 2.0 * plan(_wave_ideal(dish), wavelength, DEFAULT_SAMPLES_PER_WAVELENGTH).n_samples * n_points
 
 
-_IDEAL: dict[int, object] = {}
+_IDEAL: dict[tuple, object] = {}
 
 
 def _wave_ideal(dish: Dish):
-    """The ideal reflector of the wave scene, built once per dish."""
+    """The ideal reflector of the wave scene, built once per dish (the last one kept)."""
     from raysim.surface.mesh import reflectors_for
 
-    key = id(dish.wave)
+    key = (dish.wave.dish, dish.wave.panels)
     if key not in _IDEAL:
         _IDEAL.clear()
         _IDEAL[key] = reflectors_for(replace(dish.wave, deformation=NoDeformation()))[0]
