@@ -116,13 +116,16 @@ def test_a_mesh_file_gives_the_numbers_of_the_scene_it_came_from(tmp_path):
     facet = rms_ratio(from_mesh["intensity_ideal_go"].values[0], from_scene["intensity_ideal_go"].values[0],
                       use)
     assert 0 < facet < 0.1
-    for name in ("ideal_difference", "fa_difference", "gap_dark_cells", "rms_go_model"):
+    for name in ("ideal_difference", "fa_difference", "rms_go_model"):
         m, s = float(from_mesh[name][0]), float(from_scene[name][0])
         assert abs(m - s) <= 2 * facet * abs(s), (name, m, s, facet)
-    # GO's dark gap lines are there; the wave field fills them in: far shallower dips there
-    assert float(from_scene["gap_dark_cells"][0]) > 0
-    go_dip, wave_dip = float(from_scene["gap_go_dip"][0]), float(from_scene["gap_wave_dip"][0])
-    assert go_dip < -0.005 and abs(wave_dip) < 0.5 * abs(go_dip), (go_dip, wave_dip)
+    # GO's dark gap lines: most of the scene's are found on the mesh too (the facets' own 5 %
+    # add cells below the 1 % threshold there); the wave field fills them in, in both
+    dark_s, dark_m = from_scene["gap_dark"].values[0] == 1, from_mesh["gap_dark"].values[0] == 1
+    assert dark_s.sum() > 0 and (dark_s & dark_m).sum() >= 0.67 * dark_s.sum()
+    for ds in (from_scene, from_mesh):
+        go_dip, wave_dip = float(ds["gap_go_dip"][0]), float(ds["gap_wave_dip"][0])
+        assert go_dip < -0.01 and abs(wave_dip) < 0.5 * abs(go_dip), (go_dip, wave_dip)
 
 
 def test_cli_writes_the_page_and_the_dataset_and_keeps_what_was_there(raysim_cli, small, tmp_path):
