@@ -299,6 +299,17 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["report", "missing.toml", "-o", "rep_new"], "no such scene file"),
         (["report", "corrupt.nc", "-o", "rep_new"], "not a readable NetCDF file"),
     ],
+    "check": [
+        (["check", "scene.toml", "-o", "rep_new", "--frequency", "0"], "must be a finite frequency > 0 Hz"),
+        (["check", "scene.toml", "-o", "rep_new", "--frequency", "-1e9"], "must be a finite frequency"),
+        (["check", "scene.toml", "-o", "rep_new", "--gap-m", "5"], "wider than a panel allows"),
+        (["check", "scene.toml", "-o", "rep_new", "--wave", "fdtd"], "unknown --wave 'fdtd'"),
+        (["check", "scene.toml", "-o", "rep_new", "--refine-model", "x"], "unknown --refine-model 'x'"),
+        (["check", "scene.toml", "-o", "rep_new", "--sphere", "9x"], "--sphere takes"),
+        (["check", "dish_mm.stl", "-o", "rep_new", "--frequency", "1e9"], "not a dish in metres"),
+        (["check", "scene.toml", "-o", "user_folder"], "holds files that are not a raysim check"),
+        (["check", "scene.toml", "-o", "notes.txt"], "exists and is not a folder"),
+    ],
     "paper": [
         (["paper", "--scale", "1e7"], "--scale must lie in (0, 50]"),
         (["paper", "--scale", "nan"], "--scale must lie in (0, 50]"),

@@ -1,7 +1,7 @@
 """The ``raysim`` command: a thin typer layer over the Python API, one module per command.
 
 - ``common``: the app, the consoles, the progress bar, output-path checks.
-- ``simulate``, ``invert`` (and ``paper``), ``render`` (and ``report``), ``scan`` (and
+- ``simulate``, ``invert`` (and ``paper``), ``render`` (and ``report``), ``check``, ``scan`` (and
   ``rig park``), ``dataset``, ``scenes``: the commands, each a wrapper of one API call.
 
 Units at this edge: lengths in metres, frequencies in Hz, angles in degrees where an option
@@ -15,7 +15,7 @@ import sys
 
 import typer
 
-from raysim.cli import dataset, invert, render, scan, scenes, simulate  # noqa: F401  (register commands)
+from raysim.cli import check, dataset, invert, render, scan, scenes, simulate  # noqa: F401  (register commands)
 from raysim.cli.common import app, error_line, say_error
 from raysim.errors import RaysimError
 

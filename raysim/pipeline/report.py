@@ -41,6 +41,14 @@ PAPER_GO = ("paper, GO data: FDM (Gauss-Seidel, N = 256, 1000 iterations) RRMS 4
 
 
 REPORT_FILES = ("report.html", "field.nc", "surface.nc", "figures")
+PAGE_STYLE = """<style>
+body { font-family: sans-serif; max-width: 1500px; margin: 2em auto; color: #222; }
+table { border-collapse: collapse; margin: 1em 0; }
+th, td { text-align: left; padding: 0.25em 1em; border-bottom: 1px solid #ddd; vertical-align: top; }
+figure { margin: 2em 0; } img { max-width: 100%; border: 1px solid #ccc; }
+figcaption { font-size: 0.95em; margin-top: 0.4em; }
+pre { background: #f5f5f5; padding: 1em; overflow-x: auto; }
+</style>"""
 
 
 def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, method: str | None = None,
@@ -91,7 +99,7 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
         check_simulation(loaded, method=method, device=device)
         inputs = loaded.inputs()
     target = _target(out_dir, inputs)
-    with _staging(target) as out:
+    with staging(target) as out:
         if not is_field:
             say(f"simulating {loaded.name} ({method})", 0.0)
             start = time.perf_counter()
@@ -112,8 +120,13 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
 
 
 def _target(out_dir: str | os.PathLike[str], inputs) -> Path:
-    """The report folder, checked: not a file, not holding an input, holding nothing but an
-    earlier report."""
+    """The report folder, checked (:func:`output_folder`)."""
+    return output_folder(out_dir, inputs, REPORT_FILES, "a raysim report")
+
+
+def output_folder(out_dir: str | os.PathLike[str], inputs, files: tuple[str, ...], what: str) -> Path:
+    """An output folder, checked: not a file, not holding an input, holding nothing but the
+    ``files`` of an earlier run (``what`` names that run in the message)."""
     from raysim.files import check_output_folder
 
     target = Path(out_dir).expanduser()
@@ -121,15 +134,15 @@ def _target(out_dir: str | os.PathLike[str], inputs) -> Path:
         raise RenderError(f"{target}: exists and is not a folder")
     check_output_folder(target, inputs, RenderError)
     if target.is_dir():
-        other = sorted(p.name for p in target.iterdir() if p.name not in REPORT_FILES)
+        other = sorted(p.name for p in target.iterdir() if p.name not in files)
         if other:
-            raise RenderError(f"{target}: holds files that are not a raysim report ({other[0]}, ...); "
+            raise RenderError(f"{target}: holds files that are not {what} ({other[0]}, ...); "
                               "give a new or empty folder")
     return target
 
 
 @contextlib.contextmanager
-def _staging(target: Path) -> Iterator[Path]:
+def staging(target: Path) -> Iterator[Path]:
     """A temporary folder beside ``target`` that replaces it when the block completes."""
     import shutil
     import tempfile
@@ -183,9 +196,9 @@ def write_report(field: xr.Dataset, surface: xr.Dataset | None, out_dir: str | o
     seconds_draw = time.perf_counter() - start
     blocks = []
     for name, caption, image in items:
-        png = _png_bytes(image)
+        png = png_bytes(image)
         (out / "figures" / f"{name}.png").write_bytes(png)
-        blocks.append(_figure_html(name, caption, png))
+        blocks.append(figure_html(name, caption, png))
     times = {**(timings or {}), "draw": seconds_draw}
     page = _page(field, surface, blocks, times)
     path = out / "report.html"
@@ -238,7 +251,8 @@ def _figures(field: xr.Dataset, surface: xr.Dataset | None) -> list[tuple[str, s
     return items
 
 
-def _png_bytes(image: np.ndarray) -> bytes:
+def png_bytes(image: np.ndarray) -> bytes:
+    """An RGB image (height, width, 3) as PNG bytes."""
     from matplotlib.image import imsave
 
     buffer = io.BytesIO()
@@ -246,7 +260,8 @@ def _png_bytes(image: np.ndarray) -> bytes:
     return buffer.getvalue()
 
 
-def _figure_html(name: str, caption: str, png: bytes) -> str:
+def figure_html(name: str, caption: str, png: bytes) -> str:
+    """One embedded figure (base64 PNG) with its caption and a link to the PNG file beside."""
     data = base64.b64encode(png).decode("ascii")
     return (f'<figure id="{name}"><img alt="{html.escape(caption)}" src="data:image/png;base64,{data}">'
             f'<figcaption>{html.escape(caption)} <a href="figures/{name}.png">PNG</a></figcaption>'
@@ -313,14 +328,7 @@ def _page(field: xr.Dataset, surface: xr.Dataset | None, blocks: list[str], time
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">
 <title>raysim report: {name}</title>
-<style>
-body {{ font-family: sans-serif; max-width: 1500px; margin: 2em auto; color: #222; }}
-table {{ border-collapse: collapse; margin: 1em 0; }}
-th, td {{ text-align: left; padding: 0.25em 1em; border-bottom: 1px solid #ddd; vertical-align: top; }}
-figure {{ margin: 2em 0; }} img {{ max-width: 100%; border: 1px solid #ccc; }}
-figcaption {{ font-size: 0.95em; margin-top: 0.4em; }}
-pre {{ background: #f5f5f5; padding: 1em; overflow-x: auto; }}
-</style></head><body>
+{PAGE_STYLE}</head><body>
 <h1>raysim report: {name}</h1>
 <p>Surface deformation from one intensity scan on a hemisphere about the focus. {summary}</p>
 <h2>Numbers of this run</h2><table>{rows}</table>

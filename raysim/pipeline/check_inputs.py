@@ -1,0 +1,301 @@
+"""What ``raysim check`` runs on: the dish (a scene, or a mesh file fitted to a paraboloid),
+the deformation it tests with, the panel gaps, and the wave engine per frequency.
+
+Frame and units: the reflector frame of docs/physics.md (vertex at the origin, axis +z); lengths
+in m, frequencies in Hz, angles in rad. Every defect a user can cause raises
+:class:`CheckError` with one line, before any simulation starts.
+
+The engine rule (:func:`choose_wave`): PO + PTD (rim) is the reference wave engine wherever its
+cost is affordable, the number of source-point pairs (quadrature samples of both reflectors
+times the sphere's points) within :data:`PO_PAIR_BUDGET` for the device; above it, go+edge.
+docs/engines.md has the measured accuracies behind it: go+edge agrees with PO + PTD to 0.02 to
+0.6 % in the ideal intensity everywhere, and in FA to 1.6 to 4.7 % of FA's RMS once the
+dish is a few hundred wavelengths across (paper dish at 3 GHz, 25 m dish at 1 and 3 GHz), but
+only to 21 to 59 % on the paper's dish at 0.3 and 1 GHz, where PO + PTD is affordable (5e9
+pairs at 0.3 GHz, 90 x 360). So the rule never takes go+edge where it is known to be poor
+unless the budget forces it, and the result says which engine ran and why.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from raysim.errors import RaysimError
+from raysim.maps.aperture import ApertureGrid
+from raysim.scene.scene import Scene, check_frequency, check_sphere_cells, load_scene, parse_scene
+from raysim.surface.deformation import Deformation, NoDeformation, Sum
+from raysim.surface.panels import PanelLayout
+
+MESH_SUFFIXES = (".stl", ".ply", ".obj", ".glb", ".gltf", ".off")
+WAVE_CHOICES = ("auto", "po", "po+ptd", "go+edge")
+DEFORMATIONS = ("auto", "scene", "mix")
+DEFAULT_RMS_M = 100e-6
+PO_PAIR_BUDGET = {"cpu": 1.2e10, "cuda": 1e12}  # source-point pairs: minutes on 2 cores / a GPU
+WAVE_FACE_M = 4.0  # quadrature faces of the wave data (the refinement's PO model uses 5 m)
+SPHERE_RADIUS_OF_F = 0.3  # a mesh's probe sphere by default: R = 0.3 F (the paper's 10 / 33)
+MAX_FREQUENCIES = 12
+
+
+class CheckError(RaysimError, ValueError):
+    """A ``raysim check`` input that cannot be honoured (one line for the user)."""
+
+
+@dataclass(frozen=True)
+class Dish:
+    """The dish a check runs on: the GO scene (the dish as given), the wave scene (the same
+    dish on quadrature faces for a generated mesh; the same mesh for a mesh file), where the
+    dish came from and how it was fitted."""
+
+    go: Scene
+    wave: Scene
+    source: str
+    is_mesh: bool
+    fit_rms: float = 0.0  # m, the mesh's RMS departure from its best-fit paraboloid
+    notes: tuple[str, ...] = ()
+
+    @property
+    def D(self) -> float:
+        return self.go.D
+
+    @property
+    def F(self) -> float:
+        return self.go.F
+
+
+def is_mesh(source: str | Path) -> bool:
+    return Path(source).suffix.lower() in MESH_SUFFIXES
+
+
+def load_dish(source: str | Path, *, sphere_radius: float | None = None,
+              focal_length: float | None = None, resolution: float | None = None) -> Dish:
+    """The dish of a scene file (or a shipped example's name) or of a mesh file.
+
+    A mesh is fitted to the paraboloid z = r^2 / (4F) (``focal_length`` fixes F) and refused
+    when it is not a dish: F / D outside 0.1 .. 5, or an RMS departure from the fit over 2 %
+    of the dish's depth. ``sphere_radius`` (m) sets its probe sphere (default 0.3 F);
+    ``resolution`` (m) the triangle edge of a generated GO mesh.
+    """
+    if is_mesh(source):
+        return _mesh_dish(Path(source), sphere_radius, focal_length)
+    if sphere_radius is not None or focal_length is not None:
+        raise CheckError("--sphere-radius and --focal-length apply to a mesh file; a scene sets "
+                         "its own in [sphere] and [dish]")
+    from raysim.files import find_input
+
+    scene = load_scene(find_input(source))
+    if scene.dish.mesh is not None:
+        return _mesh_dish(scene.dish.mesh, scene.sphere.radius, scene.dish.focal_length,
+                          scene=scene)
+    if resolution is not None:
+        if not (math.isfinite(resolution) and 0 < resolution <= scene.D / 8):
+            raise CheckError(f"--resolution must lie in (0, D/8 = {scene.D / 8:g}] m, got {resolution:g}")
+        scene = replace(scene, dish=replace(scene.dish, resolution=float(resolution)))
+    face = max(scene.dish.resolution, min(WAVE_FACE_M, scene.D / 25))
+    wave = replace(scene, dish=replace(scene.dish, resolution=face), subdivisions=1)
+    return Dish(scene, wave, str(source), False,
+                notes=(f"wave engines on {face:g} m quadrature faces of the smooth surface, GO on "
+                       f"{scene.dish.resolution:g} m triangles x {scene.subdivisions} rays per edge",))
+
+
+def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None = None) -> Dish:
+    from raysim.surface.mesh import load_reflector
+
+    if not path.is_file():
+        raise CheckError(f"{path}: no such mesh file")
+    if F is not None and not (math.isfinite(F) and F > 0):
+        raise CheckError(f"--focal-length must be a length > 0 m, got {F:g}")
+    ideal, _, fit = load_reflector(path, scene.dish.mesh_unit if scene else 1.0, F)
+    D = float(ideal.D)
+    depth = D**2 / (16.0 * fit.F)
+    if not 0.1 <= fit.F / D <= 5.0:
+        raise CheckError(f"{path}: not a dish: its best-fit paraboloid has F / D = {fit.F / D:.3g} "
+                         "(a reflector has 0.1 to 5)")
+    if fit.rms > 0.02 * depth:
+        raise CheckError(f"{path}: not a dish: it departs {fit.rms:.3g} m RMS from its best-fit "
+                         f"paraboloid ({100 * fit.rms / depth:.0f} % of the dish's depth)")
+    R = SPHERE_RADIUS_OF_F * fit.F if R is None else float(R)
+    if not (math.isfinite(R) and 0 < R < fit.F):
+        raise CheckError(f"--sphere-radius must lie in (0, F = {fit.F:.4g}) m, got {R:g}")
+    if scene is None:
+        text = (f'name = "{path.stem}"\n[dish]\nmesh = "{path.resolve().as_posix()}"\n'
+                f"focal_length_m = {float(fit.F)!r}\n[source]\nfrequency_hz = 1e9\n"
+                f"[sphere]\nradius_m = {float(R)!r}\n")
+        scene = parse_scene(text, source=str(path), base=path.parent)
+    scene = replace(scene, dish=replace(scene.dish, diameter=D, focal_length=fit.F))
+    note = (f"mesh {path.name}: {len(ideal.faces):,} faces, {int(ideal.n_panels)} pieces, best-fit "
+            f"paraboloid F = {fit.F:.4g} m, D = {D:.4g} m, fit RMS {fit.rms * 1e6:.3g} um; every "
+            "engine on the file's facets")
+    return Dish(scene, scene, str(path), True, fit.rms, (note,))
+
+
+def frequencies_of(dish: Dish, frequencies: list[float] | tuple[float, ...] | None) -> tuple[float, ...]:
+    """The frequencies (Hz) to check: those given, else the scene's; each checked."""
+    freqs = tuple(float(f) for f in (frequencies or ()))
+    if not freqs:
+        if is_mesh(dish.source):
+            raise CheckError("a mesh file carries no frequency: give --frequency HZ (one or more)")
+        freqs = (dish.go.source.frequency_hz,)
+    if len(freqs) > MAX_FREQUENCIES:
+        raise CheckError(f"at most {MAX_FREQUENCIES} frequencies, got {len(freqs)}")
+    for f in freqs:
+        check_frequency(f, "--frequency")
+    return tuple(sorted(set(freqs)))
+
+
+def with_grid(dish: Dish, grid: tuple[int, int] | None) -> Dish:
+    """The dish with its probe sphere's cells set to ``grid`` (n_theta, n_phi)."""
+    if grid is None:
+        return dish
+    n_theta, n_phi = grid
+    check_sphere_cells(n_theta, n_phi, ("--sphere n_theta", "--sphere n_phi"))
+    return replace(dish, go=dish.go.with_overrides(None, n_theta, n_phi),
+                   wave=dish.wave.with_overrides(None, n_theta, n_phi))
+
+
+def parse_grid(text: str | None) -> tuple[int, int] | None:
+    """``"90x360"`` -> (90, 360); None stays None."""
+    if text is None:
+        return None
+    try:
+        n_theta, n_phi = (int(n) for n in text.lower().split("x"))
+    except ValueError:
+        raise CheckError(f"--sphere takes the sphere's cells as NTHETAxNPHI (90x360), got {text!r}") from None
+    return n_theta, n_phi
+
+
+# --- the deformation ------------------------------------------------------------------------
+def realistic_mix(D: float, rms: float = DEFAULT_RMS_M, seed: int = 0) -> Deformation:
+    """Gravity-like rim astigmatism plus actuator-scale bumps, together ``rms`` (m) over the
+    aperture: the dataset specs' ``gravity`` and ``bumps`` models (raysim.dataset.models)
+    drawn from ``seed``, half the variance each, then scaled together to ``rms``.
+
+    The astigmatism grows as (r/a)^p, p uniform in 2.5..4 (p = 2 would be harmonic: no
+    signal); 4 bumps of width D/110 x (1.5 .. 4) m, the paper dish's actuator scale.
+    """
+    from raysim.dataset.distributions import Distribution
+    from raysim.dataset.models import GravityAstigmatism, RandomBumps
+
+    grid = ApertureGrid(D, 128)
+
+    def draw(scale: float) -> Deformation:
+        rng = np.random.default_rng(seed)
+        part = Distribution("fixed", scale * rms / math.sqrt(2.0))
+        gravity = GravityAstigmatism("gravity", part, 1.0, Distribution("uniform", 2.5, 4.0),
+                                     Distribution("uniform", 0.0, math.pi))
+        bumps = RandomBumps("bumps", part, 1.0, Distribution("fixed", 4.0),
+                            Distribution("uniform", 1.5 * D / 110.0, 4.0 * D / 110.0), 0.8)
+        parts = [m.draw(rng, grid)[0] for m in (gravity, bumps)]
+        return Sum(tuple(p for p in parts if p is not None))
+
+    first = draw(1.0)
+    return draw(rms / grid.rms(first))
+
+
+def choose_deformation(dish: Dish, kind: str, rms: float, seed: int) -> tuple[Dish, Deformation, str]:
+    """The dish with the deformation to test with: ``scene`` (the scene's own), ``mix``
+    (:func:`realistic_mix`), ``auto`` (the scene's when it has one, else the mix). Returns
+    (dish, deformation, description)."""
+    if kind not in DEFORMATIONS:
+        raise CheckError(f"unknown --deformation {kind!r}: use one of {', '.join(DEFORMATIONS)}")
+    if not (math.isfinite(rms) and 0 < rms <= 0.01):
+        raise CheckError(f"--rms-um must lie in (0, 10000] um, got {rms * 1e6:g}")
+    own = dish.go.deformation
+    if kind == "scene" or (kind == "auto" and not isinstance(own, NoDeformation)):
+        if isinstance(own, NoDeformation):
+            raise CheckError("--deformation scene: the scene has no [[deformation]]; use mix")
+        return dish, own, own.describe()
+    mix = realistic_mix(dish.D, rms, seed)
+    text = f"realistic mix (gravity-like astigmatism + actuator bumps, seed {seed}), {rms * 1e6:g} um RMS"
+    return (replace(dish, go=_plain(replace(dish.go, deformation=mix)),
+                    wave=_plain(replace(dish.wave, deformation=mix))), mix, text)
+
+
+def _plain(scene: Scene) -> Scene:
+    """A changed scene no longer matches its TOML text: drop the text (the check records it)."""
+    return replace(scene, text="")
+
+
+# --- panels and gaps ------------------------------------------------------------------------
+def default_layout(D: float, gap: float) -> PanelLayout:
+    """Eight rings of equal width, 6, 12, ..., 48 panels (the paper dish's layout, scaled)."""
+    edges = tuple(float(v) for v in np.linspace(0.0, D / 2, 9))
+    return PanelLayout(edges, tuple(6 * (i + 1) for i in range(8)), gap)
+
+
+def check_gap(layout: PanelLayout, gap: float) -> None:
+    """Refuse a gap as wide as a panel: at least 4 gaps across each ring and along each panel's
+    arc at the ring's mid radius."""
+    if not (math.isfinite(gap) and gap >= 0):
+        raise CheckError(f"--gap-m must be a width >= 0 m, got {gap:g}")
+    for ring in range(layout.n_rings):
+        lo, hi = layout.ring_edges[ring], layout.ring_edges[ring + 1]
+        arc = math.pi * (lo + hi) / layout.panels_per_ring[ring]
+        narrowest = min(hi - lo, arc if layout.panels_per_ring[ring] > 1 else hi - lo)
+        if gap > 0.25 * narrowest:
+            raise CheckError(f"--gap-m {gap:g} m is wider than a panel allows: ring {ring} panels "
+                             f"are {narrowest:.3g} m across (a gap may be at most a quarter of that)")
+
+
+def with_gap(dish: Dish, gap: float | None) -> Dish:
+    """The dish with panel gaps ``gap`` (m): the scene's layout, or :func:`default_layout`."""
+    if gap is None:
+        return dish
+    if dish.is_mesh:
+        raise CheckError("--gap-m applies to a generated dish: a mesh file's gaps are in the file")
+    layout = dish.go.panels or default_layout(dish.D, gap)
+    check_gap(layout, gap)
+    layout = PanelLayout(layout.ring_edges, layout.panels_per_ring, float(gap), layout.phi0)
+    return replace(dish, go=_plain(replace(dish.go, panels=layout)),
+                   wave=_plain(replace(dish.wave, panels=layout)))
+
+
+def gap_width(dish: Dish) -> float:
+    """The panel gap (m) of a generated dish; NaN for a mesh (its gaps are what the file has)."""
+    if dish.is_mesh:
+        return math.nan
+    return float(dish.go.panels.gap) if dish.go.panels is not None else 0.0
+
+
+# --- the wave engine ------------------------------------------------------------------------
+def wave_pairs(dish: Dish, frequency_hz: float, n_points: int) -> float:
+    """PO's source-point pairs at ``frequency_hz``: quadrature samples of the ideal and the
+    deformed reflector (the same count) times the sphere's points."""
+    from raysim.optics.po import DEFAULT_SAMPLES_PER_WAVELENGTH
+    from raysim.surface.quadrature import plan
+
+    wavelength = 299_792_458.0 / frequency_hz
+    return 2.0 * plan(_wave_ideal(dish), wavelength, DEFAULT_SAMPLES_PER_WAVELENGTH).n_samples * n_points
+
+
+_IDEAL: dict[tuple, object] = {}
+
+
+def _wave_ideal(dish: Dish):
+    """The ideal reflector of the wave scene, built once per dish (the last one kept)."""
+    from raysim.surface.mesh import reflectors_for
+
+    key = (dish.wave.dish, dish.wave.panels)
+    if key not in _IDEAL:
+        _IDEAL.clear()
+        _IDEAL[key] = reflectors_for(replace(dish.wave, deformation=NoDeformation()))[0]
+    return _IDEAL[key]
+
+
+def choose_wave(dish: Dish, frequency_hz: float, wave: str, device: str) -> tuple[str, str]:
+    """(method, why) of the wave engine at ``frequency_hz`` (the rule of this module's
+    docstring); ``wave`` other than ``auto`` forces that engine."""
+    if wave not in WAVE_CHOICES:
+        raise CheckError(f"unknown --wave {wave!r}: use one of {', '.join(WAVE_CHOICES)}")
+    if wave != "auto":
+        return wave, "forced by --wave"
+    sphere = dish.wave.sphere
+    pairs = wave_pairs(dish, frequency_hz, sphere.n_theta * sphere.n_phi)
+    budget = PO_PAIR_BUDGET["cuda" if str(device).startswith("cuda") else "cpu"]
+    if pairs <= budget:
+        return "po+ptd", f"PO + PTD affordable: {pairs:.2g} source-point pairs (budget {budget:.2g})"
+    return "go+edge", (f"PO + PTD would need {pairs:.2g} source-point pairs (budget {budget:.2g}): "
+                       "go+edge, whose cost does not grow as f^2")

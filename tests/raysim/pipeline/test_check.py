@@ -1,0 +1,191 @@
+"""``raysim check``: GO against the wave engines, on small dishes (fast) and the paper's (slow).
+
+The small dish: D = 10 m, F = 3 m (F/D 0.3 like the paper's), probe sphere R = 1 m, coarse
+sphere grids; its wave engine is PO + PTD (a few seconds). GO is the short-wavelength limit of
+the wave field, so every difference must fall as the frequency rises (the dish 33, 67 and 133
+wavelengths across); GO's own ideal map must be the closed form (rho / R)^2 of the paraboloid.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from raysim.maps.sphere import SphereGrid, ideal_go_cell_mean
+from raysim.pipeline.check import check, summary_rows, verdict_lines
+from raysim.pipeline.check_measures import rms_ratio, usable
+
+SMALL = """
+name = "small_dish"
+[dish]
+diameter_m = 10.0
+focal_length_m = 3.0
+resolution_m = 0.1
+{panels}
+[source]
+frequency_hz = 1e9
+[sphere]
+radius_m = 1.0
+n_theta = 24
+n_phi = 36
+"""
+PANELS = """[panels]
+ring_edges_m = [0.0, 1.7, 3.4, 5.0]
+panels_per_ring = [6, 12, 18]
+gap_m = 0.02
+"""
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    path = tmp_path_factory.mktemp("check") / "small.toml"
+    path.write_text(SMALL.format(panels=""))
+    return path
+
+
+@pytest.fixture(scope="module")
+def trend(small):
+    return check(small, frequencies=[1e9, 2e9, 4e9], N=32, refine=0, refine_model="none")
+
+
+def test_go_against_the_wave_falls_with_frequency(trend):
+    assert list(trend["wave_method"].values) == ["po+ptd"] * 3
+    ideal, fa = trend["ideal_difference"].values, trend["fa_difference"].values
+    # the edge wave's share of the field falls as (k rho)^-1/2 asymptotically; at 33 to 133
+    # wavelengths across the dish is not there yet, but the fall over 4x in f is clear
+    assert np.all(np.diff(ideal) < 0) and ideal[-1] < 0.75 * ideal[0], ideal
+    assert np.all(np.diff(fa) < 0) and fa[-1] < 0.5 * fa[0], fa
+    # the band table's widest band agrees with the whole-sphere figure's order of magnitude
+    bands = trend["band_fa_difference"].values
+    assert np.all(np.isfinite(bands)) and bands.shape == (3, trend.sizes["band"])
+
+
+def test_go_ideal_map_is_the_paraboloids_closed_form(trend):
+    sphere = SphereGrid(1.0, 24, 36)
+    e = sphere.theta_edges
+    exact = ideal_go_cell_mean(e[:-1], e[1:], 3.0, 1.0)
+    inside = sphere.theta < math.radians(70)
+    got = trend["intensity_ideal_go"].values[0][inside]
+    np.testing.assert_allclose(got, np.broadcast_to(exact[inside, None], got.shape), rtol=2e-2)
+
+
+def test_dataset_round_trips_and_the_verdict_quotes_its_numbers(trend, tmp_path):
+    path = tmp_path / "check.nc"
+    trend.to_netcdf(path)
+    back = xr.open_dataset(path)
+    np.testing.assert_array_equal(back["fa_difference"].values, trend["fa_difference"].values)
+    lines = verdict_lines(trend)
+    assert len(lines) == 3
+    for line, fa in zip(lines, trend["fa_difference"].values, strict=True):
+        assert f"{100 * fa:.1f} %" in line and ("fails" in line or "marginal" in line or "holds" in line)
+    rows = summary_rows(trend)
+    assert len(rows) == 4 and rows[1][1] == "po+ptd"
+
+
+def _panelled_stl(tmp_path):
+    """An STL of the small dish in 36 panels with 20 mm gaps, and its scene."""
+    from raysim.surface.mesh import paraboloid
+    from raysim.surface.panels import PanelLayout
+
+    layout = PanelLayout((0.0, 1.7, 3.4, 5.0), (6, 12, 18), 0.02)
+    dish = paraboloid(10.0, 3.0, 0.1, layout)
+    import trimesh
+
+    path = tmp_path / "panelled.stl"
+    trimesh.Trimesh(dish.vertices, dish.faces, process=False).export(path)
+    scene = tmp_path / "panelled.toml"
+    scene.write_text(SMALL.format(panels=PANELS))
+    return path, scene
+
+
+@pytest.mark.slow
+def test_a_mesh_file_gives_the_numbers_of_the_scene_it_came_from(tmp_path):
+    stl, scene = _panelled_stl(tmp_path)
+    options = {"frequencies": [2e9], "N": 32, "refine": 1, "refine_model": "none", "wave": "po+ptd",
+               "grid": (24, 36)}
+    from_scene = check(scene, **options)
+    from_mesh = check(stl, sphere_radius=1.0, **options)
+    assert from_mesh.attrs["is_mesh"] == 1 and abs(from_mesh.attrs["focal_length"] - 3.0) < 1e-6
+    # the faceting error: GO on the file's flat facets (interpolated vertex normals) against GO
+    # on the smooth panels, over the usable cells (about 5 %, most of it at the vertex and
+    # beside the gaps); every figure agrees within twice that
+    use = usable(SphereGrid(1.0, 24, 36), 10.0, 3.0)[:, None] & np.ones((1, 36), bool)
+    facet = rms_ratio(from_mesh["intensity_ideal_go"].values[0], from_scene["intensity_ideal_go"].values[0],
+                      use)
+    assert 0 < facet < 0.1
+    for name in ("ideal_difference", "fa_difference", "rms_go_model"):
+        m, s = float(from_mesh[name][0]), float(from_scene[name][0])
+        assert abs(m - s) <= 2 * facet * abs(s), (name, m, s, facet)
+    # GO's dark gap lines: most of the scene's are found on the mesh too (the facets' own 5 %
+    # add cells below the 1 % threshold there); the wave field fills them in, in both
+    dark_s, dark_m = from_scene["gap_dark"].values[0] == 1, from_mesh["gap_dark"].values[0] == 1
+    assert dark_s.sum() > 0 and (dark_s & dark_m).sum() >= 0.67 * dark_s.sum()
+    for ds in (from_scene, from_mesh):
+        go_dip, wave_dip = float(ds["gap_go_dip"][0]), float(ds["gap_wave_dip"][0])
+        assert go_dip < -0.01 and abs(wave_dip) < 0.5 * abs(go_dip), (go_dip, wave_dip)
+
+
+def test_cli_writes_the_page_and_the_dataset_and_keeps_what_was_there(raysim_cli, small, tmp_path):
+    out = tmp_path / "out"
+    code, stdout, stderr = raysim_cli("check", str(small), "--frequency", "1e9", "--grid", "32",
+                                      "--refine", "0", "--refine-model", "none", "-o", str(out))
+    assert code == 0, stderr
+    assert "GO against the wave engine" in stdout and "at 1 GHz (po+ptd) GO" in stdout
+    page = (out / "check.html").read_text()
+    assert "data:image/png;base64," in page and "Verdict" in page
+    ds = xr.open_dataset(out / "check.nc")
+    assert float(ds["fa_difference"][0]) > 0 and "error_go_model" in ds
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    code, _, stderr = raysim_cli("check", str(small), "--frequency", "1e9", "-o", str(other))
+    assert code == 2 and "notes.txt" in stderr
+    assert (other / "notes.txt").read_text() == "mine"
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--frequency", "0"], "frequency"),
+    (["--frequency", "-3e9"], "frequency"),
+    (["--gap-m", "0.5"], "wider than a panel"),
+    (["--wave", "fdtd"], "--wave"),
+    (["--sphere", "90by360"], "--sphere"),
+])
+def test_bad_input_is_one_line_and_exit_2(raysim_cli, small, tmp_path, args, words):
+    result = raysim_cli("check", str(small), *args, "-o", str(tmp_path / "out"))
+    assert result.code == 2
+    assert words in result.error()
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_mesh_that_is_not_a_dish_is_refused(raysim_cli, tmp_path):
+    import trimesh
+
+    for name, mesh in (("ball.stl", trimesh.creation.icosphere(3, radius=5.0)),
+                       ("plate.stl", trimesh.creation.box((10.0, 10.0, 0.01)))):
+        path = tmp_path / name
+        mesh.export(path)
+        result = raysim_cli("check", str(path), "--frequency", "1e9", "-o", str(tmp_path / "out"))
+        assert result.code == 2 and "dish" in result.error(), result.stderr
+    assert not (tmp_path / "out").exists()
+
+
+# --- the paper's dish: the figures measured by separate commands ------------------------------
+# 45 x 18 cells are enough: the dish and Eq. 8 are axially symmetric, and the figures on 45 x 18,
+# 45 x 36, 90 x 18, 90 x 36 and 90 x 72 agree to 1 % of themselves (README, raysim check)
+GRID = (45, 18)
+@pytest.mark.slow
+@pytest.mark.parametrize("wave, ideal, rrms", [("po", (0.32, 0.37), None),
+                                               ("po+ptd", None, (0.16, 0.19))])
+def test_papers_dish_at_0_3_ghz(wave, ideal, rrms):
+    """PO vs GO in the ideal intensity about 35 % RMS; PO + PTD data inverted with the GO
+    refinement about 18 % RRMS. Measured on 45 x 18 cells: 33.9 % and 17.16 % (90 x 36: 33.5 %
+    and 17.18 %)."""
+    ds = check("paper_go", wave=wave, grid=GRID, refine_model="none",
+               N=256 if rrms else 32, refine=3 if rrms else 0)
+    if ideal:
+        assert ideal[0] < float(ds["ideal_difference"][0]) < ideal[1]
+    if rrms:
+        assert rrms[0] < float(ds["rrms_go_model"][0]) < rrms[1]
