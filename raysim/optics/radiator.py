@@ -9,7 +9,9 @@ different kinds on the same points add (superposition).
 
 Kinds: ``electric`` and ``magnetic`` (:mod:`raysim.optics.kernels.po`, (9, N): position,
 moment J dA / I dl in A m or M dA / K dl in V m), ``fringe`` (:mod:`raysim.optics.kernels.ptd`,
-(23, N), prefactors already inside the coefficients).
+(23, N), prefactors already inside the coefficients), ``shift``
+(:mod:`raysim.optics.kernels.po_derivative`, (18, N): an electric element moving as its moment
+changes, the first-order field change that a surface perturbation makes; electric prefactor).
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ class Kind:
 
 
 def _kinds() -> dict[str, Kind]:
-    from raysim.optics.kernels import po, ptd
+    from raysim.optics.kernels import po, po_derivative, ptd
 
     return {
         "electric": Kind(po.ROWS, (po.radiate_electric, po.radiate_electric4),
@@ -45,6 +47,9 @@ def _kinds() -> dict[str, Kind]:
         "magnetic": Kind(po.ROWS, (po.radiate_magnetic, po.radiate_magnetic4),
                          lambda k: 1j * k / (4.0 * np.pi)),
         "fringe": Kind(ptd.ROWS, (ptd.radiate_fringe, ptd.radiate_fringe4), lambda k: 1.0),
+        "shift": Kind(po_derivative.SHIFT_ROWS,
+                      (po_derivative.radiate_shift, po_derivative.radiate_shift4),
+                      lambda k: -1j * k * ETA0 / (4.0 * np.pi)),
     }
 
 
