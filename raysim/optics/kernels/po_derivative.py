@@ -156,3 +156,13 @@ def adjoint_sum(
         acc += adjoint_pair(P, bre, bim, e, w, k, k_inv, table)
     for c in range(8):
         out[c, s] = out[c, s] + acc[c]
+
+
+def _fringe_adjoint():
+    from raysim.optics.kernels.ptd import fringe_pair, load_edge
+    from raysim.optics.kernels.radiation import adjoint_kernel
+
+    return adjoint_kernel(load_edge, fringe_pair)
+
+
+fringe_adjoint = _fringe_adjoint()
