@@ -36,6 +36,7 @@ from solver.equation import (
 )
 from solver.errors import SolverError
 from solver.fit import parse_terms, remove_terms
+from solver.gauss_newton import REFINE_METHODS, choose_method, refine_gauss_newton, report_attrs
 from solver.forward import MODELS, Progress
 from solver.nonlinear import Forward, extend_outside, refine
 from solver.poisson import SOLVERS, SolveInfo, solve_poisson
@@ -161,7 +162,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
            truth: Callable | NDArray | str | None = "scene", forward: Forward | None = None,
            device: str | None = "cpu", uncertainty_samples: int = 32, seed: int = 0,
            max_harmonics: int = boundary.MAX_HARMONICS, model: str | None = None,
-           weights: str = "auto", progress: Progress | None = None) -> xr.Dataset:
+           weights: str = "auto", progress: Progress | None = None,
+           refine_method: str = "auto", gauss_newton=None, log=None) -> xr.Dataset:
     """Recover the surface deformation from a FieldMap; return a SurfaceMap.
 
     Parameters
@@ -194,6 +196,12 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         ``none`` uses FA as the paper does; ``auto`` (default) weights when the refinement
         runs a wave model, so the linear answer (refine 0) stays the paper's equation.
     progress : optional ``progress(stage, fraction)`` of the refinement (0..1).
+    refine_method : ``defect`` (defect correction only), ``gauss-newton`` (then Gauss-Newton
+        with the wave model's exact Jacobian, :mod:`solver.gauss_newton`) or ``auto``
+        (Gauss-Newton for a wave model where it is affordable: see
+        :func:`solver.gauss_newton.choose_method`).
+    gauss_newton : :class:`solver.gauss_newton.GaussNewtonOptions` (None: defaults).
+    log : optional ``log(line)`` of the Gauss-Newton steps (misfit, update, time).
     """
     start = time.perf_counter()
     if solver not in SOLVERS:
@@ -206,6 +214,9 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         raise SolverError(f"unknown model {model!r}: choose one of {', '.join(MODELS)}")
     if weights not in WEIGHTS:
         raise SolverError(f"unknown weights {weights!r}: choose one of {', '.join(WEIGHTS)}")
+    if refine_method not in REFINE_METHODS:
+        raise SolverError(f"unknown refine method {refine_method!r}: choose one of "
+                          f"{', '.join(REFINE_METHODS)}")
     terms = parse_terms(remove)
     scan = Scan.from_fieldmap(field)
     grid = ApertureGrid(scan.D, N)
@@ -234,6 +245,14 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
                             weight=inverse.weight, fit_gain=setup.fit_gain,
                             progress=setup.progress)
     gain_factor = history.gain_factor[-1] if history.gain_factor else 1.0
+    method, why = choose_method(refine_method, setup, scan, refine_iterations)
+    gn_report = None
+    if method == "gauss-newton":
+        delta, gn_report = refine_gauss_newton(
+            delta, fa, inverse, setup.forward, inverse.weight if inverse.weight is not None
+            else np.ones_like(fa), n_rows, noise_v, gain_factor, setup.fit_gain, gauss_newton,
+            setup.progress, log)
+        gain_factor = gn_report.gain_factor
     std = None
     if scan.intensity_std is not None and uncertainty_samples > 0:
         std = _monte_carlo_std(scan, inverse, gain, uncertainty_samples, seed)
@@ -275,6 +294,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         "data_method": str(scan.attrs.get("method", "")),
         "data_frequency_hz": float(scan.attrs.get("frequency_hz", 0.0)),
     }
+    attrs.update(report_attrs(gn_report, why))
     for name, value in coef.items():
         attrs[f"removed_{name}"] = value
     truth_map = _truth_map(truth, scan, grid)

@@ -39,14 +39,16 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
                refine: int = DEFAULT_REFINE, gain: str = "power", iterations: int | None = None,
                device: str | None = "cpu",
                panels_csv: str | os.PathLike[str] | None = None, model: str | None = None,
-               progress: Progress | None = None) -> xr.Dataset:
+               progress: Progress | None = None, refine_method: str = "auto",
+               log=None) -> xr.Dataset:
     """Invert the FieldMap at ``field_path`` and write the SurfaceMap to ``output``.
 
     Options as :func:`solver.invert.invert`; ``rim_csv`` is a CSV ``x,y,dz`` (m) of rim
     targets; ``panels_csv`` receives the per-panel adjustment table (needs a FieldMap whose
     scene has panels); ``model`` names the refinement's forward model (None: from the data's
-    method); ``progress(stage, fraction)`` follows the refinement. Nothing is written when an
-    input is bad.
+    method); ``progress(stage, fraction)`` follows the refinement; ``refine_method`` and
+    ``log(line)`` (each Gauss-Newton step) as :func:`solver.invert.invert`. Nothing is
+    written when an input is bad.
     """
     field = load_fieldmap(field_path)
     rim = boundary.read_rim_csv(rim_csv) if rim_csv is not None else None
@@ -58,7 +60,7 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
                               "--panels-csv needs one")
     result = invert(field, solver=solver, N=N, rim=rim, remove=remove,
                     refine_iterations=refine, gain=gain, iterations=iterations, device=device,
-                    model=model, progress=progress)
+                    model=model, progress=progress, refine_method=refine_method, log=log)
     result.attrs["source_fieldmap"] = str(field_path)
     surface.save(result, output)
     if layout is not None:
