@@ -25,10 +25,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import gn_data  # noqa: E402
+import gn_data
 
-from solver.gauss_newton import GaussNewtonOptions  # noqa: E402
-from solver.invert import invert  # noqa: E402
+from solver.gauss_newton import GaussNewtonOptions
+from solver.invert import invert
 
 
 def run_case(frequency_hz: float, name: str, noise_db: float, N: int,

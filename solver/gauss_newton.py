@@ -226,7 +226,7 @@ AUTO_MAX_PAIRS = 1.0e9  # PO samples x sphere cells up to which "auto" runs Gaus
 
 def model_pairs(model, sphere, F: float, D: float) -> float:
     """PO samples times field points of one radiation of ``model`` on the scan's sphere."""
-    from raysim.optics.po import DEFAULT_SAMPLES_PER_WAVELENGTH, C0
+    from raysim.optics.po import C0, DEFAULT_SAMPLES_PER_WAVELENGTH
     from raysim.surface.quadrature import plan
     from solver.forward import _paraboloid
 

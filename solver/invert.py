@@ -36,8 +36,8 @@ from solver.equation import (
 )
 from solver.errors import SolverError
 from solver.fit import parse_terms, remove_terms
-from solver.gauss_newton import REFINE_METHODS, choose_method, refine_gauss_newton, report_attrs
 from solver.forward import MODELS, Progress
+from solver.gauss_newton import REFINE_METHODS, choose_method, refine_gauss_newton, report_attrs
 from solver.nonlinear import Forward, extend_outside, refine
 from solver.poisson import SOLVERS, SolveInfo, solve_poisson
 from solver.refinement import choose_model, refinement_setup
