@@ -32,8 +32,9 @@ from solver.invert import invert
 
 
 def run_case(frequency_hz: float, name: str, noise_db: float, N: int,
-             options: GaussNewtonOptions, methods: tuple[str, ...]) -> list[dict]:
-    field = gn_data.fine_fieldmap(frequency_hz, name, log=lambda s: print(s, flush=True))
+             options: GaussNewtonOptions, methods: tuple[str, ...],
+             sphere: tuple[int, int] = (90, 360)) -> list[dict]:
+    field = gn_data.fine_fieldmap(frequency_hz, name, *sphere, log=lambda s: print(s, flush=True))
     if noise_db > 0:
         field = gn_data.with_noise(field, noise_db)
     truth = gn_data.DEFORMATIONS[name]()
@@ -51,7 +52,8 @@ def run_case(frequency_hz: float, name: str, noise_db: float, N: int,
                "gn_steps": len(str(a.get("gn_step_factor", "")).split(",")) if a.get("gn_used") else 0,
                "gn_lsqr": str(a.get("gn_lsqr_iterations", "")), "gn_misfit": str(a.get("gn_misfit_rms", "")),
                "gn_stopped": str(a.get("gn_stopped", "")), "gn_noise": float(a.get("gn_noise_rms", 0.0)),
-               "rim_targets": 0 if rim is None else len(rim)}
+               "rim_targets": 0 if rim is None else len(rim), "sphere": f"{sphere[0]}x{sphere[1]}",
+               "gn_jvp_calls": int(a.get("gn_jvp_calls", 0)), "gn_vjp_calls": int(a.get("gn_vjp_calls", 0))}
         rows.append(row)
         print(json.dumps(row), flush=True)
         with open(gn_data.OUT / "results.jsonl", "a") as fh:
@@ -66,6 +68,7 @@ def main() -> None:
     ap.add_argument("--noise", default="0,0.01", help="dB per sample, comma-separated")
     ap.add_argument("--methods", default="defect,gauss-newton")
     ap.add_argument("--grid", type=int, default=256)
+    ap.add_argument("--sphere", default="90x360", help="n_theta x n_phi of the scan")
     ap.add_argument("--steps", type=int, default=GaussNewtonOptions.iterations)
     ap.add_argument("--inner", type=int, default=GaussNewtonOptions.inner)
     args = ap.parse_args()
@@ -73,7 +76,8 @@ def main() -> None:
     for f in (float(v) for v in args.frequencies.split(",")):
         for noise in (float(v) for v in args.noise.split(",")):
             run_case(f, args.deformation, noise, args.grid, options,
-                     tuple(args.methods.split(",")))
+                     tuple(args.methods.split(",")),
+                     tuple(int(n) for n in args.sphere.lower().split("x")))
 
 
 if __name__ == "__main__":

@@ -85,6 +85,11 @@ def summary(result: xr.Dataset) -> list[str]:
                  f"refinement {a.get('refine_iterations', 0)} iterations, model "
                  f"{a.get('refine_model', 'go')} ({a.get('refine_model_choice', '')}), "
                  f"{a.get('refine_seconds', 0.0):.1f} s")
+    if a.get("gn_used"):
+        misfit = str(a["gn_misfit_rms"]).split(",")
+        lines.append(f"gauss-newton ({a['gn_choice']}): misfit {misfit[0]} -> {misfit[-1]} "
+                     f"(noise {a['gn_noise_rms']:.2e}), LSQR {a['gn_lsqr_iterations']}, "
+                     f"stopped: {a['gn_stopped']}")
     lines.append(f"boundary: {a['boundary']}")
     if a["harmonic_part"] == "unobservable":
         lines.append("harmonic part (tilt, astigmatism, any r^n cos n phi) is UNOBSERVABLE "
