@@ -123,11 +123,11 @@ def vjp(state: EdgeState, wave: Illumination, points: ArrayLike, c: ArrayLike,
     src = wp.array(np.ascontiguousarray(np.hstack(shifts)), dtype=wp.float64, device=dev)
     field_arr = wp.array(np.ascontiguousarray(np.vstack([pts.T, b.real.T, b.imag.T])),
                          dtype=wp.float64, device=dev)
-    out = wp.zeros(6 * n, dtype=wp.float64, device=dev)
+    out = wp.zeros((8, 6 * n), dtype=wp.float64, device=dev)
     table = wp.array(radiation.cis_table(), dtype=wp.vec2d, device=dev)
     for begin in range(0, len(pts), block):
         runtime.launch(po_derivative.fringe_adjoint, 6 * n,
                        [field_arr, src, begin, min(begin + block, len(pts)), wave.k,
                         1.0 / wave.k, table, out], dev, min_chunk=16)
-    acc = out.numpy().reshape(6, n)
+    acc = out.numpy()[0].reshape(6, n)
     return tuple((acc[2 * a] - acc[2 * a + 1]) / (2.0 * EPS) for a in range(3))

@@ -35,7 +35,16 @@ import warp as wp
 
 from raysim.optics.kernels.f64 import F64_ONE, F64_THREE, F64_TWO
 from raysim.optics.kernels.po import Dipole, load_dipole
-from raysim.optics.kernels.radiation import electric_bracket, green, radiation_kernels, times, vec6d
+from raysim.optics.kernels.ptd import EdgeElement, fringe_pair, load_edge
+from raysim.optics.kernels.radiation import (
+    adjoint_kernel,
+    electric_bracket,
+    green,
+    radiation_kernels,
+    times,
+    vec6d,
+    vec8d,
+)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -111,58 +120,52 @@ def shift_pair(p: wp.vec3d, e: ShiftElement, k: wp.float64, k_inv: wp.float64,
 radiate_shift, radiate_shift4 = radiation_kernels(load_shift, shift_pair)
 
 
-vec8d = wp.types.vector(length=8, dtype=wp.float64)
+@wp.struct
+class AdjointSource:
+    """A PO element seen by the adjoint: the dipole and the direction w of its displacement."""
+
+    dipole: Dipole
+    w: wp.vec3d
 
 
 @wp.func
-def adjoint_pair(P: wp.vec3d, bre: wp.vec3d, bim: wp.vec3d, e: Dipole, w: wp.vec3d,
-                 k: wp.float64, k_inv: wp.float64, table: wp.array(dtype=wp.vec2d)) -> vec8d:
-    """(G(d) b, b . D_w[G m]) of one field point P with weight b for the source e (moment m,
+def load_adjoint(src: wp.array2d(dtype=wp.float64), s: int) -> AdjointSource:
+    e = AdjointSource()
+    e.dipole = load_dipole(src, s)
+    e.w = wp.vec3d(src[9, s], src[10, s], src[11, s])
+    return e
+
+
+@wp.func
+def adjoint_pair(P: wp.vec3d, bre: wp.vec3d, bim: wp.vec3d, a: AdjointSource, k: wp.float64,
+                 k_inv: wp.float64, table: wp.array(dtype=wp.vec2d)) -> vec8d:
+    """(G(d) b, b . D_w[G m]) of one field point P with weight b for the source (moment m,
     displacement direction w): the terms of U and S (module docstring)."""
+    e = a.dipole
     d = P - e.r
     R2 = wp.dot(d, d)
     inv = F64_ONE / wp.sqrt(R2)
     u = inv * k_inv
     g = green(k, R2, inv, table)
     U = times(electric_bracket(d, inv, u, bre, bim), g)
-    D = times(moved(d, inv, u, k, e.re, e.im, w), g)
+    D = times(moved(d, inv, u, k, e.re, e.im, a.w), g)
     dr = wp.vec3d(D[0], D[1], D[2])
     di = wp.vec3d(D[3], D[4], D[5])
     return vec8d(U[0], U[1], U[2], U[3], U[4], U[5],
                  wp.dot(bre, dr) - wp.dot(bim, di), wp.dot(bre, di) + wp.dot(bim, dr))
 
 
-@wp.kernel
-def adjoint_sum(
-    field: wp.array2d(dtype=wp.float64),
-    src: wp.array2d(dtype=wp.float64),
-    begin: int,
-    end: int,
-    k: wp.float64,
-    k_inv: wp.float64,
-    table: wp.array(dtype=wp.vec2d),
-    out: wp.array2d(dtype=wp.float64),
-    offset: int,
-):
-    """For source s = tid + offset, add the sum over field points begin..end-1 of (U, S)."""
-    s = wp.tid() + offset
-    e = load_dipole(src, s)
-    w = wp.vec3d(src[9, s], src[10, s], src[11, s])
-    acc = vec8d()
-    for i in range(begin, end):
-        P = wp.vec3d(field[0, i], field[1, i], field[2, i])
-        bre = wp.vec3d(field[3, i], field[4, i], field[5, i])
-        bim = wp.vec3d(field[6, i], field[7, i], field[8, i])
-        acc += adjoint_pair(P, bre, bim, e, w, k, k_inv, table)
-    for c in range(8):
-        out[c, s] = out[c, s] + acc[c]
+@wp.func
+def fringe_adjoint_pair(P: wp.vec3d, bre: wp.vec3d, bim: wp.vec3d, e: EdgeElement,
+                        k: wp.float64, k_inv: wp.float64,
+                        table: wp.array(dtype=wp.vec2d)) -> vec8d:
+    """Re(b . E) of one fringe element's field at P, in the first slot."""
+    v = fringe_pair(P, e, k, k_inv, table)
+    out = vec8d()
+    out[0] = (wp.dot(bre, wp.vec3d(v[0], v[1], v[2]))
+              - wp.dot(bim, wp.vec3d(v[3], v[4], v[5])))
+    return out
 
 
-def _fringe_adjoint():
-    from raysim.optics.kernels.ptd import fringe_pair, load_edge
-    from raysim.optics.kernels.radiation import adjoint_kernel
-
-    return adjoint_kernel(load_edge, fringe_pair)
-
-
-fringe_adjoint = _fringe_adjoint()
+adjoint_sum = adjoint_kernel(load_adjoint, adjoint_pair)
+fringe_adjoint = adjoint_kernel(load_edge, fringe_adjoint_pair)
