@@ -163,7 +163,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
            device: str | None = "cpu", uncertainty_samples: int = 32, seed: int = 0,
            max_harmonics: int = boundary.MAX_HARMONICS, model: str | None = None,
            weights: str = "auto", progress: Progress | None = None,
-           refine_method: str = "auto", gauss_newton=None, log=None) -> xr.Dataset:
+           refine_method: str = "defect", gauss_newton=None, log=None) -> xr.Dataset:
     """Recover the surface deformation from a FieldMap; return a SurfaceMap.
 
     Parameters
@@ -196,9 +196,9 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         ``none`` uses FA as the paper does; ``auto`` (default) weights when the refinement
         runs a wave model, so the linear answer (refine 0) stays the paper's equation.
     progress : optional ``progress(stage, fraction)`` of the refinement (0..1).
-    refine_method : ``defect`` (defect correction only), ``gauss-newton`` (then Gauss-Newton
-        with the wave model's exact Jacobian, :mod:`solver.gauss_newton`) or ``auto``
-        (Gauss-Newton for a wave model where it is affordable: see
+    refine_method : ``defect`` (defect correction only, the default), ``gauss-newton`` (then
+        Gauss-Newton with the wave model's exact Jacobian, :mod:`solver.gauss_newton`) or
+        ``auto`` (Gauss-Newton for a wave model where it is affordable: see
         :func:`solver.gauss_newton.choose_method`).
     gauss_newton : :class:`solver.gauss_newton.GaussNewtonOptions` (None: defaults).
     log : optional ``log(line)`` of the Gauss-Newton steps (misfit, update, time).
@@ -232,6 +232,9 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     inverse = LinearInverse(scan, grid, solver, iterations=iterations, omega=omega, tol=tol,
                             targets=rim, max_harmonics=max_harmonics)
     chosen = choose_model(scan.attrs, refine_iterations, model, forward, device)
+    if refine_method == "gauss-newton" and refine_iterations and not chosen.wave:
+        raise SolverError(f"gauss-newton needs a wave model (po or po+ptd); the refinement's "
+                          f"model is {chosen.name!r}")
     weights = ("amplitude" if chosen.wave else "none") if weights == "auto" else weights
     if weights == "amplitude":
         inverse.weight = amplitude_weight(scan.intensity_ideal, scan.sphere, scan.F,

@@ -39,7 +39,7 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
                refine: int = DEFAULT_REFINE, gain: str = "power", iterations: int | None = None,
                device: str | None = "cpu",
                panels_csv: str | os.PathLike[str] | None = None, model: str | None = None,
-               progress: Progress | None = None, refine_method: str = "auto",
+               progress: Progress | None = None, refine_method: str = "defect",
                log=None) -> xr.Dataset:
     """Invert the FieldMap at ``field_path`` and write the SurfaceMap to ``output``.
 

@@ -24,11 +24,11 @@ def invert_command(
                    "the data, its FieldMap method; go for a measured scan). PO costs about 45 s "
                    "per iteration at 0.3 GHz on two cores, growing with f^2."),
     refine_method: str = typer.Option(
-        "auto", "--refine-method",
-        help="defect (defect correction), gauss-newton (then Gauss-Newton with the wave model's "
-             "exact Jacobian; po or po+ptd models) or auto (gauss-newton for a wave model where "
-             "a PO radiation is at most 1e9 element-point pairs, about 0.1 GHz on the paper's "
-             "grid)."),
+        "defect", "--refine-method",
+        help="defect (defect correction, the default), gauss-newton (then Gauss-Newton with the "
+             "wave model's exact Jacobian; po or po+ptd models; two PO radiations per LSQR "
+             "iteration) or auto (gauss-newton for a wave model where a PO radiation is at most "
+             "1e9 element-point pairs, about 0.1 GHz on the paper's grid)."),
     panels_csv: Path | None = typer.Option(None, help="Write the per-panel adjustment table."),
     gain: str = typer.Option("power", help="power (estimate the scan's scale) or none."),
     iterations: int | None = typer.Option(None, help="Fixed sweeps for gauss-seidel / sor."),
