@@ -15,9 +15,11 @@ Saunders, ACM TOMS 8, 43, 1982), right-preconditioned by the GO Poisson solve: t
 y = G Laplacian(d) on the grid points inside the aperture (d = M y, zero on the rim), in which
 the GO part of J is close to a resampling, so LSQR's first iterations take the well-determined
 directions. Regularisation is by iteration (the discrepancy principle, Morozov 1966): LSQR
-stops as soon as the linearised residual is within ``tau`` times the noise the data carry,
-|r + J d| <= tau sigma sqrt(sum w^2), sigma the samples' relative noise (stated by the scan or
-estimated from second differences along phi); directions the data do not see are never
+stops as soon as the linearised residual is no larger than the noise the data carry,
+|r + J d|^2 <= sigma^2 sum w^2 (1 + ``sigmas`` sqrt(2 / n)) over the n cells compared: the
+chi-square expectation of pure noise plus ``sigmas`` of its standard deviations, sigma the
+samples' relative noise (stated by the scan or estimated from second differences along
+phi); directions the data do not see are never
 entered (LSQR's iterates stay in the range of the preconditioned transpose), so nothing is
 added where the data carry no information. A step that does not lower the misfit is halved
 (up to ``backtrack`` times); the outer loop stops when the misfit reaches the noise level,
@@ -42,11 +44,12 @@ STALL = 0.995      # a step that lowers the misfit by less than 0.5 % ends the l
 
 @dataclass(frozen=True)
 class GaussNewtonOptions:
-    """Settings: outer steps, LSQR iterations per step, discrepancy factor tau, backtracking."""
+    """Settings: outer steps, LSQR iterations per step, the discrepancy principle's tolerance
+    (chi-square standard deviations above the noise's expectation), backtracking halvings."""
 
     iterations: int = 4
     inner: int = 12
-    tau: float = 1.5
+    sigmas: float = 2.0
     backtrack: int = 2
 
 
@@ -160,7 +163,8 @@ def refine_gauss_newton(delta0: NDArray[np.float64], fa_measured: NDArray[np.flo
     w = np.nan_to_num(weight)
     report = GaussNewtonReport()
     report.noise_rms = float(np.sqrt(noise_variance * np.mean(w[rows] ** 2)))
-    floor = options.tau * report.noise_rms * np.sqrt(np.count_nonzero(rows))
+    n = np.count_nonzero(rows)
+    floor = report.noise_rms * np.sqrt(n * (1.0 + options.sigmas * np.sqrt(2.0 / n)))
     delta = np.array(delta0, dtype=np.float64, copy=True)
     delta = delta + inverse.rim_update(delta)
     gamma = float(gamma0)
@@ -278,8 +282,8 @@ def report_attrs(report: GaussNewtonReport | None, why: str) -> dict:
         "gn_step_factor": ",".join(f"{v:g}" for v in report.step_factor) or "none",
         "gn_seconds": ",".join(f"{v:.1f}" for v in report.seconds) or "none",
         "gn_noise_rms": report.noise_rms, "gn_stopped": report.stopped,
-        "gn_regularisation": "LSQR stopped by the discrepancy principle (tau x noise); no "
-                             "penalty term",
+        "gn_regularisation": "LSQR stopped by the discrepancy principle (misfit^2 at the "
+                             "noise's chi-square expectation + 2 sd); no penalty term",
         "gn_jvp_calls": report.jvp_calls, "gn_vjp_calls": report.vjp_calls,
         "gn_gain_factor": report.gain_factor,
     }
