@@ -34,7 +34,7 @@ from raysim.errors import RaysimError
 from raysim.optics import runtime
 from raysim.optics.bvh import ReflectorBVH
 from raysim.optics.illumination import ETA0, Illumination
-from raysim.optics.radiator import Radiator
+from raysim.optics.radiator import PREFACTORS, Radiator
 from raysim.surface.mesh import Reflector
 from raysim.surface.quadrature import plan
 
@@ -129,7 +129,7 @@ def vjp(elements: SurfaceElements, points: ArrayLike, c: ArrayLike, device: str 
     wp = runtime.init()
     dev = runtime.resolve_device(device)
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    prefactor = -1j * elements.k * ETA0 / (4.0 * np.pi)
+    prefactor = PREFACTORS["shift"](elements.k)  # the moving elements' (electric) constant
     b = prefactor * np.conj(np.asarray(c, dtype=np.complex128).reshape(-1, 3))
     n = len(elements)
     sources = np.vstack([elements.r.T, elements.m.real.T, elements.m.imag.T,
