@@ -1,7 +1,7 @@
 """Gauss-Newton refinement with the wave model's exact Jacobian (PO / PO + PTD).
 
-Frame and units (docs/physics.md): sphere cells (theta, phi in rad), the aperture grid (x, y, delta
-in m), FA dimensionless.
+Frame and units (docs/physics.md): sphere cells (theta, phi in rad), the aperture grid (x, y,
+delta in m), FA dimensionless.
 
 The data misfit is the refinement's (:mod:`solver.nonlinear`): on the usable sphere cells,
 

@@ -1,17 +1,16 @@
 """The wave model's Jacobian on the aperture grid: delta (N x N) -> intensity on the sphere.
 
-Frame and units (docs/physics.md): the aperture grid of :mod:`solver.aperture` (x, y, delta in m),
-the scan's sphere grid (theta, phi in rad) about the focus; intensities relative to the
-incident wave.
+Frame and units (docs/physics.md): the aperture grid of :mod:`solver.aperture` (x, y, delta
+in m), the scan's sphere grid (theta, phi in rad) about the focus; intensities relative to
+the incident wave.
 
 The refinement's PO model (:class:`solver.forward.WaveForward`) sees a surface estimate as
 ``GriddedMap(x, y, extend_outside(grid, delta))``: the values inside the aperture, continued
 outside by a discrete Laplace equation (:class:`raysim.surface.gridded.HarmonicFill`, whose
 :meth:`~raysim.surface.gridded.HarmonicFill.transpose` is the continuation's adjoint), then the
-bicubic interpolating spline of FITPACK
-(scipy's RectBivariateSpline, s = 0), which clamps points beyond the outer grid centres to
-them. Every step is linear in delta, so :class:`GridToSamples` writes the map from the grid
-values inside the aperture to (dz, dh/dx, dh/dy) at the PO samples, and its transpose, with
+bicubic interpolating spline of FITPACK (scipy's RectBivariateSpline, s = 0), which clamps
+points beyond the outer grid centres to them. Every step is linear in delta, so
+:class:`GridToSamples` writes the map from the grid values inside the aperture to (dz, dh/dx, dh/dy) at the PO samples, and its transpose, with
 the spline's own knots: the B-spline coefficients are Ay^-1 Z Ax^-T (collocation matrices
 at the grid centres), the sample values B_y(y_s) C B_x(x_s)^T and the slopes with one factor
 differentiated. With :mod:`raysim.optics.po_jacobian` this gives the model's exact JVP and VJP
