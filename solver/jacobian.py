@@ -10,10 +10,11 @@ outside by a discrete Laplace equation (:class:`raysim.surface.gridded.HarmonicF
 :meth:`~raysim.surface.gridded.HarmonicFill.transpose` is the continuation's adjoint), then the
 bicubic interpolating spline of FITPACK (scipy's RectBivariateSpline, s = 0), which clamps
 points beyond the outer grid centres to them. Every step is linear in delta, so
-:class:`GridToSamples` writes the map from the grid values inside the aperture to (dz, dh/dx, dh/dy) at the PO samples, and its transpose, with
-the spline's own knots: the B-spline coefficients are Ay^-1 Z Ax^-T (collocation matrices
-at the grid centres), the sample values B_y(y_s) C B_x(x_s)^T and the slopes with one factor
-differentiated. With :mod:`raysim.optics.po_jacobian` this gives the model's exact JVP and VJP
+:class:`GridToSamples` writes the map from the grid values inside the aperture to (dz, dh/dx,
+dh/dy) at the PO samples, and its transpose, with the spline's own knots: the B-spline
+coefficients are Ay^-1 Z Ax^-T (collocation matrices at the grid centres), the sample values
+B_y(y_s) C B_x(x_s)^T and the slopes with one factor differentiated. With
+:mod:`raysim.optics.po_jacobian` this gives the model's exact JVP and VJP
 (:class:`WaveJacobian`): dI = 2 Re(conj(E) . dE) per sphere cell.
 """
 
