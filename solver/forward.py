@@ -214,6 +214,18 @@ class WaveForward(WaveModel):
                 self._ideal.popitem(last=False)
         return self._ideal[key].copy()
 
+    def field(self, sphere: SphereGrid, F: float, D: float, surface: tuple | None,
+              progress: Progress | None = None) -> NDArray[np.complex128]:
+        """Complex E (n_theta, n_phi, 3) of the paraboloid plus ``surface`` ((x, y, delta) grids
+        in m, delta finite everywhere; None: the ideal reflector), the field this model's
+        intensity is |E|^2 of (not cached)."""
+        return self._field(sphere, F, D, surface, progress)
+
+    def reflector(self, D: float, F: float, surface: tuple | None):
+        """The reflector this model radiates: its :meth:`paraboloid` plus ``surface``
+        (:func:`deformed`)."""
+        return deformed(self.paraboloid(D, F), surface)
+
     def paraboloid(self, D: float, F: float):
         """The smooth ideal paraboloid on the model's quadrature faces, built once per dish."""
         key = (float(D), float(F))
@@ -274,6 +286,17 @@ class WaveForward(WaveModel):
         return replace(job, key=job.fingerprint())
 
 
+def deformed(ideal: Any, surface: tuple | None) -> Any:
+    """The reflector ``ideal`` moved by the gridded map ``surface`` ((x, y, delta) grids in m,
+    :class:`raysim.surface.gridded.GriddedMap`; None: ``ideal`` itself): what every wave model
+    radiates, and what :class:`solver.jacobian.WaveJacobian` linearises."""
+    if surface is None:
+        return ideal
+    from raysim.surface.gridded import GriddedMap
+
+    return ideal.deformed(GriddedMap(*surface))
+
+
 _RUNNER: contextvars.ContextVar[Any] = contextvars.ContextVar("raysim_forward_runner", default=None)
 
 
@@ -299,12 +322,14 @@ class GOEdgeForward(WaveForward):
     def _scattered(self, sphere: SphereGrid, F: float, D: float, surface: tuple | None, wave,
                    progress: Progress | None) -> NDArray[np.complex128]:
         from raysim.optics import goedge
-        from raysim.surface.gridded import GriddedMap
 
-        reflector = self.paraboloid(D, F)
-        if surface is not None:
-            reflector = reflector.deformed(GriddedMap(*surface))
-        return goedge.sphere_field(reflector, sphere, wave, device=self.device).E
+        return goedge.sphere_field(self.reflector(D, F, surface), sphere, wave,
+                                   device=self.device).E
+
+
+def active_runner() -> Any:
+    """The runner of the enclosing :func:`distributed` block (None outside one)."""
+    return _RUNNER.get()
 
 
 @contextlib.contextmanager
@@ -365,11 +390,8 @@ class ForwardJob:
         from raysim.optics.sources import Sources
         from raysim.surface.mesh import paraboloid
 
-        reflector = ideal if ideal is not None else paraboloid(self.D, self.F, self.face_m)
-        if self.surface is not None:
-            from raysim.surface.gridded import GriddedMap
-
-            reflector = reflector.deformed(GriddedMap(*self.surface))
+        reflector = deformed(ideal if ideal is not None else
+                             paraboloid(self.D, self.F, self.face_m), self.surface)
         spw = po.DEFAULT_SAMPLES_PER_WAVELENGTH if self.samples_per_wavelength is None \
             else self.samples_per_wavelength
         sources = Sources(reflector, self.wave(), spw, "rim" if self.ptd else None, device, keep)

@@ -7,10 +7,11 @@ on the sphere with the noise bias removed (:func:`measured_fa`) -> the linear an
 (:class:`solver.linear.LinearInverse`: resample to the aperture grid, Laplacian(delta) = FA / G
 on the disk with rim values zero or fitted to rim targets) -> model-based refinement
 (``refine_iterations`` iterations of a forward model: GO, or PO / PO+PTD for wave data, chosen
-from the FieldMap's ``method`` unless the caller names one) -> the noise's spread (Monte Carlo,
-when the scan states its noise) -> optional removal of piston, tilt and focus -> RMS / RRMS
-against the truth when it is known -> SurfaceMap with every choice recorded
-(:mod:`solver.record`). The settings travel as one frozen :class:`InvertOptions`.
+from the FieldMap's ``method`` unless the caller names one) -> optionally Gauss-Newton on the
+wave model's exact Jacobian (``refine_method``, :mod:`solver.gauss_newton`) -> the noise's
+spread (Monte Carlo, when the scan states its noise) -> optional removal of piston, tilt and
+focus -> RMS / RRMS against the truth when it is known -> SurfaceMap with every choice
+recorded (:mod:`solver.record`). The settings travel as one frozen :class:`InvertOptions`.
 """
 
 from __future__ import annotations
@@ -37,6 +38,13 @@ from solver.equation import (
 from solver.errors import SolverError
 from solver.fit import parse_terms, remove_terms
 from solver.forward import Forward, ForwardModel
+from solver.gauss_newton import (
+    GaussNewtonOptions,
+    GaussNewtonReport,
+    choose_method,
+    refine_gauss_newton,
+    report_attrs,
+)
 from solver.linear import MAX_INCIDENCE, LinearInverse, LinearSolution, Scan
 from solver.nonlinear import RefineHistory, refine
 from solver.options import check_options
@@ -77,10 +85,13 @@ class InvertOptions:
     max_harmonics: int = boundary.MAX_HARMONICS
     model: str | None = None
     weights: str = "auto"
+    refine_method: str = "defect"
+    gauss_newton: GaussNewtonOptions | None = None
 
     def __post_init__(self) -> None:
         check_options(solver=self.solver, N=self.N, refine=self.refine_iterations, gain=self.gain,
-                      iterations=self.iterations, remove=self.remove, model=self.model)
+                      iterations=self.iterations, remove=self.remove, model=self.model,
+                      refine_method=self.refine_method)
         if self.weights not in WEIGHTS:
             raise SolverError(f"unknown weights {self.weights!r}: choose one of {', '.join(WEIGHTS)}")
         if self.rim is not None and self.solver == "fft":
@@ -119,6 +130,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
            device: str | None = "cpu", uncertainty_samples: int = 32, seed: int = 0,
            max_harmonics: int = boundary.MAX_HARMONICS, model: str | None = None,
            weights: str = "auto", progress: Progress | None = None,
+           refine_method: str = "defect", gauss_newton: GaussNewtonOptions | None = None,
+           log: Callable[[str], None] | None = None,
            options: InvertOptions | None = None) -> xr.Dataset:
     """Recover the surface deformation from a FieldMap; return a SurfaceMap.
 
@@ -154,21 +167,28 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         ``none`` uses FA as the paper does; ``auto`` (default) weights when the refinement
         runs a wave model, so the linear answer (refine 0) stays the paper's equation.
     progress : optional ``progress(stage, fraction)`` of the refinement (0..1).
+    refine_method : ``defect`` (the defect correction alone, the default), ``gauss-newton``
+        (then Gauss-Newton with the PO / PO + PTD model's exact Jacobian,
+        :mod:`solver.gauss_newton`) or ``auto`` (Gauss-Newton where it is affordable and the
+        model allows it: :func:`solver.gauss_newton.choose_method`).
+    gauss_newton : :class:`solver.gauss_newton.GaussNewtonOptions` (None: the defaults).
+    log : optional ``log(line)`` of each Gauss-Newton step (misfit, update, time).
     options : all the settings above at once; when given, it replaces the keyword settings
-        (``truth`` and ``progress`` stay separate: they are not settings of the method).
+        (``truth``, ``progress`` and ``log`` stay separate: they are not settings of the method).
     """
     start = time.perf_counter()
     opts = options if options is not None else InvertOptions(
         solver=solver, N=N, rim=rim, remove=remove, refine_iterations=refine_iterations,
         gain=gain, iterations=iterations, omega=omega, tol=tol, forward=forward, device=device,
         uncertainty_samples=uncertainty_samples, seed=seed, max_harmonics=max_harmonics,
-        model=model, weights=weights)
+        model=model, weights=weights, refine_method=refine_method, gauss_newton=gauss_newton)
     scan = Scan.from_fieldmap(field)
     grid = solver_grid(scan.D, opts.N)
     if opts.rim is not None:
         boundary.check_targets(opts.rim, grid.a)
     data = measured_fa(scan, opts.gain)
     chosen = choose_model(scan.attrs, opts.refine_iterations, opts.model, opts.forward, opts.device)
+    method, why = choose_method(opts.refine_method, chosen.forward, scan, opts.refine_iterations)
     weighted = opts.weights == "amplitude" or (opts.weights == "auto" and chosen.wave)
     weight = amplitude_weight(scan.intensity_ideal, scan.sphere, scan.F,
                               str(scan.attrs.get("sampling", "centre"))) if weighted else None
@@ -178,13 +198,18 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     setup = refinement_setup(inverse, chosen, opts.refine_iterations,
                              fit_gain=opts.gain == "power", progress=progress)
     delta, history = _refine(inverse, linear, data, setup, opts)
+    gn = None
+    if method == "gauss-newton":
+        delta, gn = _gauss_newton(inverse, delta, data, setup, history, opts, log)
     std = None
     if scan.intensity_std is not None and opts.uncertainty_samples > 0:
         std = monte_carlo_std(scan, inverse, opts.gain, opts.uncertainty_samples, opts.seed,
                               linear.coverage.n_rows)
     delta_out, coef = remove_terms(grid, delta, opts.terms, scan.F)
-    outcome = Outcome(scan, grid, inverse, linear, data, setup, history, weighted, coef)
+    outcome = Outcome(scan, grid, inverse, linear, data, setup, history, weighted, coef,
+                      gn.gain_factor if gn is not None else None)
     attrs = surface_attrs(opts, outcome)
+    attrs.update(report_attrs(gn, why))
     truth_map = truth_on_grid(truth, scan, grid)
     if truth_map is not None:
         accuracy, truth_map = accuracy_attrs(grid, delta, delta_out, truth_map, opts.terms)
@@ -200,6 +225,19 @@ def _refine(inverse: LinearInverse, linear: LinearSolution, data: MeasuredFA,
     return refine(linear.delta, data.fa, scan.sphere, scan.F, scan.D, inverse.grid, data.n_rows,
                   setup.correct, opts.refine_iterations, setup.forward, opts.device,
                   weight=inverse.weight, fit_gain=setup.fit_gain, progress=setup.progress)
+
+
+def _gauss_newton(inverse: LinearInverse, delta: NDArray[np.float64], data: MeasuredFA,
+                  setup: RefinementSetup, history: RefineHistory, opts: InvertOptions,
+                  log: Callable[[str], None] | None
+                  ) -> tuple[NDArray[np.float64], GaussNewtonReport]:
+    """Gauss-Newton from the defect correction's answer and scale factor
+    (:func:`solver.gauss_newton.refine_gauss_newton`)."""
+    weight = inverse.weight if inverse.weight is not None else np.ones_like(data.fa)
+    gain_factor = history.gain_factor[-1] if history.gain_factor else 1.0
+    return refine_gauss_newton(delta, data.fa, inverse, setup.forward, weight, data.n_rows,
+                               data.noise_variance, gain_factor, setup.fit_gain,
+                               opts.gauss_newton, setup.progress, log)
 
 
 def power_scale(intensity: NDArray[np.float64], scan: Scan, n_rows: int) -> float:

@@ -51,7 +51,7 @@ from solver.equation import intensity_ratio_fa
 from solver.forward import Forward, ForwardModel, as_model, go_forward
 
 __all__ = ["Correct", "Forward", "ForwardModel", "RefineHistory", "anderson_step", "extend_outside",
-           "go_forward", "refine"]
+           "go_forward", "outside_fill", "refine"]
 
 
 @dataclass
@@ -67,7 +67,7 @@ class RefineHistory:
 
 
 @lru_cache(maxsize=4)
-def _outside_fill(D: float, N: int) -> HarmonicFill:
+def outside_fill(D: float, N: int) -> HarmonicFill:
     """The Laplace continuation into the points outside the disk of the grid (D, N), factorised
     once per grid (the refinement calls it every iteration)."""
     return HarmonicFill(~ApertureGrid(D, N).mask)
@@ -79,7 +79,7 @@ def extend_outside(grid: ApertureGrid, delta: NDArray[np.float64]) -> NDArray[np
 
     Gives the forward model a continuous surface up to the corners of the square grid.
     """
-    return _outside_fill(float(grid.D), int(grid.N))(delta)
+    return outside_fill(float(grid.D), int(grid.N))(delta)
 
 
 Correct = Callable[[NDArray[np.float64], NDArray[np.float64]],

@@ -15,6 +15,7 @@ from solver.equation import GAIN_MODES
 from solver.errors import SolverError
 from solver.fit import parse_terms
 from solver.forward import MODELS
+from solver.gauss_newton import IN_PROCESS, REFINE_METHODS
 from solver.poisson import SOLVERS
 
 MAX_N = 4096  # aperture grid points across D: 16.8 million unknowns, about 2 GB per solve
@@ -29,8 +30,13 @@ def _integer(name: str, value: object, lo: int, hi: int) -> None:
 
 def check_options(*, solver: str | None = None, N: int | None = None, refine: int | None = None,
                   gain: str | None = None, iterations: int | None = None,
-                  remove: str | Sequence[str] | None = None, model: str | None = None) -> None:
-    """Refuse inversion options outside their choices or bounds (None: not given)."""
+                  remove: str | Sequence[str] | None = None, model: str | None = None,
+                  refine_method: str | None = None, blocks: bool = False) -> None:
+    """Refuse inversion options outside their choices or bounds (None: not given).
+
+    ``blocks``: the wave model's fields are to run in blocks on Dask (--scheduler, --workers),
+    which Gauss-Newton's Jacobian does not (it runs in this process).
+    """
     if solver is not None and solver not in SOLVERS:
         raise SolverError(f"unknown solver {solver!r}: choose one of {', '.join(SOLVERS)}")
     if N is not None:
@@ -43,4 +49,9 @@ def check_options(*, solver: str | None = None, N: int | None = None, refine: in
         raise SolverError(f"unknown gain mode {gain!r}: choose one of {', '.join(GAIN_MODES)}")
     if model is not None and model not in MODELS:
         raise SolverError(f"unknown model {model!r}: choose one of {', '.join(MODELS)}")
+    if refine_method is not None and refine_method not in REFINE_METHODS:
+        raise SolverError(f"unknown refine method {refine_method!r}: choose one of "
+                          f"{', '.join(REFINE_METHODS)}")
+    if refine_method == "gauss-newton" and blocks:
+        raise SolverError(IN_PROCESS)
     parse_terms(remove)

@@ -38,13 +38,15 @@ class Outcome:
     history: RefineHistory
     weighted: bool
     removed: dict[str, float]
+    gain_factor: float | None = None  # the final scale factor when Gauss-Newton refitted it
 
 
 def surface_attrs(opts: InvertOptions, out: Outcome) -> dict[str, Any]:
     """The SurfaceMap attributes of an inversion with settings ``opts`` and results ``out``."""
     scan, linear, setup, history = out.scan, out.linear, out.setup, out.history
     gain = opts.gain
-    gain_factor = history.gain_factor[-1] if history.gain_factor else 1.0
+    gain_factor = out.gain_factor if out.gain_factor is not None else (
+        history.gain_factor[-1] if history.gain_factor else 1.0)
     attrs: dict[str, Any] = {
         "solver": opts.solver, "solver_iterations": linear.info.iterations,
         "solver_residual": linear.info.residual, "solver_converged": linear.info.converged,

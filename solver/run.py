@@ -8,6 +8,7 @@ adjustment table, and returns the SurfaceMap with a short human summary.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 import xarray as xr
@@ -34,14 +35,16 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
                refine: int = DEFAULT_REFINE, gain: str = "power", iterations: int | None = None,
                device: str | None = "cpu",
                panels_csv: str | os.PathLike[str] | None = None, model: str | None = None,
-               progress: Progress | None = None) -> xr.Dataset:
+               progress: Progress | None = None, refine_method: str = "defect",
+               log: Callable[[str], None] | None = None) -> xr.Dataset:
     """Invert the FieldMap at ``field_path`` and write the SurfaceMap to ``output``.
 
     Options as :func:`solver.invert.invert`; ``rim_csv`` is a CSV ``x,y,dz`` (m) of rim
     targets; ``panels_csv`` receives the per-panel adjustment table (needs a FieldMap whose
     scene has panels); ``model`` names the refinement's forward model (None: from the data's
-    method); ``progress(stage, fraction)`` follows the refinement. Nothing is written when an
-    input is bad.
+    method); ``progress(stage, fraction)`` follows the refinement; ``refine_method`` and
+    ``log(line)`` (each Gauss-Newton step) as :func:`solver.invert.invert`. Nothing is
+    written when an input is bad.
     """
     field = load_fieldmap(field_path)
     rim = boundary.read_rim_csv(rim_csv) if rim_csv is not None else None
@@ -53,7 +56,7 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
                               "--panels-csv needs one")
     result = invert(field, solver=solver, N=N, rim=rim, remove=remove,
                     refine_iterations=refine, gain=gain, iterations=iterations, device=device,
-                    model=model, progress=progress)
+                    model=model, progress=progress, refine_method=refine_method, log=log)
     result.attrs["source_fieldmap"] = str(field_path)
     surface.save(result, output)
     if layout is not None:
@@ -78,6 +81,11 @@ def summary(result: xr.Dataset) -> list[str]:
                  f"refinement {a.get('refine_iterations', 0)} iterations, model "
                  f"{a.get('refine_model', 'go')} ({a.get('refine_model_choice', '')}), "
                  f"{a.get('refine_seconds', 0.0):.1f} s")
+    if a.get("gn_used"):
+        misfit = str(a["gn_misfit_rms"]).split(",")
+        lines.append(f"gauss-newton ({a['gn_choice']}): misfit {misfit[0]} -> {misfit[-1]} "
+                     f"(noise {a['gn_noise_rms']:.2e}), LSQR {a['gn_lsqr_iterations']}, "
+                     f"stopped: {a['gn_stopped']}")
     lines.append(f"boundary: {a['boundary']}")
     if a["harmonic_part"] == "unobservable":
         lines.append("harmonic part (tilt, astigmatism, any r^n cos n phi) is UNOBSERVABLE "

@@ -27,6 +27,13 @@ def invert_command(
                    "that made the data, its FieldMap method; go for a measured scan). Each PO "
                    "iteration is a PO run: about a minute at 0.3 GHz on two cores, growing with "
                    "f^2; go+edge (geometric wave plus rim diffraction) takes seconds, growing with f."),
+    refine_method: str = typer.Option(
+        "defect", "--refine-method",
+        help="defect (defect correction, the default), gauss-newton (then Gauss-Newton with the "
+             "model's exact Jacobian: po or po+ptd models, in this process; two PO radiations "
+             "per LSQR iteration) or auto (gauss-newton for a po or po+ptd model where a PO "
+             "radiation is at most 1e9 element-point pairs, about 0.1 GHz on the paper's grid, "
+             "and without --scheduler / --workers)."),
     panels_csv: Path | None = typer.Option(None, help="Write the per-panel adjustment table."),
     gain: str = typer.Option("power", help="power (estimate the scan's scale) or none."),
     iterations: int | None = typer.Option(None, help="Fixed sweeps for gauss-seidel / sor."),
@@ -43,7 +50,8 @@ def invert_command(
     from solver.run import run_invert, summary
 
     check_options(solver=solver, N=grid, refine=refine, gain=gain, iterations=iterations,
-                  remove=remove, model=model)
+                  remove=remove, model=model, refine_method=refine_method,
+                  blocks=bool(scheduler) or workers is not None)
     inputs = [("FieldMap", field), ("rim-target file", rim)]
     output_path(output, inputs)
     if panels_csv is not None:
@@ -57,7 +65,8 @@ def invert_command(
         with _model_blocks(scheduler, workers, device):
             result = run_invert(field, output, solver=solver, N=grid, rim_csv=rim, remove=remove,
                                 refine=refine, gain=gain, iterations=iterations, device=device,
-                                panels_csv=panels_csv, model=model, progress=report)
+                                panels_csv=panels_csv, model=model, progress=report,
+                                refine_method=refine_method, log=note)
     for line in summary(result):
         say(line)
     say(f"wrote {output}")

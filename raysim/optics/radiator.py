@@ -11,7 +11,9 @@ Kinds: ``electric`` and ``magnetic`` (:mod:`raysim.optics.kernels.po`, (9, N): p
 moment J dA / I dl in A m or M dA / K dl in V m), ``fringe`` (:mod:`raysim.optics.kernels.ptd`,
 (23, N), prefactors already inside the coefficients), ``diffraction``
 (:mod:`raysim.optics.kernels.goedge`: fringe plus PO end-point currents of an edge, prefactors
-inside).
+inside), ``shift`` (:mod:`raysim.optics.kernels.po_derivative`, (18, N): an electric element
+moving as its moment changes, the first-order field change that a surface perturbation makes;
+electric prefactor).
 """
 
 from __future__ import annotations
@@ -45,11 +47,12 @@ PREFACTORS: dict[str, Any] = {
     "magnetic": lambda k: 1j * k / (4.0 * np.pi),
     "fringe": lambda k: 1.0,
     "diffraction": lambda k: 1.0,  # go+edge: prefactors inside the coefficients, as fringe
+    "shift": lambda k: -1j * k * ETA0 / (4.0 * np.pi),  # a moving electric element
 }
 
 
 def _kinds() -> dict[str, Kind]:
-    from raysim.optics.kernels import goedge, po, ptd
+    from raysim.optics.kernels import goedge, po, po_derivative, ptd
 
     return {
         "electric": Kind(po.ROWS, (po.radiate_electric, po.radiate_electric4), PREFACTORS["electric"]),
@@ -57,6 +60,9 @@ def _kinds() -> dict[str, Kind]:
         "fringe": Kind(ptd.ROWS, (ptd.radiate_fringe, ptd.radiate_fringe4), PREFACTORS["fringe"]),
         "diffraction": Kind(goedge.ROWS, (goedge.radiate_diffraction, goedge.radiate_diffraction4),
                             PREFACTORS["diffraction"]),
+        "shift": Kind(po_derivative.SHIFT_ROWS,
+                      (po_derivative.radiate_shift, po_derivative.radiate_shift4),
+                      PREFACTORS["shift"]),
     }
 
 

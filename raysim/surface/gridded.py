@@ -7,7 +7,8 @@ delta in metres along +z, arrays indexed [y, x].
 (5-point Laplace equation, zero normal derivative at the grid's outer edge) that takes the
 known values: the smoothest continuation, with no new extremum. It is the one fill the
 project uses: for the NaN samples of a gridded map, and for the points outside the aperture
-disk that the solver's forward model needs (:func:`solver.nonlinear.extend_outside`).
+disk that the solver's forward model needs (:func:`solver.nonlinear.extend_outside`), and
+its transpose for the model's Jacobian (:mod:`solver.jacobian`).
 """
 
 from __future__ import annotations
@@ -72,6 +73,19 @@ class HarmonicFill:
             np.add.at(rhs, k, filled[nj, ni])
         filled[self.missing] = self._lu.solve(rhs)
         return filled
+
+    def transpose(self, values: Array) -> Array:
+        """The adjoint of the fill (a linear map of the grid's values, which ignores the
+        missing cells' inputs): a copy of ``values`` whose missing cells are zero and whose
+        known cells gain what the missing cells drew from them, (A^-T g) per neighbour."""
+        back = np.array(values, dtype=np.float64, copy=True)
+        if not self._n:
+            return back
+        t = self._lu.solve(np.ascontiguousarray(back[self.missing]), trans="T")
+        back[self.missing] = 0.0
+        for k, nj, ni in self._known:
+            np.add.at(back, (nj, ni), t[k])
+        return back
 
 
 @dataclass(frozen=True, eq=False)

@@ -190,3 +190,42 @@ def radiation_kernels(load: Any, pair: Any) -> tuple[Any, Any]:
             E[c, t + 3] = E[c, t + 3] + a3[c]
 
     return radiate, radiate4
+
+
+vec8d = wp.types.vector(length=8, dtype=wp.float64)
+
+
+def adjoint_kernel(load: Any, pair: Any) -> Any:
+    """The transposed sum of one kind of element: per element, over the field points.
+
+    ``field`` (9, n) holds each field point P and a complex weight b (Re 3, Im 3);
+    ``pair(P, b_re, b_im, element, k, k_inv, table)`` returns up to eight real numbers
+    (``vec8d``) that are linear in b. The kernel adds their sum over the points
+    ``begin..end-1`` to ``out[:, s]`` (8, n_elements) for element s = tid + offset: the
+    adjoint of a radiation sum, field points as sources.
+    """
+
+    @wp.kernel(module="unique")
+    def adjoint(
+        field: wp.array2d(dtype=wp.float64),
+        src: wp.array2d(dtype=wp.float64),
+        begin: int,
+        end: int,
+        k: wp.float64,
+        k_inv: wp.float64,
+        table: wp.array(dtype=wp.vec2d),
+        out: wp.array2d(dtype=wp.float64),
+        offset: int,
+    ):
+        s = wp.tid() + offset
+        e = load(src, s)
+        acc = vec8d()
+        for i in range(begin, end):
+            p = wp.vec3d(field[0, i], field[1, i], field[2, i])
+            bre = wp.vec3d(field[3, i], field[4, i], field[5, i])
+            bim = wp.vec3d(field[6, i], field[7, i], field[8, i])
+            acc += pair(p, bre, bim, e, k, k_inv, table)
+        for c in range(8):
+            out[c, s] = out[c, s] + acc[c]
+
+    return adjoint

@@ -1,0 +1,303 @@
+"""Gauss-Newton refinement with the wave model's exact Jacobian (PO / PO + PTD).
+
+Frame and units (docs/physics.md): sphere cells (theta, phi in rad), the aperture grid (x, y,
+delta in m), FA dimensionless.
+
+The data misfit is the refinement's (:mod:`solver.nonlinear`): on the usable sphere cells,
+
+    r(delta, gamma) = w [(1 + FA_measured) gamma - I0_model / I_model(delta)],
+
+with w the amplitude weight and gamma the scan's scale (fitted when the gain is not trusted).
+Each step linearises the model exactly (:class:`solver.jacobian.WaveJacobian`: d(I0 / I) =
+-(I0 / I^2) dI, dI = 2 Re(conj(E) . dE), the JVP and its adjoint each about one PO radiation)
+and solves the linear least-squares problem min |r + J d| matrix-free with LSQR (Paige &
+Saunders, ACM TOMS 8, 43, 1982), right-preconditioned by the GO Poisson solve: the unknown is
+y = G Laplacian(d) on the grid points inside the aperture (d = M y, zero on the rim), in which
+the GO part of J is close to a resampling, so LSQR's first iterations take the well-determined
+directions. Regularisation is by iteration (the discrepancy principle, Morozov 1966): LSQR
+stops as soon as the linearised residual is no larger than the noise the data carry,
+|r + J d|^2 <= sigma^2 sum w^2 (1 + ``sigmas`` sqrt(2 / n)) over the n cells compared: the
+chi-square expectation of pure noise plus ``sigmas`` of its standard deviations, sigma the
+samples' relative noise (stated by the scan or estimated from second differences along
+phi); directions the data do not see are never
+entered (LSQR's iterates stay in the range of the preconditioned transpose), so nothing is
+added where the data carry no information. A step that does not lower the misfit is halved
+(up to ``backtrack`` times); the outer loop stops when the misfit reaches the noise level,
+stalls, or after ``iterations`` steps. Rim targets are kept by the harmonic rim update of the
+linear inverse at each step.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse.linalg as spla
+from numpy.typing import NDArray
+
+from raysim.progress import Progress
+from solver.forward import ForwardModel, WaveForward, active_runner
+
+STALL = 0.995      # a step that lowers the misfit by less than 0.5 % ends the loop
+
+
+@dataclass(frozen=True)
+class GaussNewtonOptions:
+    """Settings: outer steps, LSQR iterations per step, the discrepancy principle's tolerance
+    (chi-square standard deviations above the noise's expectation), backtracking halvings."""
+
+    iterations: int = 4
+    inner: int = 12
+    sigmas: float = 2.0
+    backtrack: int = 2
+
+
+@dataclass
+class GaussNewtonReport:
+    """Per outer step: weighted misfit RMS, update RMS (m), LSQR iterations, step factor,
+    seconds since the start; the noise floor of the rule and why the loop stopped."""
+
+    misfit_rms: list[float] = field(default_factory=list)
+    update_rms: list[float] = field(default_factory=list)
+    inner_iterations: list[int] = field(default_factory=list)
+    step_factor: list[float] = field(default_factory=list)
+    seconds: list[float] = field(default_factory=list)
+    gain_factor: float = 1.0
+    noise_rms: float = 0.0
+    stopped: str = ""
+    jvp_calls: int = 0
+    vjp_calls: int = 0
+
+    def describe(self) -> str:
+        return (f"Gauss-Newton, exact PO Jacobian, LSQR stopped by the discrepancy principle "
+                f"(noise {self.noise_rms:.2e}); {len(self.update_rms)} steps, inner "
+                f"{self.inner_iterations}, stopped: {self.stopped}")
+
+
+class _Problem:
+    """The misfit at one estimate and the preconditioned linear operator of its Jacobian."""
+
+    def __init__(self, jac, fa_measured, I0, weight, rows, gamma, inverse, fit_gain):
+        self.jac, self.inverse, self.fit_gain = jac, inverse, fit_gain
+        I = jac.intensity
+        self.rows = rows                       # boolean (n_theta, n_phi): cells compared
+        self.scale_d = np.where(rows, weight * I0 / I**2, 0.0)   # d r / d I = +w I0 / I^2
+        self.col_gain = np.where(rows, weight * (1.0 + fa_measured), 0.0)
+        r = weight * ((1.0 + fa_measured) * gamma - I0 / I)
+        self.r = np.where(rows, r, 0.0)
+        grid = inverse.grid
+        self.mask = grid.mask
+        self.Ginv = 1.0 / inverse.G[grid.mask]
+
+    def misfit_rms(self) -> float:
+        return float(np.sqrt(np.sum(self.r**2) / np.count_nonzero(self.rows)))
+
+    def precondition(self, y):
+        from solver.poisson import disk_laplacian
+
+        op = disk_laplacian(self.inverse.grid.D, self.inverse.grid.N)
+        return op.lu().solve(y * self.Ginv)
+
+    def precondition_T(self, d):
+        from solver.poisson import disk_laplacian
+
+        op = disk_laplacian(self.inverse.grid.D, self.inverse.grid.N)
+        return op.lu().solve(np.ascontiguousarray(d), trans="T") * self.Ginv
+
+    def operator(self) -> spla.LinearOperator:
+        n_in = int(np.count_nonzero(self.mask))
+        n = n_in + (1 if self.fit_gain else 0)
+        m = int(np.count_nonzero(self.rows))
+        rows = self.rows
+
+        def matvec(v):
+            dI = self.jac.jvp(self.precondition(v[:n_in]))
+            out = self.scale_d * dI
+            if self.fit_gain:
+                out = out + self.col_gain * v[n_in] * GAIN_UNIT
+            return out[rows]
+
+        def rmatvec(u):
+            full = np.zeros(rows.shape)
+            full[rows] = u
+            g = self.precondition_T(self.jac.vjp(self.scale_d * full))
+            if self.fit_gain:
+                g = np.append(g, GAIN_UNIT * float(np.sum(self.col_gain * full)))
+            return g
+
+        return spla.LinearOperator((m, n), matvec=matvec, rmatvec=rmatvec, dtype=np.float64)
+
+
+GAIN_UNIT = 1e-3  # the scale's unknown in LSQR is gamma steps of 1e-3 (FA-sized)
+
+
+def refine_gauss_newton(delta0: NDArray[np.float64], fa_measured: NDArray[np.float64],
+                        inverse, model, weight: NDArray[np.float64], n_rows: int,
+                        noise_variance: float, gamma0: float = 1.0, fit_gain: bool = False,
+                        options: GaussNewtonOptions | None = None,
+                        progress: Progress | None = None,
+                        log: Callable[[str], None] | None = None
+                        ) -> tuple[NDArray[np.float64], GaussNewtonReport]:
+    """Refine ``delta0`` (m, (N, N)) by Gauss-Newton on the wave model ``model``.
+
+    ``inverse`` is the scan's :class:`solver.invert.LinearInverse` (grid, G, rim targets);
+    ``fa_measured`` the gain-corrected FA on the sphere (NaN where missing), ``weight`` the
+    per-cell weight of the misfit, ``n_rows`` the usable theta rows, ``noise_variance`` the
+    samples' relative intensity variance (the discrepancy principle's noise level),
+    ``gamma0`` the starting scale factor. ``progress(stage, fraction)`` and ``log(line)``
+    report each step: misfit, update, time.
+    """
+    from solver.jacobian import WaveJacobian
+
+    options = options or GaussNewtonOptions()
+    scan, grid = inverse.scan, inverse.grid
+    say = log or (lambda line: None)
+    report_progress = progress or (lambda stage, fraction: None)
+    start = time.perf_counter()
+    I0 = model(scan.sphere, scan.F, scan.D, grid.x, grid.y, None)
+    rows = np.zeros(fa_measured.shape, dtype=bool)
+    rows[:n_rows] = True
+    rows &= np.isfinite(fa_measured) & np.isfinite(weight)
+    fa = np.nan_to_num(fa_measured)
+    w = np.nan_to_num(weight)
+    report = GaussNewtonReport()
+    report.noise_rms = float(np.sqrt(noise_variance * np.mean(w[rows] ** 2)))
+    n = np.count_nonzero(rows)
+    floor = report.noise_rms * np.sqrt(n * (1.0 + options.sigmas * np.sqrt(2.0 / n)))
+    delta = np.array(delta0, dtype=np.float64, copy=True)
+    delta = delta + inverse.rim_update(delta)
+    gamma = float(gamma0)
+
+    def problem_at(d, g):
+        jac = WaveJacobian(model, scan.sphere, scan.F, scan.D, grid, d)
+        return _Problem(jac, fa, I0, w, rows, g, inverse, fit_gain)
+
+    prob = problem_at(delta, gamma)
+    report.misfit_rms.append(prob.misfit_rms())
+    say(f"gauss-newton start: misfit {report.misfit_rms[-1]:.3e} (noise {report.noise_rms:.2e})")
+    for it in range(options.iterations):
+        norm_r = float(np.linalg.norm(prob.r))
+        if norm_r <= floor:
+            report.stopped = "misfit at the noise level (discrepancy principle)"
+            break
+        report_progress(f"gauss-newton {it + 1}/{options.iterations}: LSQR",
+                        it / options.iterations)
+        sol = spla.lsqr(prob.operator(), -prob.r[rows], atol=0.0, btol=floor / norm_r,
+                        iter_lim=options.inner)
+        y, inner = sol[0], int(sol[2])
+        n_in = int(np.count_nonzero(grid.mask))
+        update = np.zeros_like(delta)
+        update[grid.mask] = prob.precondition(y[:n_in])
+        dgamma = float(y[n_in]) * GAIN_UNIT if fit_gain else 0.0
+        report.jvp_calls += prob.jac.calls["jvp"]
+        report.vjp_calls += prob.jac.calls["vjp"]
+        factor, accepted = 1.0, None
+        for _ in range(options.backtrack + 1):
+            trial = delta + factor * update
+            trial = trial + inverse.rim_update(trial)
+            candidate = problem_at(trial, gamma + factor * dgamma)
+            if candidate.misfit_rms() < report.misfit_rms[-1]:
+                accepted = (trial, candidate)
+                break
+            factor *= 0.5
+        if accepted is None:
+            report.stopped = "no step lowered the misfit"
+            break
+        delta, prob = accepted
+        gamma += factor * dgamma
+        report.inner_iterations.append(inner)
+        report.step_factor.append(factor)
+        report.update_rms.append(float(np.sqrt(np.mean((factor * update[grid.mask]) ** 2))))
+        report.misfit_rms.append(prob.misfit_rms())
+        report.seconds.append(time.perf_counter() - start)
+        say(f"gauss-newton {it + 1}: misfit {report.misfit_rms[-1]:.3e}, update "
+            f"{report.update_rms[-1] * 1e6:.2f} um (x{factor:g}), LSQR {inner}, "
+            f"{report.seconds[-1]:.0f} s")
+        if report.misfit_rms[-1] > STALL * report.misfit_rms[-2]:
+            report.stopped = "misfit stalled"
+            break
+    else:
+        report.stopped = f"{options.iterations} steps"
+    report.gain_factor = gamma
+    report_progress("gauss-newton done", 1.0)
+    return delta, report
+
+
+REFINE_METHODS = ("auto", "defect", "gauss-newton")
+AUTO_MAX_PAIRS = 1.0e9  # PO samples x sphere cells up to which "auto" runs Gauss-Newton
+IN_PROCESS = ("gauss-newton computes its Jacobian in this process, not in blocks on Dask: drop "
+              "--scheduler / --workers (the Dask runner), or refine with the defect correction")
+
+
+def model_pairs(model: WaveForward, sphere, F: float, D: float) -> float:
+    """PO samples times field points of one radiation of ``model`` on the scan's sphere."""
+    from raysim.optics.po import C0, DEFAULT_SAMPLES_PER_WAVELENGTH
+    from raysim.surface.quadrature import plan
+
+    spw = model.samples_per_wavelength or DEFAULT_SAMPLES_PER_WAVELENGTH
+    quadrature = plan(model.paraboloid(D, F), C0 / model.frequency_hz, spw)
+    return float(quadrature.n_samples) * sphere.n_theta * sphere.n_phi
+
+
+def has_exact_jacobian(model: object) -> bool:
+    """Whether :class:`solver.jacobian.WaveJacobian` linearises ``model`` exactly: a
+    :class:`WaveForward` whose scattered field is PO's (with PTD's rim), not a subclass with
+    other physics (the go+edge model, :class:`solver.forward.GOEdgeForward`)."""
+    return isinstance(model, WaveForward) and \
+        type(model)._scattered is WaveForward._scattered
+
+
+def choose_method(name: str, model: ForwardModel | None, scan, iterations: int) -> tuple[str, str]:
+    """(method, why): ``defect`` or ``gauss-newton`` for the refinement's ``model``.
+
+    Called before any work, so a request that cannot run is one line. Gauss-Newton needs the
+    PO or PO + PTD model (:func:`has_exact_jacobian`) computed in this process (not inside
+    :func:`solver.forward.distributed`); ``auto`` takes it where one radiation costs at most
+    AUTO_MAX_PAIRS element-point pairs (each step costs two radiations per LSQR iteration:
+    about a minute per iteration on two cores at that size), else the defect correction alone.
+    """
+    from solver.errors import SolverError
+
+    if name not in REFINE_METHODS:
+        raise SolverError(f"unknown refine method {name!r}: choose one of "
+                          f"{', '.join(REFINE_METHODS)}")
+    if iterations == 0 or name == "defect":
+        return "defect", "requested" if name == "defect" else "refine 0"
+    refused = None
+    if not has_exact_jacobian(model):
+        named = getattr(model, "name", "none")
+        refused = (f"gauss-newton needs the po or po+ptd model (its exact Jacobian); the "
+                   f"refinement's model is {named!r}", f"auto: the {named} model")
+    elif active_runner() is not None:
+        refused = IN_PROCESS, "auto: the model's fields run on a Dask runner"
+    if refused is not None:
+        if name == "gauss-newton":
+            raise SolverError(refused[0])
+        return "defect", refused[1]
+    if name == "gauss-newton":
+        return "gauss-newton", "requested"
+    pairs = model_pairs(model, scan.sphere, scan.F, scan.D)
+    if pairs <= AUTO_MAX_PAIRS:
+        return "gauss-newton", f"auto: {pairs:.2g} pairs per radiation <= {AUTO_MAX_PAIRS:.0e}"
+    return "defect", f"auto: {pairs:.2g} pairs per radiation > {AUTO_MAX_PAIRS:.0e}"
+
+
+def report_attrs(report: GaussNewtonReport | None, why: str) -> dict:
+    """SurfaceMap attributes of a Gauss-Newton run (``gn_*``), or of its absence."""
+    if report is None:
+        return {"gn_used": False, "gn_choice": why}
+    return {
+        "gn_used": True, "gn_choice": why, "gn_method": report.describe(),
+        "gn_misfit_rms": ",".join(f"{v:.4e}" for v in report.misfit_rms),
+        "gn_update_rms_m": ",".join(f"{v:.3e}" for v in report.update_rms),
+        "gn_lsqr_iterations": ",".join(str(v) for v in report.inner_iterations) or "none",
+        "gn_step_factor": ",".join(f"{v:g}" for v in report.step_factor) or "none",
+        "gn_seconds": ",".join(f"{v:.1f}" for v in report.seconds) or "none",
+        "gn_noise_rms": report.noise_rms, "gn_stopped": report.stopped,
+        "gn_regularisation": "LSQR stopped by the discrepancy principle (misfit^2 at the "
+                             "noise's chi-square expectation + 2 sd); no penalty term",
+        "gn_jvp_calls": report.jvp_calls, "gn_vjp_calls": report.vjp_calls,
+        "gn_gain_factor": report.gain_factor,
+    }

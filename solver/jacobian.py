@@ -1,0 +1,189 @@
+"""The wave model's Jacobian on the aperture grid: delta (N x N) -> intensity on the sphere.
+
+Frame and units (docs/physics.md): the aperture grid of :mod:`solver.aperture` (x, y, delta
+in m), the scan's sphere grid (theta, phi in rad) about the focus; intensities relative to
+the incident wave.
+
+The refinement's PO model (:class:`solver.forward.WaveForward`) sees a surface estimate as
+``GriddedMap(x, y, extend_outside(grid, delta))``: the values inside the aperture, continued
+outside by a discrete Laplace equation (:class:`raysim.surface.gridded.HarmonicFill`, whose
+:meth:`~raysim.surface.gridded.HarmonicFill.transpose` is the continuation's adjoint), then the
+bicubic interpolating spline of FITPACK (scipy's RectBivariateSpline, s = 0), which clamps
+points beyond the outer grid centres to them. Every step is linear in delta, so
+:class:`GridToSamples` writes the map from the grid values inside the aperture to (dz, dh/dx,
+dh/dy) at the PO samples, and its transpose, with the spline's own knots: the B-spline
+coefficients are Ay^-1 Z Ax^-T (collocation matrices at the grid centres), the sample values
+B_y(y_s) C B_x(x_s)^T and the slopes with one factor differentiated. With
+:mod:`raysim.optics.po_jacobian` this gives the model's exact JVP and VJP
+(:class:`WaveJacobian`): dI = 2 Re(conj(E) . dE) per sphere cell.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+from scipy.interpolate import BSpline, RectBivariateSpline
+
+from raysim.maps.sphere import SphereGrid
+from solver.aperture import ApertureGrid
+from solver.forward import WaveForward
+from solver.nonlinear import extend_outside, outside_fill
+
+DEGREE = 3
+CHUNK = 65_536
+
+
+def _basis(x: NDArray[np.float64], t: NDArray[np.float64], lo: float, hi: float):
+    """Sparse (n, n_coef) values and first derivatives of the degree-3 B-splines on knots t
+    at x clamped to [lo, hi] (FITPACK's rule for points beyond the data)."""
+    xc = np.clip(x, lo, hi)
+    B = BSpline.design_matrix(xc, t, DEGREE).tocsr()
+    # degree 2 on the same knots, at the last knot from the left (the slope is continuous;
+    # the degree-2 functions there would be read on the empty interval beyond it)
+    low = BSpline.design_matrix(np.minimum(xc, np.nextafter(hi, lo)), t, DEGREE - 1).tocsr()
+    n = len(t) - DEGREE - 1
+    i = np.arange(n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        left = np.where(t[i + DEGREE] > t[i], DEGREE / (t[i + DEGREE] - t[i]), 0.0)
+        right = np.where(t[i + DEGREE + 1] > t[i + 1],
+                         DEGREE / (t[i + DEGREE + 1] - t[i + 1]), 0.0)
+    # d/dx B_i,3 = 3 B_i,2 / (t_i+3 - t_i) - 3 B_i+1,2 / (t_i+4 - t_i+1)
+    M = sp.diags([left, -right], [0, -1], shape=(n + 1, n)).tocsr()
+    return B, (low @ M).tocsr()
+
+
+@dataclass
+class GridToSamples:
+    """The linear map grid values inside the aperture -> (dz, dh_x, dh_y) at points (x_s, y_s).
+
+    ``grid`` the aperture grid; ``x``, ``y`` (n,) the sample footprints (m).
+    """
+
+    grid: ApertureGrid
+    x: NDArray[np.float64]
+    y: NDArray[np.float64]
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    @cached_property
+    def _spline(self):
+        g = self.grid
+        probe = RectBivariateSpline(g.y, g.x, np.zeros((g.N, g.N)), kx=DEGREE, ky=DEGREE, s=0)
+        ty, tx = probe.get_knots()
+        Ay = BSpline.design_matrix(g.y, ty, DEGREE).toarray()
+        Ax = BSpline.design_matrix(g.x, tx, DEGREE).toarray()
+        By, dBy = _basis(self.y, ty, g.y[0], g.y[-1])
+        Bx, dBx = _basis(self.x, tx, g.x[0], g.x[-1])
+        return np.linalg.inv(Ay), np.linalg.inv(Ax), By, dBy, Bx, dBx
+
+    def _filled(self, delta_in: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The grid values inside the aperture continued outside it (:func:`extend_outside`)."""
+        g = self.grid
+        Z = np.zeros((g.N, g.N))
+        Z[g.mask] = delta_in
+        return extend_outside(g, Z)
+
+    def _filled_T(self, G: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The adjoint of :meth:`_filled`: a gradient on the whole grid -> on the values inside."""
+        g = self.grid
+        return outside_fill(float(g.D), int(g.N)).transpose(G)[g.mask]
+
+    def apply(self, delta_in: NDArray[np.float64]) -> tuple[NDArray, NDArray, NDArray]:
+        """(dz, dh_x, dh_y) at the samples for grid values ``delta_in`` (m, inside the mask)."""
+        iAy, iAx, By, dBy, Bx, dBx = self._spline
+        C = iAy @ self._filled(delta_in) @ iAx.T
+        dz, hx, hy = (np.empty(len(self.x)) for _ in range(3))
+        for lo in range(0, len(self.x), CHUNK):
+            s = slice(lo, lo + CHUNK)
+            YC = By[s] @ C
+            dz[s] = np.asarray(Bx[s].multiply(YC).sum(axis=1)).ravel()
+            hx[s] = np.asarray(dBx[s].multiply(YC).sum(axis=1)).ravel()
+            hy[s] = np.asarray(Bx[s].multiply(dBy[s] @ C).sum(axis=1)).ravel()
+        return dz, hx, hy
+
+    def transpose(self, g_z, g_x, g_y) -> NDArray[np.float64]:
+        """The adjoint: per-sample gradients in (dz, dh_x, dh_y) -> gradient on the grid values."""
+        iAy, iAx, By, dBy, Bx, dBx = self._spline
+        GC = (By.T @ sp.diags(g_z) @ Bx + By.T @ sp.diags(g_x) @ dBx
+              + dBy.T @ sp.diags(g_y) @ Bx).toarray()
+        return self._filled_T(iAy.T @ GC @ iAx)
+
+
+class WaveJacobian:
+    """The PO (+ PTD) model's intensity and its exact linearisation at one surface estimate.
+
+    ``model`` a :class:`solver.forward.WaveForward` (PO or PO + PTD, in this process);
+    ``delta`` (N, N) the estimate (m, NaN outside the aperture) on ``grid``; ``sphere``, ``F``,
+    ``D`` the scan (m). Takes the model's reflector and complex field E at the cell centres
+    (:meth:`solver.forward.WaveForward.field`: :attr:`intensity` is the model's intensity),
+    and the PO samples and rim points of that reflector under the model's wave. :meth:`jvp`
+    maps a grid perturbation (values inside the aperture, m) to dI on the sphere, :meth:`vjp`
+    the transpose.
+    """
+
+    def __init__(self, model: WaveForward, sphere: SphereGrid, F: float, D: float,
+                 grid: ApertureGrid, delta: NDArray[np.float64]) -> None:
+        from raysim.optics import po, po_jacobian
+
+        self.model, self.sphere, self.grid = model, sphere, grid
+        self.points = sphere.points(F).reshape(-1, 3)
+        self.shape = (sphere.n_theta, sphere.n_phi)
+        surface = (grid.x, grid.y, extend_outside(grid, delta))
+        self.wave = model.job(sphere, F, D, surface).wave()
+        spw = po.DEFAULT_SAMPLES_PER_WAVELENGTH if model.samples_per_wavelength is None \
+            else model.samples_per_wavelength
+        # the model's own reflector and field (PO, PTD's rim, the incident wave when total)
+        self.reflector = model.reflector(D, F, surface)
+        self.E = model.field(sphere, F, D, surface).reshape(-1, 3)
+        self.elements = po_jacobian.surface_elements(self.reflector, self.wave, spw, model.device)
+        self.samples = GridToSamples(grid, self.elements.x, self.elements.y)
+        self.edges = None
+        if model.ptd:
+            from raysim.optics import ptd_jacobian
+
+            self.edges = ptd_jacobian.edge_state(self.reflector, self.wave, "rim",
+                                                 device=model.device)
+            self.edge_samples = GridToSamples(grid, self.edges.x, self.edges.y)
+        self.calls = {"jvp": 0, "vjp": 0}
+
+    @property
+    def intensity(self) -> NDArray[np.float64]:
+        """|E|^2 (n_theta, n_phi) of the model at this estimate."""
+        return np.sum(np.abs(self.E) ** 2, axis=-1).reshape(self.shape)
+
+    def field_jvp(self, v_in: NDArray[np.float64]) -> NDArray[np.complex128]:
+        """dE (n_points, 3) for grid values ``v_in`` (m) inside the aperture."""
+        from raysim.optics import po_jacobian
+
+        dz, hx, hy = self.samples.apply(v_in)
+        dE = po_jacobian.jvp(self.elements, self.points, dz, hx, hy, self.model.device)
+        if self.edges is not None:
+            from raysim.optics import ptd_jacobian
+
+            dE = dE + ptd_jacobian.jvp(self.edges, self.wave, self.points,
+                                       *self.edge_samples.apply(v_in), device=self.model.device)
+        return dE
+
+    def jvp(self, v_in: NDArray[np.float64]) -> NDArray[np.float64]:
+        """dI (n_theta, n_phi) = 2 Re(conj(E) . dE) for grid values ``v_in`` (m)."""
+        self.calls["jvp"] += 1
+        dE = self.field_jvp(v_in)
+        return 2.0 * np.real(np.sum(np.conj(self.E) * dE, axis=-1)).reshape(self.shape)
+
+    def vjp(self, y: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The transpose: weights ``y`` (n_theta, n_phi) on dI -> gradient on the grid values."""
+        from raysim.optics import po_jacobian
+
+        self.calls["vjp"] += 1
+        c = 2.0 * np.asarray(y, dtype=np.float64).reshape(-1, 1) * self.E
+        g = po_jacobian.vjp(self.elements, self.points, c, self.model.device)
+        out = self.samples.transpose(*g)
+        if self.edges is not None:
+            from raysim.optics import ptd_jacobian
+
+            g = ptd_jacobian.vjp(self.edges, self.wave, self.points, c, self.model.device)
+            out = out + self.edge_samples.transpose(*g)
+        return out
