@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from raysim.pipeline.check import summary_rows, verdict_lines
+from raysim.pipeline.check_verdict import summary_rows, verdict_lines
 from raysim.pipeline.report import PAGE_STYLE, figure_html, png_bytes
 from raysim.render import backend
 from raysim.render.charts import RIM_STYLE, cell_edges, colour_map, rim_circle

@@ -321,13 +321,3 @@ class PanelRigid(Deformation):
 
     def describe(self) -> str:
         return f"panel rigid errors ({self.layout.n_panels} panels)"
-
-
-def __getattr__(name: str):
-    # GriddedMap lives in raysim.surface.gridded (it builds on Deformation, defined here);
-    # the old name keeps working without an import cycle at load time
-    if name == "GriddedMap":
-        from raysim.surface.gridded import GriddedMap
-
-        return GriddedMap
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

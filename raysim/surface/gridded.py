@@ -14,7 +14,6 @@ its transpose for the model's Jacobian (:mod:`solver.jacobian`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
@@ -137,11 +136,3 @@ class GriddedMap(Deformation):
 
     def describe(self) -> str:
         return f"gridded map {len(self.y)} x {len(self.x)}"
-
-    @classmethod
-    def from_file(cls, path: str | Path, scale: float = 1.0) -> GriddedMap:
-        """Read a map: NetCDF with coords x, y (m) and ``deformation`` (m), or CSV x,y,dz (m)
-        (read and checked by :func:`raysim.surface.mapfile.read_map`)."""
-        from raysim.surface.mapfile import read_map
-
-        return read_map(path, scale)

@@ -17,6 +17,7 @@ from raysim.surface.deformation import (
     paper_peak_to_peak,
 )
 from raysim.surface.gridded import GriddedMap
+from raysim.surface.mapfile import read_map
 from raysim.surface.panels import PanelLayout
 from tests.surfaces import disk_rms
 
@@ -159,15 +160,15 @@ def test_gridded_map_files_round_trip(tmp_path: Path):
     rows = np.column_stack([X.ravel(), Y.ravel(), dz.ravel()])[order]
     np.savetxt(csv, rows, delimiter=",", header="x,y,dz", comments="")
     pts = (np.array([3.3, -40.1]), np.array([17.0, 2.5]))
-    assert np.allclose(GriddedMap.from_file(nc)(*pts), GriddedMap.from_file(csv)(*pts), rtol=0, atol=1e-15)
+    assert np.allclose(read_map(nc)(*pts), read_map(csv)(*pts), rtol=0, atol=1e-15)
     bad = tmp_path / "bad.nc"
     xr.Dataset({"deformation": (("y", "x"), dz * 1e6, {"units": "um"})}, coords={"x": g, "y": g}).to_netcdf(bad)
     with pytest.raises(SceneError, match="must be in m, got 'um'"):
-        GriddedMap.from_file(bad)
+        read_map(bad)
     ragged = tmp_path / "ragged.csv"
     ragged.write_text("x,y,dz\n0,0,1\n1,0,1\n0,1,1\n")
     with pytest.raises(SceneError, match="do not fill a regular x-y grid"):
-        GriddedMap.from_file(ragged)
+        read_map(ragged)
 
 
 def test_deformations_add():
