@@ -7,7 +7,9 @@ import os
 import signal
 import socket
 import subprocess
+import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 
@@ -58,3 +60,31 @@ def listening(port: int) -> bool:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.settimeout(0.2)
         return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+@contextlib.contextmanager
+def dask_processes(n_workers: int, worker_timeout: float = 120.0) -> Iterator[tuple[str, int]]:
+    """A separately started ``dask scheduler`` and one ``dask worker`` nanny with ``n_workers``
+    processes (one thread each) on loopback; yields (scheduler address, nanny pid) once every
+    worker process is up, and stops them all on exit."""
+    from tests.cli import cli_env
+
+    port = free_port()
+    common = dict(env=cli_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                  start_new_session=True)
+    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host",
+                                  "127.0.0.1", "--port", str(port), "--no-dashboard"], **common)
+    nanny = None
+    try:
+        wait_until(lambda: listening(port), 60, "the scheduler to listen")
+        address = f"tcp://127.0.0.1:{port}"
+        nanny = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
+                                  "--host", "127.0.0.1", "--nworkers", str(n_workers),
+                                  "--nthreads", "1", "--no-dashboard"], **common)
+        wait_until(lambda: len(worker_processes(nanny.pid)) == n_workers, worker_timeout,
+                   f"{n_workers} worker processes")
+        yield address, nanny.pid
+    finally:
+        for proc in (nanny, scheduler):
+            if proc is not None:
+                kill_group(proc)

@@ -7,7 +7,6 @@ import contextlib
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -28,8 +27,8 @@ from raysim.dataset.models import RimAstigmatism
 from raysim.maps.fieldmap import validate
 from raysim.maps.sphere import ideal_go_cell_mean
 from raysim.surface.deformation import GaussianBumps, PanelRigid
-from tests.cli import cli_env, popen_cli, run_cli
-from tests.processes import free_port, kill_group, listening, wait_until, worker_processes
+from tests.cli import popen_cli, run_cli
+from tests.processes import dask_processes, kill_group, wait_until, worker_processes
 from tests.reference_zernike import zernike_sum
 
 pytestmark = pytest.mark.slow
@@ -245,24 +244,14 @@ def test_separate_scheduler_and_worker_with_a_worker_killed(reference, spec, tmp
     """A `dask scheduler` and a `dask worker` process on loopback, the CLI as client; the
     worker process is killed after the first sample and its nanny restarts it: the store
     completes, identical to the reference."""
-    port = free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    common = dict(env=cli_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host",
-                                  "127.0.0.1", "--port", str(port), "--no-dashboard"], **common)
-    nanny = None
-    try:
-        wait_until(lambda: listening(port), 60, "the scheduler to listen")
-        nanny = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--host",
-                                  "127.0.0.1", "--nworkers", "1", "--nthreads", "1", "--no-dashboard"],
-                                 **common)
+    with dask_processes(1) as (address, nanny_pid):
         store = tmp_path / "distributed.zarr"
         run = popen_cli("dataset", str(DEMO), "-o", str(store), "--scheduler", address, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
         try:
             wait_until(lambda: bool(_markers(store)) or run.poll() is not None, RUN_TIMEOUT,
                         "a first sample")
-            workers = worker_processes(nanny.pid)
+            workers = worker_processes(nanny_pid)
             killed = bool(workers) and run.poll() is None and len(_markers(store)) < spec.samples
             for pid in workers:  # the worker process under the nanny: the nanny restarts it
                 with contextlib.suppress(ProcessLookupError):
@@ -276,7 +265,3 @@ def test_separate_scheduler_and_worker_with_a_worker_killed(reference, spec, tmp
         assert run.returncode == 0, err
         assert f"{spec.samples}/{spec.samples} samples done" in out and "on 1 workers" in out
         assert_same_store(reference, store)
-    finally:
-        for proc in (nanny, scheduler):
-            if proc is not None:
-                kill_group(proc)

@@ -19,7 +19,7 @@ from raysim.maps.fieldmap import load
 from raysim.scene.scene import parse_scene
 from raysim.simulate import simulate
 from tests.cli import cli_env
-from tests.processes import free_port, kill_group, listening, wait_until, worker_processes
+from tests.processes import dask_processes, wait_until, worker_processes
 from tests.raysim.distributed.conftest import SMALL, assert_same_fieldmap
 
 pytestmark = pytest.mark.slow
@@ -69,26 +69,14 @@ def test_scheduler_and_two_workers_with_a_worker_and_the_client_killed(tmp_path)
     scene_path = tmp_path / "small.toml"
     scene_path.write_text(SCENE)
     reference = simulate(parse_scene(SCENE), "po")
-    port = free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    common = dict(env=cli_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host",
-                                  "127.0.0.1", "--port", str(port), "--no-dashboard"], **common)
-    nanny = None
-    try:
-        wait_until(lambda: listening(port), 60, "the scheduler to listen")
-        nanny = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--host",
-                                  "127.0.0.1", "--nworkers", "2", "--nthreads", "1", "--no-dashboard"],
-                                 **common)
-        wait_until(lambda: len(worker_processes(nanny.pid)) == 2, 120, "two worker processes")
-
+    with dask_processes(2) as (address, nanny_pid):
         # 1. a worker process killed after a few blocks: its nanny restarts it, the run completes
         first = tmp_path / "first.nc"
         run = _simulate(scene_path, first, address)
         wait_until(lambda: _markers(first) >= 3 or run.poll() is not None, RUN_TIMEOUT, "three blocks")
         killed = run.poll() is None and _markers(first) < N_BLOCKS
         with contextlib.suppress(ProcessLookupError):
-            os.kill(worker_processes(nanny.pid)[0], signal.SIGKILL)
+            os.kill(worker_processes(nanny_pid)[0], signal.SIGKILL)
         out, _ = _finish(run)
         assert killed, "the run ended before a worker could be killed"
         ds = load(first)
@@ -113,7 +101,3 @@ def test_scheduler_and_two_workers_with_a_worker_and_the_client_killed(tmp_path)
         assert (a["blocks_reused"], a["blocks_computed"], a["blocks_computed_twice"]) == \
             (kept, N_BLOCKS - kept, 0)
         assert f"{kept} reused, 0 computed twice" in out
-    finally:
-        for proc in (nanny, scheduler):
-            if proc is not None:
-                kill_group(proc)
