@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-GAIN_MODES = ("power", "none")
+GAIN_MODES = ("auto", "known", "power", "none")  # solver.gainmode says what each means
 
 
 def intensity_ratio_fa(intensity: ArrayLike, intensity_ideal: ArrayLike) -> NDArray[np.float64]:

@@ -28,16 +28,18 @@ from raysim.maps.surfacemap import surfacemap
 from raysim.progress import Progress
 from solver import boundary
 from solver.aperture import ApertureGrid, solver_grid
-from solver.equation import (
-    debias,
-    intensity_ratio_fa,
-    noise_variance,
-    power_gain,
-    stated_noise_variance,
-)
+from solver.equation import debias, intensity_ratio_fa, noise_variance, stated_noise_variance
 from solver.errors import SolverError
 from solver.fit import parse_terms, remove_terms
 from solver.forward import Forward, ForwardModel
+from solver.gainmode import (
+    GainChoice,
+    GainEstimate,
+    estimate_gain,
+    refocus_mode,
+    remove_mode,
+    resolve_gain,
+)
 from solver.gauss_newton import (
     GaussNewtonOptions,
     GaussNewtonReport,
@@ -50,7 +52,7 @@ from solver.nonlinear import RefineHistory, refine
 from solver.options import check_options
 from solver.record import Outcome, accuracy_attrs, surface_attrs
 from solver.refinement import RefinementSetup, choose_model, refinement_setup
-from solver.resample import fill_missing, usable_rows
+from solver.resample import usable_rows
 from solver.wave import amplitude_weight
 
 DEFAULT_SOLVER = "multigrid"
@@ -74,7 +76,7 @@ class InvertOptions:
     rim: boundary.RimTargets | None = None
     remove: str | Sequence[str] | None = None
     refine_iterations: int = DEFAULT_REFINE
-    gain: str = "power"
+    gain: str = "auto"
     iterations: int | None = None
     omega: float | None = None
     tol: float = 1e-10
@@ -109,22 +111,29 @@ class InvertOptions:
 class MeasuredFA:
     """FA of a scan after its gain, with the noise bias removed (NaN where a sample is missing).
 
-    ``scale``: the gain divided out (1 when trusted); ``noise_variance``: the relative
-    variance v of the readings and where it came from; ``n_rows``: the usable theta rows;
-    ``missing``: missing samples among them.
+    ``gain``: whether the scale was trusted or estimated; ``estimate``: the scale divided out
+    (1 when trusted), its spread and coverage; ``noise_variance``: the relative variance v of
+    the readings and where it came from; ``n_rows``: the usable theta rows; ``missing``:
+    missing samples among them.
     """
 
     fa: NDArray[np.float64]
-    scale: float
+    gain: GainChoice
+    estimate: GainEstimate
     noise_variance: float
     noise_source: str
     n_rows: int
     missing: int
 
+    @property
+    def scale(self) -> float:
+        """The scale divided out of the readings (1 when the gain is trusted)."""
+        return self.estimate.scale
+
 
 def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_N,
            rim: boundary.RimTargets | None = None, remove: str | Sequence[str] | None = None,
-           refine_iterations: int = DEFAULT_REFINE, gain: str = "power",
+           refine_iterations: int = DEFAULT_REFINE, gain: str = "auto",
            iterations: int | None = None, omega: float | None = None, tol: float = 1e-10,
            truth: Callable | NDArray | str | None = "scene", forward: Forward | None = None,
            device: str | None = "cpu", uncertainty_samples: int = 32, seed: int = 0,
@@ -144,7 +153,10 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     rim : rim targets (x, y, dz in m) fixing the harmonic part; None assumes zero on the rim.
     remove : terms to remove after the solve: any of piston, tilt, focus.
     refine_iterations : model refinement iterations; 0 gives the linear answer.
-    gain : ``power`` estimates the scan's scale from its total power; ``none`` trusts it.
+    gain : ``known`` trusts the scan's scale; ``power`` estimates it from the total power and
+        reports the map with the unobservable delta_c mode removed (:mod:`solver.gainmode`);
+        ``auto`` (default) is ``known`` for simulated data, ``power`` for a measured scan;
+        ``none`` is the former name of ``known``.
     iterations, omega, tol : settings of the iterative solvers (see :func:`solve_poisson`).
     truth : None, a callable delta(x, y) (m), an (N, N) array (m), or ``"scene"`` (the
         FieldMap's scene deformation when it carries a scene).
@@ -160,7 +172,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         ``po``, ``po+ptd``); None picks the one that made the data (FieldMap ``method``: GO for
         GO data, PO for PO data, GO for a measured scan). A wave model brings its own
         preconditioner (:class:`solver.wave.WaveCorrection`) and, unless ``gain="none"``,
-        fits the scan's scale with the surface.
+        fits the scan's scale with the surface when the gain is estimated.
     weights : ``amplitude`` multiplies FA (and every refinement misfit) by sqrt(I_ideal /
         I_GO) per sphere cell, which keeps wave data's response near GO's in the dark rings
         of the diffraction pattern (:func:`solver.wave.amplitude_weight`; 1 for GO data);
@@ -186,7 +198,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     grid = solver_grid(scan.D, opts.N)
     if opts.rim is not None:
         boundary.check_targets(opts.rim, grid.a)
-    data = measured_fa(scan, opts.gain)
+    data = measured_fa(scan, resolve_gain(opts.gain, str(scan.attrs.get("method", ""))))
     chosen = choose_model(scan.attrs, opts.refine_iterations, opts.model, opts.forward, opts.device)
     method, why = choose_method(opts.refine_method, chosen.forward, scan, opts.refine_iterations)
     weighted = opts.weights == "amplitude" or (opts.weights == "auto" and chosen.wave)
@@ -196,23 +208,25 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
                             opts.rim, opts.max_harmonics, weight)
     linear = inverse.solve(data.fa)
     setup = refinement_setup(inverse, chosen, opts.refine_iterations,
-                             fit_gain=opts.gain == "power", progress=progress)
+                             fit_gain=data.gain.estimated, progress=progress)
     delta, history = _refine(inverse, linear, data, setup, opts)
     gn = None
     if method == "gauss-newton":
         delta, gn = _gauss_newton(inverse, delta, data, setup, history, opts, log)
+    refined = setup.forward is not None and opts.refine_iterations > 0
+    mode = delta_c_mode(inverse, refined) if data.gain.estimated else None
     std = None
     if scan.intensity_std is not None and opts.uncertainty_samples > 0:
-        std = monte_carlo_std(scan, inverse, opts.gain, opts.uncertainty_samples, opts.seed,
-                              linear.coverage.n_rows)
-    delta_out, coef = remove_terms(grid, delta, opts.terms, scan.F)
+        std = monte_carlo_std(scan, inverse, data, opts.uncertainty_samples, opts.seed, mode)
+    delta_fit, delta_c = remove_mode(grid, delta, mode) if mode is not None else (delta, 0.0)
+    delta_out, coef = remove_terms(grid, delta_fit, opts.terms, scan.F)
     outcome = Outcome(scan, grid, inverse, linear, data, setup, history, weighted, coef,
-                      gn.gain_factor if gn is not None else None)
+                      gn.gain_factor if gn is not None else None, delta_c, mode)
     attrs = surface_attrs(opts, outcome)
     attrs.update(report_attrs(gn, why))
     truth_map = truth_on_grid(truth, scan, grid)
     if truth_map is not None:
-        accuracy, truth_map = accuracy_attrs(grid, delta, delta_out, truth_map, opts.terms)
+        accuracy, truth_map = accuracy_attrs(grid, delta, delta_out, truth_map, opts.terms, mode)
         attrs.update(accuracy)
     attrs["time_s"] = time.perf_counter() - start
     return surfacemap(grid, delta_out, attrs, truth=truth_map, deformation_std=std)
@@ -240,34 +254,41 @@ def _gauss_newton(inverse: LinearInverse, delta: NDArray[np.float64], data: Meas
                                opts.gauss_newton, setup.progress, log)
 
 
-def power_scale(intensity: NDArray[np.float64], scan: Scan, n_rows: int) -> float:
-    """The scan's scale from GO power conservation, missing samples filled first.
+def delta_c_mode(inverse: LinearInverse, refined: bool) -> NDArray[np.float64]:
+    """The map's response (m) to a unit FA offset: the shape an unknown gain leaves open.
 
-    A missing sample would drop its cell from both power sums and bias the ratio by its FA;
-    inside the usable rows it takes the inpainted ratio I / I_ideal, beyond them the ideal.
+    The linear answer's is its own solve of FA = 1 (weighted like the data); a model-based
+    answer's is the refocus of :func:`solver.gainmode.refocus_mode`. With rim targets the
+    rim fit's response to the shape is part of it (targets inside the rim see it).
     """
-    ideal = scan.intensity_ideal
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(ideal > 0, intensity / ideal, np.nan)
-    ratio[:n_rows], _ = fill_missing(ratio[:n_rows], n_rows)
-    filled = np.where(np.isfinite(intensity), intensity,
-                      np.where(np.isfinite(ratio), ratio, 1.0) * ideal)
-    return power_gain(filled, ideal, scan.sphere.cell_area())
+    grid = inverse.grid
+    if refined:
+        base = np.where(grid.mask, refocus_mode(grid, inverse.scan.F, inverse.scan.R), 0.0)
+    else:
+        ones = np.ones_like(inverse.scan.intensity_ideal)
+        base = inverse.poisson(inverse.to_aperture(ones if inverse.weight is None
+                                                   else inverse.weight))
+    if inverse.targets is not None:
+        base = base + inverse.rim_update(base) - inverse.rim_update(np.zeros_like(base))
+    return grid.masked(base)
 
 
-def measured_fa(scan: Scan, gain: str) -> MeasuredFA:
-    """FA of the scan after the gain (``power`` or ``none``), with the noise bias removed."""
+def measured_fa(scan: Scan, gain: GainChoice) -> MeasuredFA:
+    """FA of the scan after the gain (trusted or estimated), with the noise bias removed."""
     n_rows = usable_rows(scan.sphere, scan.F, scan.D)
-    scale = power_scale(scan.intensity, scan, n_rows) if gain == "power" else 1.0
-    fa = intensity_ratio_fa(scan.intensity / scale, scan.intensity_ideal)
     if scan.intensity_std is not None:
         v = stated_noise_variance(scan.intensity, scan.intensity_std, n_rows)
         source = "intensity_std"
     else:
-        v, source = noise_variance(fa, n_rows), "estimated from second differences along phi"
+        v = noise_variance(intensity_ratio_fa(scan.intensity, scan.intensity_ideal), n_rows)
+        source = "estimated from second differences along phi"
+    estimate = (estimate_gain(scan.intensity, scan.intensity_ideal, scan.sphere, n_rows, v,
+                              scan.intensity_std) if gain.estimated
+                else GainEstimate(1.0, 0.0, 1.0))
+    fa = intensity_ratio_fa(scan.intensity / estimate.scale, scan.intensity_ideal)
     missing = int(np.count_nonzero(~np.isfinite(fa[:n_rows])))
-    return MeasuredFA(debias(fa, v if gain == "power" else 0.5 * v), scale, v, source, n_rows,
-                      missing)
+    return MeasuredFA(debias(fa, v if gain.estimated else 0.5 * v), gain, estimate, v, source,
+                      n_rows, missing)
 
 
 def _truth_from_scene(attrs: dict) -> Callable | None:
@@ -296,18 +317,24 @@ def truth_on_grid(truth, scan: Scan, grid: ApertureGrid) -> NDArray[np.float64] 
     return grid.masked(arr)
 
 
-def monte_carlo_std(scan: Scan, inverse: LinearInverse, gain: str, samples: int, seed: int,
-                    n_rows: int) -> NDArray[np.float64]:
+def monte_carlo_std(scan: Scan, inverse: LinearInverse, data: MeasuredFA, samples: int,
+                    seed: int, mode: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
     """Std (m) of the linear solution under Gaussian intensity noise of ``intensity_std``.
 
     The inversion is linear in FA and FA is smooth in the intensity, so the linear solve's
-    spread is the refined map's spread to first order.
+    spread is the refined map's spread to first order. Each draw gets the data's gain
+    treatment: the scale estimated again and ``mode`` (delta_c) removed when the gain is
+    estimated.
     """
     rng = np.random.default_rng(seed)
     sigma = np.where(np.isfinite(scan.intensity_std), scan.intensity_std, 0.0)
     draws = []
     for _ in range(samples):
         noisy = scan.intensity + sigma * rng.standard_normal(sigma.shape)
-        c = power_scale(noisy, scan, n_rows) if gain == "power" else 1.0
-        draws.append(inverse.solve(intensity_ratio_fa(noisy / c, scan.intensity_ideal)).delta)
+        c = (estimate_gain(noisy, scan.intensity_ideal, scan.sphere, data.n_rows,
+                           data.noise_variance).scale if data.gain.estimated else 1.0)
+        delta = inverse.solve(intensity_ratio_fa(noisy / c, scan.intensity_ideal)).delta
+        if mode is not None:
+            delta, _ = remove_mode(inverse.grid, delta, mode)
+        draws.append(delta)
     return np.std(np.stack(draws), axis=0, ddof=1)

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from solver import metrics
 from solver.aperture import ApertureGrid
 from solver.fit import remove_terms
+from solver.gainmode import remove_mode
 from solver.linear import LinearInverse, LinearSolution, Scan
 from solver.nonlinear import RefineHistory
 from solver.refinement import RefinementSetup
@@ -39,12 +40,14 @@ class Outcome:
     weighted: bool
     removed: dict[str, float]
     gain_factor: float | None = None  # the final scale factor when Gauss-Newton refitted it
+    delta_c: float = 0.0  # the removed multiple of the delta_c mode (an FA offset)
+    delta_c_mode: NDArray[np.float64] | None = None  # the mode (m per unit FA), None: kept
 
 
 def surface_attrs(opts: InvertOptions, out: Outcome) -> dict[str, Any]:
     """The SurfaceMap attributes of an inversion with settings ``opts`` and results ``out``."""
     scan, linear, setup, history = out.scan, out.linear, out.setup, out.history
-    gain = opts.gain
+    gain = out.data.gain
     gain_factor = out.gain_factor if out.gain_factor is not None else (
         history.gain_factor[-1] if history.gain_factor else 1.0)
     attrs: dict[str, Any] = {
@@ -66,11 +69,14 @@ def surface_attrs(opts: InvertOptions, out: Outcome) -> dict[str, Any]:
         "refine_update_rms_m": ",".join(f"{v:.3e}" for v in history.update_rms),
         "refine_misfit_rms": ",".join(f"{v:.3e}" for v in history.misfit_rms),
         "refine_seconds": history.seconds,
-        "gain_mode": gain, "gain": out.data.scale * gain_factor,
-        "gain_source": _gain_source(gain, setup.fit_gain and bool(history.gain_factor)),
+        "gain_mode": gain.mode, "gain_known": not gain.estimated, "gain_choice": gain.reason,
+        "gain": out.data.scale * gain_factor,
+        "gain_std": out.data.estimate.std, "gain_coverage": out.data.estimate.coverage,
+        "gain_source": _gain_source(gain.estimated, setup.fit_gain and bool(history.gain_factor)),
+        **_delta_c_attrs(out),
         "noise_relative_std": float(np.sqrt(out.data.noise_variance)),
         "noise_source": out.data.noise_source,
-        "noise_bias": "removed: FA -> (1 + FA) / (1 + v) - 1" if gain == "power" else
+        "noise_bias": "removed: FA -> (1 + FA) / (1 + v) - 1" if gain.estimated else
                       "removed: FA -> (1 + FA) / (1 + v/2) - 1 (noise symmetric in dB)",
         "samples_missing": out.data.missing,
         "missing_samples": "filled by least-squares Laplacian inpainting on the (theta, phi) "
@@ -87,26 +93,41 @@ def surface_attrs(opts: InvertOptions, out: Outcome) -> dict[str, Any]:
     return attrs
 
 
-def _gain_source(gain: str, fitted: bool) -> str:
+def _delta_c_attrs(out: Outcome) -> dict[str, Any]:
+    """How the map treats delta_c, the shape a scale error makes (:mod:`solver.gainmode`)."""
+    if out.delta_c_mode is None:
+        return {"delta_c_part": "kept: the gain is known, so delta_c is fixed by the data",
+                "delta_c_observable": True}
+    centre = out.delta_c_mode[out.grid.N // 2, out.grid.N // 2]
+    return {"delta_c_part": "removed: unobservable with an estimated gain (G Laplacian(delta_c) "
+                            "= const, zero on the rim)",
+            "delta_c_observable": False, "removed_delta_c": out.delta_c,
+            "removed_delta_c_centre_m": float(out.delta_c * centre) if np.isfinite(centre)
+            else float("nan")}
+
+
+def _gain_source(estimated: bool, fitted: bool) -> str:
     if fitted:
         return "GO power balance, then fitted with the surface by the wave refinement"
-    if gain == "power":
+    if estimated:
         return "GO power balance (deformed and ideal send equal power)"
     return "none (trusted)"
 
 
 def accuracy_attrs(grid: ApertureGrid, delta: NDArray[np.float64], delta_out: NDArray[np.float64],
-                   truth: NDArray[np.float64], terms: Sequence[str]
+                   truth: NDArray[np.float64], terms: Sequence[str],
+                   mode: NDArray[np.float64] | None = None
                    ) -> tuple[dict[str, float], NDArray[np.float64]]:
     """RMS and RRMS of the recovered map against the truth (m), the paper's definitions.
 
-    ``delta`` is the map before the term removal, ``delta_out`` after; the truth gets the same
-    removal, and is returned so (the SurfaceMap's ``truth``). RRMS = RMS / peak-to-peak of the
-    truth before removal.
+    ``delta`` is the map before any removal, ``delta_out`` after; the truth gets the same
+    removal (the ``mode`` delta_c when given, then the terms), and is returned so (the
+    SurfaceMap's ``truth``). RRMS = RMS / peak-to-peak of the truth before removal.
     """
     M = metrics.peak_to_peak(grid, truth)
     before = metrics.rms_error(grid, delta, truth)
-    removed, _ = remove_terms(grid, truth, terms)
+    removed = truth if mode is None else remove_mode(grid, truth, mode)[0]
+    removed, _ = remove_terms(grid, removed, terms)
     rms = metrics.rms_error(grid, delta_out, removed)
     return ({"rms_before_removal_m": before, "rms_m": rms, "rrms": rms / M,
              "truth_peak_to_peak_m": M}, removed)

@@ -32,7 +32,7 @@ def panel_layout_of(field: xr.Dataset):
 def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str], *,
                solver: str = DEFAULT_SOLVER, N: int = DEFAULT_N,
                rim_csv: str | os.PathLike[str] | None = None, remove: str | None = None,
-               refine: int = DEFAULT_REFINE, gain: str = "power", iterations: int | None = None,
+               refine: int = DEFAULT_REFINE, gain: str = "auto", iterations: int | None = None,
                device: str | None = "cpu",
                panels_csv: str | os.PathLike[str] | None = None, model: str | None = None,
                progress: Progress | None = None, refine_method: str = "defect",
@@ -90,7 +90,15 @@ def summary(result: xr.Dataset) -> list[str]:
     if a["harmonic_part"] == "unobservable":
         lines.append("harmonic part (tilt, astigmatism, any r^n cos n phi) is UNOBSERVABLE "
                      "without rim targets: the map assumes zero on the rim")
-    lines.append(f"removed terms: {a['removed_terms']}; gain {a['gain_mode']} "
-                 f"(scale {a['gain']:.6f}); missing samples {a['samples_missing']}")
+    if a.get("gain_known", True):
+        lines.append(f"gain known ({a['gain_choice']}): scale {a['gain']:.6f} trusted, delta_c "
+                     "kept")
+    else:
+        lines.append(f"gain ESTIMATED ({a['gain_choice']}): scale {a['gain']:.6f} +- "
+                     f"{a['gain_std']:.1e}, {100 * a['gain_coverage']:.1f} % of the power "
+                     f"scanned; delta_c (the shape a scale error makes) is UNOBSERVABLE and "
+                     f"removed: coefficient {a['removed_delta_c']:.3e} (an FA offset), "
+                     f"{1e6 * a['removed_delta_c_centre_m']:.2f} um at the centre")
+    lines.append(f"removed terms: {a['removed_terms']}; missing samples {a['samples_missing']}")
     lines.append(f"time {a['time_s']:.2f} s")
     return lines

@@ -35,7 +35,11 @@ def invert_command(
              "radiation is at most 1e9 element-point pairs, about 0.1 GHz on the paper's grid, "
              "and without --scheduler / --workers)."),
     panels_csv: Path | None = typer.Option(None, help="Write the per-panel adjustment table."),
-    gain: str = typer.Option("power", help="power (estimate the scan's scale) or none."),
+    gain: str = typer.Option(
+        "auto", help="auto (known for simulated data, estimated for a measured scan), known "
+                     "(trust the scan's scale) or power (estimate it from the total power; the "
+                     "map then has the unobservable delta_c shape removed, its coefficient "
+                     "recorded)."),
     iterations: int | None = typer.Option(None, help="Fixed sweeps for gauss-seidel / sor."),
     device: str = typer.Option("cpu", help="Warp device of the refinement's model: cpu or cuda."),
     scheduler: str | None = typer.Option(

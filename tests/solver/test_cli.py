@@ -86,7 +86,7 @@ def test_panels_csv_from_a_fieldmap_whose_scene_has_panels(monkeypatch, capsys, 
                      "--grid", "128", "--refine", "0", "--panels-csv", str(table))
     assert code in (0, None)
     lines = table.read_text().splitlines()
-    assert lines[0].startswith("panel_id,ring,centre_x_m,centre_y_m,piston_um")
+    assert lines[0].startswith("panel_id,ring,centre_x_m,centre_y_m,tilt_x_urad")
     assert len(lines) == 1 + 216
 
 

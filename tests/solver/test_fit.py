@@ -54,6 +54,6 @@ def test_panel_table_recovers_rigid_panel_errors(tmp_path):
     path = write_panel_csv(rows, tmp_path / "panels.csv")
     with open(path) as fh:
         table = list(csv.DictReader(fh))
-    assert list(table[0]) == ["panel_id", "ring", "centre_x_m", "centre_y_m", "piston_um",
-                              "tilt_x_urad", "tilt_y_urad", "n_points"]
+    assert list(table[0]) == ["panel_id", "ring", "centre_x_m", "centre_y_m", "tilt_x_urad",
+                              "tilt_y_urad", "n_points"]         # pistons unobservable: left out
     assert len(table) == layout.n_panels
