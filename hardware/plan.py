@@ -15,6 +15,7 @@ import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +55,7 @@ class ScanPlan:
     the samples, ``drift_window`` how many references a ``smooth`` fit spans.
     ``power_unit`` is the power the receiver reads when the intensity is 1 (the incident
     plane wave's), so intensity = power / power_unit.
+    ``reading_s`` is the power meter's time per reading (for the scan's duration).
     ``refer_to_sphere`` scales each reading by (r / R)^2, r the probe's distance from the
     focus per the rig's calibration, to refer it to the sphere of radius R (the rays of a
     focusing reflector converge on the focus).
@@ -73,6 +75,7 @@ class ScanPlan:
     drift_window: int = 9
     power_unit: float = 1e-5
     refer_to_sphere: bool = True
+    reading_s: float = 0.05
     simulator: SimSettings = field(default_factory=SimSettings)
     text: str = ""
     rig_text: str = ""
@@ -109,12 +112,33 @@ class ScanPlan:
         rig = asdict(self.rig)
         rig.pop("resources")
         skip = ("text", "rig_text", "files", "rig", "simulator", "drift_correction",
-                "drift_window")
+                "drift_window", "reading_s")
         content = {k: v for k, v in asdict(self).items() if k not in skip}
         content["rig"] = rig
         content["extra"] = extra or {}
         blob = json.dumps(content, sort_keys=True, default=str).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
+
+    def duration(self, samples_per_point: int | None = None) -> float:
+        """The scan's time (s) on the rig: every move at the axes' speed (both axes at once),
+        the settle time after it and the readings (``samples_per_point``, default the plan's,
+        at each cell; ``reference_samples`` at each reference)."""
+        samples = self.samples_per_point if samples_per_point is None else samples_per_point
+        moves, n_samples, n_references = self._motion
+        readings = n_samples * samples + n_references * self.reference_samples
+        return moves + (n_samples + n_references) * self.settle_s + readings * self.reading_s
+
+    @cached_property
+    def _motion(self) -> tuple[float, int, int]:
+        """The time (s) the scan's moves take, and its sample and reference steps."""
+        moves, here, n_samples, steps = 0.0, None, 0, self.steps()
+        for step in steps:
+            there = self.rig.axes(step.theta, step.phi)
+            if here is not None:
+                moves += max(abs(there[0] - here[0]), abs(there[1] - here[1])) / self.rig.speed
+            here = there
+            n_samples += step.kind == SAMPLE
+        return moves, n_samples, len(steps) - n_samples
 
     def check_reach(self) -> None:
         """Raise :class:`PlanError` if a step lies outside the rig's reach."""
@@ -177,6 +201,7 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
     drift = acq.string("drift_correction", "auto", choices=DRIFT_MODES)
     window = acq.integer("drift_window", 9, lo=2)
     refer = acq.boolean("refer_to_sphere", True)
+    reading_s = acq.number("reading_s", 0.05, lo=0.0, hi=60.0)
     acq.done()
 
     simulator = sim_settings_from_table(top.sub("simulator", required=False))
@@ -184,7 +209,7 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
 
     plan = ScanPlan(F, D, frequency_hz, grid, rig, settle_s, samples, every, reference,
                     reference_samples, drift, window, dbm_to_w(power_unit_dbm), refer,
-                    simulator, text, rig_text, (rig_file,) if rig_file is not None else ())
+                    reading_s, simulator, text, rig_text, (rig_file,) if rig_file is not None else ())
     plan.check_reach()
     return plan
 

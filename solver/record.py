@@ -122,12 +122,13 @@ def accuracy_attrs(grid: ApertureGrid, delta: NDArray[np.float64], delta_out: ND
 
     ``delta`` is the map before any removal, ``delta_out`` after; the truth gets the same
     removal (the ``mode`` delta_c when given, then the terms), and is returned so (the
-    SurfaceMap's ``truth``). RRMS = RMS / peak-to-peak of the truth before removal.
+    SurfaceMap's ``truth``). RRMS = RMS / peak-to-peak of the truth before removal (NaN for a
+    flat truth, the ideal dish).
     """
     M = metrics.peak_to_peak(grid, truth)
     before = metrics.rms_error(grid, delta, truth)
     removed = truth if mode is None else remove_mode(grid, truth, mode)[0]
     removed, _ = remove_terms(grid, removed, terms)
     rms = metrics.rms_error(grid, delta_out, removed)
-    return ({"rms_before_removal_m": before, "rms_m": rms, "rrms": rms / M,
+    return ({"rms_before_removal_m": before, "rms_m": rms, "rrms": rms / M if M > 0 else float("nan"),
              "truth_peak_to_peak_m": M}, removed)

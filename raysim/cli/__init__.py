@@ -15,7 +15,16 @@ import sys
 
 import typer
 
-from raysim.cli import check, dataset, invert, render, scan, scenes, simulate  # noqa: F401  (register commands)
+from raysim.cli import (  # noqa: F401  (register commands)
+    budget,
+    check,
+    dataset,
+    invert,
+    render,
+    scan,
+    scenes,
+    simulate,
+)
 from raysim.cli.common import app, error_line, say_error
 from raysim.errors import RaysimError
 

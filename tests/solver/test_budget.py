@@ -1,0 +1,60 @@
+"""The error budget (solver.budget) against the inversion's own scatter over noisy scans.
+
+Monte Carlo is the test, not the method: each case inverts 32 noisy GO scans of the ideal
+dish (exact cell means from tests/reference_go.py, noise in dB per reading like a power
+meter's) with the whole linear pipeline, gain estimated, and compares the RMS scatter of the
+maps with the budget's prediction, for two scan plans and three noise levels.
+"""
+
+import numpy as np
+import pytest
+
+from raysim.maps.fieldmap import fieldmap
+from raysim.maps.sphere import SphereGrid
+from solver.aperture import ApertureGrid
+from solver.boundary import RimTargets, fit_harmonic
+from solver.budget import harmonic_rms, noise_budget
+from solver.invert import invert
+from tests.reference_go import cell_mean_intensity
+from tests.solver.conftest import D, F, R
+
+SEEDS = 32
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("cells", [(90, 360), (45, 180)])
+def test_the_budget_predicts_the_inversions_scatter(cells):
+    sphere = SphereGrid(R, *cells)
+    ideal = cell_mean_intensity(sphere, F, D)
+    for k, noise_db in enumerate((0.001, 0.01, 0.05)):
+        rng = np.random.default_rng(100 * k + cells[0])
+        squares = []
+        for _ in range(SEEDS):
+            reading = ideal * 10 ** (noise_db * rng.standard_normal(ideal.shape) / 10)
+            scan = fieldmap(sphere, reading, ideal, focal_length=F, diameter=D,
+                            frequency_hz=3e8, method="measured", sampling="cell_mean")
+            out = invert(scan, refine_iterations=0, N=256, truth=lambda x, y: 0.0 * x)
+            assert not out.attrs["gain_known"]
+            squares.append(out.attrs["rms_m"] ** 2)
+        observed = np.sqrt(np.mean(squares))
+        predicted = noise_budget(sphere, F, D, noise_db, delta_c="linear").total
+        assert predicted == pytest.approx(observed, rel=0.15), (cells, noise_db)
+
+
+def test_the_rim_targets_part_is_the_harmonic_fits_scatter():
+    """64 targets of 10 um on the rim: the harmonic fit's RMS over the disk, 400 draws."""
+    grid = ApertureGrid(D, 128)
+    a = grid.a
+    phi = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    targets = RimTargets(a * np.cos(phi), a * np.sin(phi), np.zeros(64))
+    rng = np.random.default_rng(4)
+    inside = grid.mask
+    squares = []
+    for _ in range(400):
+        series = fit_harmonic(targets, 10e-6 * rng.standard_normal(64), a)
+        rho, ang = grid.r[inside] / a, grid.phi[inside]
+        k = np.arange(series.cos.size)
+        h = (rho[:, None] ** k * (series.cos * np.cos(k * ang[:, None])
+                                  + series.sin * np.sin(k * ang[:, None]))).sum(axis=1)
+        squares.append(np.mean(h**2))
+    assert harmonic_rms(64, 10e-6) == pytest.approx(np.sqrt(np.mean(squares)), rel=0.05)
