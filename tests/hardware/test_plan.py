@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -97,3 +98,18 @@ def test_missing_rig_file(tmp_path: Path) -> None:
     (tmp_path / "rig.toml").unlink()
     with pytest.raises(PlanError, match="no such rig file"):
         load_plan(path)
+
+
+def test_duration_counts_moves_settling_and_readings(tmp_path: Path) -> None:
+    """2 theta x 2 phi cells, a reference after every line, counted by hand: the rotation
+    limits (-5..185 deg) send phi = 270 deg to rotation 90 deg with the slider negative, and
+    both axes move at once at 10 deg/s, so each move takes its larger angle's time."""
+    plan = load_plan(write_plan(tmp_path, theta_max=40.0, theta_step=20.0, phi_step=180.0,
+                                samples=3, every=1, reference_samples=2))
+    # axes (slider, rotation) in deg: ref (0, 0); line 0: (10, 90), (30, 90); ref;
+    # line 1 reversed: (-30, 90), (-10, 90); ref
+    moves_deg = [90, 20, 90, 90, 20, 90]
+    readings = 4 * 3 + 3 * 2
+    plan = replace(plan, settle_s=0.5, reading_s=0.1)
+    assert plan.duration() == pytest.approx(sum(moves_deg) / 10.0 + 7 * 0.5 + readings * 0.1)
+    assert plan.duration(5) - plan.duration() == pytest.approx(4 * 2 * 0.1)
