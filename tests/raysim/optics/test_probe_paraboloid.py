@@ -159,7 +159,7 @@ def test_po_cross_polar_ratio_without_the_rim_wave():
     u = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), -np.cos(T)], -1)
     wave = po.Illumination.plane_wave(10e9, (0.0, 0.0, -1.0), (1.0, 0.0, 0.0))
     E = po.scatter(paraboloid(D, F, 1.0), (np.array([0.0, 0.0, F]) + R * u).reshape(-1, 3), wave,
-                   samples_per_wavelength=1.0, taper=smooth_taper(3.0, 5.0)).E.reshape(T.shape + (3,))
+                   samples_per_wavelength=1.0, taper=smooth_taper(3.0, 5.0)).E.reshape((*T.shape, 3))
     d = arrival_directions(u)
     co, cross = Probe(0.0).power(E, d), Probe(np.pi / 2).power(E, d)
     co_ref, cross_ref = reference(T, P)
