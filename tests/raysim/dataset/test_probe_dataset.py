@@ -22,4 +22,5 @@ def test_dataset_samples_are_read_by_the_scenes_probe():
     plain = ideal_intensity(parse_spec(small_demo_text(measurement=False),
                                        base=ROOT / "scenes"), 0)
     # a cross-polar probe: a part of |E|^2, up to 43 % near this deep dish's rim (80 deg)
-    assert np.nanmax(ideal / plain) < 0.5 and np.nanmedian(ideal / plain) < 0.1
+    lit = plain > 0
+    assert np.max(ideal[lit] / plain[lit]) < 0.5 and np.median(ideal[lit] / plain[lit]) < 0.1
