@@ -149,7 +149,6 @@ class Probe:
         return out
 
 
-
 def _off_boresight(d: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
     """alpha (rad): the angle between unit vectors d and b (..., 3)."""
     return np.arccos(np.clip(np.sum(np.asarray(d) * np.asarray(b), axis=-1), -1.0, 1.0))
