@@ -7,7 +7,10 @@ linearly in the step index between the references (held beyond the first and las
 probe's distance from the focus from the read-back axes and the rig file's calibration.
 ``intensity_std`` is the standard error of the mean (sample standard deviation of the
 readings over sqrt(count), NaN with a single reading). ``intensity_ideal`` is the ideal
-paraboloid's GO value (rho / R)^2 at the commanded cell centres (0 beyond the rim image).
+paraboloid's GO value (rho / R)^2 at the commanded cell centres (0 beyond the rim image), as
+the rig's probe reads it (:func:`raysim.maps.probe.ideal_weight`: times its reading of the
+ideal reflected polarisation; 1 for the ideal |E|^2 meter), so that FA compares like with like;
+a polarised probe's scan records the plan's incident ``polarization`` (rad) as well.
 Cells without a record stay NaN, so a FieldMap can be written from a partial journal.
 """
 
@@ -24,6 +27,7 @@ from hardware.journal import Record
 from hardware.plan import REFERENCE, SAMPLE, ScanPlan
 from hardware.rig import rig_attrs
 from raysim.maps.fieldmap import fieldmap
+from raysim.maps.probe import ideal_weight
 from raysim.maps.sphere import ideal_go_intensity
 
 CELL_VARS = {
@@ -74,6 +78,12 @@ def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
             cells[name][i, j] = value
     ideal = np.repeat(ideal_go_intensity(grid.theta, plan.focal_length, R,
                                          plan.diameter)[:, None], grid.n_phi, axis=1)
+    if not plan.rig.probe_response.ideal:
+        ideal = ideal * ideal_weight(plan.rig.probe_response, grid.theta[:, None], grid.phi[None, :],
+                                     plan.focal_length, plan.polarization)
+    # recorded where it matters (a polarised probe, a wave model): older scans had neither
+    probe_attrs = {"polarization": plan.polarization} \
+        if plan.polarization != 0.0 or not plan.rig.probe_response.ideal else {}
     extra: dict[str, tuple[tuple[str, ...], np.ndarray, dict[str, str]]] = {
         name: (("theta", "phi"), cells[name], {"units": unit, "long_name": text})
         for name, (unit, text) in CELL_VARS.items()
@@ -109,6 +119,7 @@ def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
         "samples_measured": int(np.count_nonzero(cells["sample_index"] >= 0)),
         "plan": plan.text,
         "rig": plan.rig_text,
+        **probe_attrs,
         **(attrs or {}),
     }
     return fieldmap(grid, intensity, ideal, focal_length=plan.focal_length,

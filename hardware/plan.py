@@ -58,7 +58,8 @@ class ScanPlan:
     ``reading_s`` is the power meter's time per reading (for the scan's duration).
     ``refer_to_sphere`` scales each reading by (r / R)^2, r the probe's distance from the
     focus per the rig's calibration, to refer it to the sphere of radius R (the rays of a
-    focusing reflector converge on the focus).
+    focusing reflector converge on the focus). ``polarization`` (rad from x) is the incident
+    wave's E, which a polarised probe's ideal reading depends on.
     """
 
     focal_length: float
@@ -80,6 +81,7 @@ class ScanPlan:
     text: str = ""
     rig_text: str = ""
     files: tuple[Path, ...] = ()  # the plan file and the rig file it was read from
+    polarization: float = 0.0
 
     def inputs(self) -> list[tuple[str, Path]]:
         """(what, path) of the files this plan was read from, for output checks."""
@@ -111,8 +113,11 @@ class ScanPlan:
         """
         rig = asdict(self.rig)
         rig.pop("resources")
+        if self.rig.probe_response.ideal:
+            rig.pop("probe_response")  # the journals of scans made before probes existed still match
         skip = ("text", "rig_text", "files", "rig", "simulator", "drift_correction",
-                "drift_window", "reading_s")
+                "drift_window", "reading_s") + (("polarization",) if self.polarization == 0.0
+                                                else ())
         content = {k: v for k, v in asdict(self).items() if k not in skip}
         content["rig"] = rig
         content["extra"] = extra or {}
@@ -175,6 +180,7 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
     F = refl.number("focal_length_m", lo=0.0, lo_open=True)
     D = refl.number("diameter_m", lo=0.0, lo_open=True)
     frequency_hz = refl.number("frequency_hz", lo=0.0, lo_open=True)
+    polarization = refl.angle("polarization_deg", 0.0, lo=-360.0, hi=360.0)
     refl.done()
     if rig.radius >= F:
         raise top.fail(f"the track radius {rig.radius:g} m must be below F = {F:g} m")
@@ -209,7 +215,8 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
 
     plan = ScanPlan(F, D, frequency_hz, grid, rig, settle_s, samples, every, reference,
                     reference_samples, drift, window, dbm_to_w(power_unit_dbm), refer,
-                    reading_s, simulator, text, rig_text, (rig_file,) if rig_file is not None else ())
+                    reading_s, simulator, text, rig_text,
+                    (rig_file,) if rig_file is not None else (), polarization)
     plan.check_reach()
     return plan
 

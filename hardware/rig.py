@@ -13,6 +13,10 @@ degrees at the instrument). Commanded sphere angles (theta, phi) go to axis posi
 the probe on the ray from the focus in that direction (exact for a known centre offset, with the
 probe then at distance ``t`` from the focus instead of R); axis positions come back to the
 probe's true (theta, phi, r).
+
+The probe itself (the rig file's optional ``[probe]`` table, :mod:`raysim.maps.probe`): its
+polarisation in the reflector frame's x-y plane and its power pattern about its boresight, the
+direction from the probe to the focus. Without the table the rig reads |E|^2 (an ideal meter).
 """
 
 from __future__ import annotations
@@ -20,12 +24,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from hardware.config import Table, plan_table, read_toml
 from hardware.errors import PlanError
 from raysim.maps.measurement import probe_point
+from raysim.maps.probe import IDEAL, PROBE_KEYS, Probe, probe_from_table
 
 TWO_PI = 2.0 * math.pi
 
@@ -57,7 +63,8 @@ class Rig:
     optical path; ``speed`` is the axes' velocity (rad/s), ``tolerance`` the largest accepted
     difference between a target and its read-back (rad), ``move_timeout_s`` the longest one
     move may take (s). ``resources`` are default VISA addresses by role (``meter``,
-    ``motion``); ``visa_timeout_s`` bounds every instrument read (s).
+    ``motion``); ``visa_timeout_s`` bounds every instrument read (s). ``probe_response`` is what the
+    power meter reads (polarisation and pattern; the ideal |E|^2 meter by default).
     """
 
     radius: float
@@ -71,6 +78,7 @@ class Rig:
     move_timeout_s: float = 120.0
     resources: dict[str, str] = field(default_factory=dict)
     visa_timeout_s: float = 2.0
+    probe_response: Probe = IDEAL
 
     def with_calibration(self, calibration: Calibration) -> Rig:
         """The same rig with another calibration (e.g. a simulator's true one)."""
@@ -184,18 +192,20 @@ def rig_from_table(top: Table) -> Rig:
                  if (value := inst.string(role, None)) is not None}
     visa_timeout_s = inst.number("timeout_s", 2.0, lo=0.0, lo_open=True)
     inst.done()
+    probe = probe_from_table(top.sub("probe", keys=PROBE_KEYS))
     top.done()
     rig = Rig(radius=radius, calibration=calibration, limits=limits, park=park,
               slider_axis=slider_axis, rotation_axis=rotation_axis, speed=speed,
               tolerance=tolerance, move_timeout_s=move_timeout_s, resources=resources,
-              visa_timeout_s=visa_timeout_s)
+              visa_timeout_s=visa_timeout_s, probe_response=probe)
     if not rig.within_limits(*park):
         raise park_t.fail("'park': the park position lies outside the axis limits")
     return rig
 
 
-def rig_attrs(rig: Rig) -> dict[str, float | int]:
-    """The rig's settings as flat FieldMap attributes (SI: m, rad)."""
+def rig_attrs(rig: Rig) -> dict[str, Any]:
+    """The rig's settings as flat FieldMap attributes (SI: m, rad), its probe's included
+    (:meth:`raysim.maps.probe.Probe.attrs`: none for the ideal meter)."""
     cal = rig.calibration
     return {
         "rig_radius": rig.radius,
@@ -205,4 +215,5 @@ def rig_attrs(rig: Rig) -> dict[str, float | int]:
         "rig_slider_zero": cal.slider_zero,
         "rig_rotation_zero": cal.rotation_zero,
         "rig_tolerance": rig.tolerance,
+        **rig.probe_response.attrs(),
     }

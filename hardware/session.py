@@ -33,6 +33,7 @@ from hardware.sim.rig import Faults, SimulatedRig
 from hardware.sim.settings import SimSettings
 from raysim.files import check_output
 from raysim.maps import fieldmap as fieldmaps
+from raysim.maps.probe import probe_of
 from raysim.progress import Progress
 
 ROLES = ("meter", "motion")
@@ -255,6 +256,7 @@ def _instrument_addresses(plan: ScanPlan, resources: Mapping[str, str] | None,
         if not math.isclose(float(ds.attrs[name]), ours, rel_tol=1e-9):
             raise PlanError(f"{simulate}: {name} {float(ds.attrs[name]):g} m differs from the "
                             f"plan's {ours:g} m")
+    _check_probe(plan, ds, simulate)
     field = SphereField.from_fieldmap(ds)
     digest = hashlib.sha256(np.ascontiguousarray(field.ratio.values).tobytes()).hexdigest()[:16]
     extra = {"simulated": 1, "sim_field": str(simulate), "sim_field_sha256": digest,
@@ -264,3 +266,17 @@ def _instrument_addresses(plan: ScanPlan, resources: Mapping[str, str] | None,
     with sim_rig:
         yield sim_rig.resources, sim_rig, extra
 
+
+def _check_probe(plan: ScanPlan, ds: xr.Dataset, simulate: str | os.PathLike[str]) -> None:
+    """Refuse a FieldMap to scan that another probe measured: the simulated meter reads the
+    map's intensity, which is what the map's probe reads (raysim.maps.probe), so it must be
+    the rig's probe, and a polarised one under the plan's incident polarisation."""
+    theirs, ours = probe_of(ds, str(simulate)), plan.rig.probe_response
+    if theirs != ours:
+        raise PlanError(f"{simulate} was simulated with the probe '{theirs.describe()}', the rig "
+                        f"has '{ours.describe()}': simulate the scene with the rig's [probe]")
+    pol = float(ds.attrs.get("polarization", 0.0))
+    if ours.polarization is not None and not math.isclose(pol, plan.polarization, abs_tol=1e-12):
+        raise PlanError(f"{simulate} has the incident wave polarised at {math.degrees(pol):g} deg, "
+                        f"the plan at {math.degrees(plan.polarization):g} deg "
+                        "([reflector] polarization_deg)")

@@ -17,6 +17,10 @@ class FieldMapError(RaysimError, ValueError):
     """A FieldMap file breaks the data contract (missing variable, attribute or unit)."""
 
 
+class ProbeError(RaysimError, ValueError):
+    """A probe is not a probe (a pattern with q < 0, a table not increasing in angle)."""
+
+
 class DeviceError(RaysimError, RuntimeError):
     """The requested compute device (for example ``cuda``) is not available."""
 

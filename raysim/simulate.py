@@ -80,6 +80,7 @@ def scene_attrs(scene: Scene, deformed: Reflector) -> dict:
         "mesh_resolution": ideal_resolution(scene),
         "mesh_faces": len(deformed.faces),
         "panels": int(deformed.n_panels),
+        **scene.probe.attrs(),  # none for the ideal |E|^2 meter (raysim.maps.probe)
     }
 
 
@@ -186,11 +187,11 @@ def _stage(report: Progress, offset: float, width: float, label: str) -> Progres
 def _run_go(scene: Scene, ideal: Reflector, deformed: Reflector, options: Options,
             device: str | None, report: Progress) -> Run:
     """GO ray tubes on both reflectors (:func:`raysim.optics.go.trace`): cell means."""
-    k_hat = scene.source.direction
+    k_hat, probe, e_hat = scene.source.direction, scene.probe, scene.source.e_hat
     result_ideal = go.trace(ideal, scene.sphere, k_hat, scene.subdivisions, device,
-                            _stage(report, 0.05, 0.45, "ideal"))
+                            _stage(report, 0.05, 0.45, "ideal"), probe, e_hat)
     result_def = go.trace(deformed, scene.sphere, k_hat, scene.subdivisions, device,
-                          _stage(report, 0.5, 0.45, "deformed"))
+                          _stage(report, 0.5, 0.45, "deformed"), probe, e_hat)
     attrs = {
         "subdivisions": int(scene.subdivisions),
         "rays": int(result_def.n_rays + result_ideal.n_rays),
@@ -361,12 +362,23 @@ def _wave_run(scene: Scene, options: Options, context: dict, arrays: dict[str, N
                                   wave.e_hat)
         fields["E"] = fields["E"] + E_inc.reshape(shape)
         fields["E_ideal"] = fields["E_ideal"] + E_inc.reshape(shape)
-    run = Run(np.sum(np.abs(fields["E"]) ** 2, axis=-1), np.sum(np.abs(fields["E_ideal"]) ** 2, axis=-1),
-              "centre", attrs)
+    run = Run(probe_power(scene, fields["E"]), probe_power(scene, fields["E_ideal"]), "centre",
+              attrs)
     if options.save_field:
         run.extra = field_variables(fields, attrs["field"])
         run.coords = {"component": ("component", ["x", "y", "z"])}
     return run
+
+
+def probe_power(scene: Scene, E: NDArray[np.complex128]) -> NDArray[np.float64]:
+    """What the scene's probe reads (n_theta, n_phi) of the complex field E (n_theta, n_phi,
+    3) at the cell centres: |E|^2 for the ideal meter; otherwise the field taken to arrive as
+    the ideal dish's rays do, on the probe's boresight (:func:`raysim.maps.probe.arrival_directions`)."""
+    from raysim.maps.probe import arrival_directions
+
+    if scene.probe.ideal:
+        return np.sum(np.abs(E) ** 2, axis=-1)
+    return scene.probe.power(E, arrival_directions(scene.sphere.directions()))
 
 
 def _run_go_edge(scene: Scene, ideal: Reflector, deformed: Reflector, options: Options,
@@ -404,8 +416,8 @@ def _run_go_edge(scene: Scene, ideal: Reflector, deformed: Reflector, options: O
     if options.total:
         E_inc = po.incident_field(scene.sphere.points(deformed.F), wave.k, wave.k_hat, wave.e_hat)
         fields = {name: E + E_inc.reshape(E.shape) for name, E in fields.items()}
-    run = Run(np.sum(np.abs(fields["E"]) ** 2, axis=-1), np.sum(np.abs(fields["E_ideal"]) ** 2, axis=-1),
-              "centre", attrs)
+    run = Run(probe_power(scene, fields["E"]), probe_power(scene, fields["E_ideal"]), "centre",
+              attrs)
     if options.save_field:
         fields.update({"E_geo": r_def.E_geo, "E_geo_ideal": r_ideal.E_geo, "E_edges": r_def.E_edge,
                        "E_edges_ideal": r_ideal.E_edge})

@@ -4,10 +4,13 @@ Frame and units (docs/physics.md): the estimate delta (m) on the aperture grid x
 grid (theta, phi in rad) of the scan, centred at the focus (0, 0, F); intensities relative to
 the incident plane wave (dimensionless).
 
-Every model needs only what a FieldMap carries: F, D, R and the grid, and for the wave models
-the frequency, the incident polarisation (attribute ``polarization`` in rad; a scan without
-one was taken with E along x, docs/physics.md) and whether the probe saw the scattered field alone
-or the total field (attribute ``field``).
+Every model needs only what a FieldMap carries: F, D, R and the grid, the probe that measured
+it (:func:`raysim.maps.probe.probe_of`: its polarisation and pattern; a scan without probe
+attributes was read by an ideal |E|^2 meter) and the incident polarisation (attribute
+``polarization`` in rad; a scan without one was taken with E along x, docs/physics.md), and for
+the wave models the frequency and whether the probe saw the scattered field alone or the total
+field (attribute ``field``). Every model reads its field with the scan's probe, so the model's
+intensity is the quantity the scan measured.
 
 - ``go``: the project's GO engine (:func:`raysim.optics.go.forward_intensity`): cell means, no
   diffraction. Cheap (a second or two per call on the paper grid).
@@ -52,6 +55,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from raysim.constants import wavenumber
+from raysim.maps.probe import IDEAL, Probe, arrival_directions, probe_of
 from raysim.maps.sphere import SphereGrid
 from raysim.progress import Progress
 from solver.errors import SolverError
@@ -128,9 +132,12 @@ def model_for_method(method: str) -> str:
 class GOForward(ForwardModel):
     """The project's GO engine (:class:`raysim.optics.go.ParaboloidTracer`): cell means of the
     ray-tube intensity, no diffraction. The model owns its tracer (the ideal mesh and BVH per
-    geometry) and the ideal reflector's map per (sphere grid, F, D), for the model's life."""
+    geometry) and the ideal reflector's map per (sphere grid, F, D), for the model's life.
+    ``probe`` reads the rays of the on-axis wave polarised at ``polarization`` (rad from x)."""
 
     device: str | None = "cpu"
+    probe: Probe = IDEAL
+    polarization: float = 0.0
     name = "go"
     _ideal: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     _tracer: Any = field(default=None, init=False, repr=False, compare=False)
@@ -143,14 +150,16 @@ class GOForward(ForwardModel):
         if delta is None:
             key = (sphere, float(F), float(D))
             if key not in self._ideal:
-                self._ideal[key] = self._tracer.intensity(sphere, float(F), float(D))
+                self._ideal[key] = self._tracer.intensity(sphere, float(F), float(D), None,
+                                                          self.probe, self.polarization)
             return self._ideal[key].copy()
         from raysim.surface.gridded import GriddedMap
 
-        return self._tracer.intensity(sphere, F, D, GriddedMap(x, y, delta))
+        return self._tracer.intensity(sphere, F, D, GriddedMap(x, y, delta), self.probe,
+                                      self.polarization)
 
     def describe(self) -> str:
-        return "raysim.optics.go GO engine (cell means, no diffraction)"
+        return "raysim.optics.go GO engine (cell means, no diffraction)" + _probe_note(self.probe)
 
 
 def go_forward(device: str | None = "cpu") -> GOForward:
@@ -171,6 +180,8 @@ class WaveForward(WaveModel):
     samples_per_wavelength : PO quadrature (None: the engine's default).
     face_m : quadrature face size (m).
     device : Warp device.
+    probe : what reads the field (:meth:`raysim.maps.probe.Probe.power`, the field taken to
+        arrive on the probe's boresight, as the simulation's wave methods read it).
     """
 
     frequency_hz: float
@@ -180,6 +191,7 @@ class WaveForward(WaveModel):
     samples_per_wavelength: float | None = None
     face_m: float = PO_FACE_M
     device: str | None = "cpu"
+    probe: Probe = IDEAL
     calls: int = field(default=0, compare=False)
     seconds: float = field(default=0.0, compare=False)
     _ideal: OrderedDict = field(default_factory=OrderedDict, init=False, repr=False, compare=False)
@@ -194,14 +206,21 @@ class WaveForward(WaveModel):
         return (f"raysim.optics.po {'+ raysim.optics.ptd ' if self.ptd else ''}at "
                 f"{self.frequency_hz / 1e9:g} GHz, E at {np.degrees(self.polarization):g} deg "
                 f"from x, {'total' if self.total else 'scattered'} field, {self.face_m:g} m faces, "
-                f"{'default' if spw is None else f'{spw:g}'} samples per wavelength")
+                f"{'default' if spw is None else f'{spw:g}'} samples per wavelength"
+                f"{_probe_note(self.probe)}")
 
     def __call__(self, sphere: SphereGrid, F: float, D: float, x: NDArray, y: NDArray,
                  delta: NDArray | None, progress: Progress | None = None) -> NDArray:
         if delta is None:
-            return np.sum(np.abs(self.ideal_field(sphere, F, D, progress)) ** 2, axis=-1)
+            return self.read(sphere, self.ideal_field(sphere, F, D, progress))
         E = self._field(sphere, F, D, (np.asarray(x), np.asarray(y), np.asarray(delta)), progress)
-        return np.sum(np.abs(E) ** 2, axis=-1)
+        return self.read(sphere, E)
+
+    def read(self, sphere: SphereGrid, E: NDArray[np.complex128]) -> NDArray[np.float64]:
+        """What the model's probe reads (n_theta, n_phi) of the field E (n_theta, n_phi, 3)."""
+        if self.probe.ideal:
+            return np.sum(np.abs(E) ** 2, axis=-1)
+        return self.probe.power(E, arrival_directions(sphere.directions()))
 
     def ideal_field(self, sphere: SphereGrid, F: float, D: float,
                     progress: Progress | None = None) -> NDArray[np.complex128]:
@@ -317,7 +336,8 @@ class GOEdgeForward(WaveForward):
     def describe(self) -> str:
         return (f"raysim.optics.goedge (geometric wave + rim diffraction) at "
                 f"{self.frequency_hz / 1e9:g} GHz, E at {np.degrees(self.polarization):g} deg from x, "
-                f"{'total' if self.total else 'scattered'} field, {self.face_m:g} m faces")
+                f"{'total' if self.total else 'scattered'} field, {self.face_m:g} m faces"
+                f"{_probe_note(self.probe)}")
 
     def _scattered(self, sphere: SphereGrid, F: float, D: float, surface: tuple | None, wave,
                    progress: Progress | None) -> NDArray[np.complex128]:
@@ -428,15 +448,22 @@ def forward_for(model: str, attrs: dict, device: str | None = "cpu",
     """
     if model not in MODELS:
         raise SolverError(f"unknown model {model!r}: choose one of {', '.join(MODELS)}")
+    probe = probe_of(attrs)
+    polarization = float(attrs.get("polarization", 0.0))
     if model == "go":
-        go = GOForward(device)
+        go = GOForward(device, probe, polarization)
         return go, go.describe()
     frequency = float(attrs.get("frequency_hz", 0.0))
     if not frequency > 0:
         raise SolverError(f"model {model} needs the scan's frequency_hz (> 0), got {frequency}")
     kind = GOEdgeForward if model == "go+edge" else WaveForward
-    wave = kind(frequency, float(attrs.get("polarization", 0.0)),
+    wave = kind(frequency, polarization,
                 total=str(attrs.get("field", "scattered")) == "total",
                 ptd=model == "po+ptd", samples_per_wavelength=samples_per_wavelength,
-                device=device)
+                device=device, probe=probe)
     return wave, wave.describe()
+
+
+def _probe_note(probe: Probe) -> str:
+    """The model description's probe clause (nothing for the ideal |E|^2 meter)."""
+    return "" if probe.ideal else f", read by the scan's probe ({probe.describe()})"

@@ -15,7 +15,8 @@ dh/dy) at the PO samples, and its transpose, with the spline's own knots: the B-
 coefficients are Ay^-1 Z Ax^-T (collocation matrices at the grid centres), the sample values
 B_y(y_s) C B_x(x_s)^T and the slopes with one factor differentiated. With
 :mod:`raysim.optics.po_jacobian` this gives the model's exact JVP and VJP
-(:class:`WaveJacobian`): dI = 2 Re(conj(E) . dE) per sphere cell.
+(:class:`WaveJacobian`): dI = 2 Re(conj(E) . dE) per sphere cell, or with a polarised probe
+(:mod:`raysim.maps.probe`: I = |v . E|^2, v = sqrt(g(0)) p_t real) dI = 2 Re(conj(v . E) v . dE).
 """
 
 from __future__ import annotations
@@ -140,6 +141,12 @@ class WaveJacobian:
         self.E = model.field(sphere, F, D, surface).reshape(-1, 3)
         self.elements = po_jacobian.surface_elements(self.reflector, self.wave, spw, model.device)
         self.samples = GridToSamples(grid, self.elements.x, self.elements.y)
+        # the probe as a real vector per point (None: |E|^2 times the boresight pattern g0)
+        from raysim.maps.probe import arrival_directions
+
+        self.v = None if model.probe.ideal else model.probe.vector(
+            arrival_directions(sphere.directions().reshape(-1, 3)))
+        self.g0 = float(model.probe.pattern(0.0))
         self.edges = None
         if model.ptd:
             from raysim.optics import ptd_jacobian
@@ -151,8 +158,17 @@ class WaveJacobian:
 
     @property
     def intensity(self) -> NDArray[np.float64]:
-        """|E|^2 (n_theta, n_phi) of the model at this estimate."""
-        return np.sum(np.abs(self.E) ** 2, axis=-1).reshape(self.shape)
+        """What the model's probe reads (n_theta, n_phi) at this estimate: |E|^2 for the
+        ideal meter."""
+        if self.v is None:
+            return (self.g0 * np.sum(np.abs(self.E) ** 2, axis=-1)).reshape(self.shape)
+        return (np.abs(np.sum(self.v * self.E, axis=-1)) ** 2).reshape(self.shape)
+
+    def _reading(self) -> NDArray[np.complex128]:
+        """The vector c (n_points, 3) with dI = 2 Re(conj(c) . dE): g0 E, or (v . E) v."""
+        if self.v is None:
+            return self.g0 * self.E
+        return np.sum(self.v * self.E, axis=-1, keepdims=True) * self.v
 
     def field_jvp(self, v_in: NDArray[np.float64]) -> NDArray[np.complex128]:
         """dE (n_points, 3) for grid values ``v_in`` (m) inside the aperture."""
@@ -168,17 +184,20 @@ class WaveJacobian:
         return dE
 
     def jvp(self, v_in: NDArray[np.float64]) -> NDArray[np.float64]:
-        """dI (n_theta, n_phi) = 2 Re(conj(E) . dE) for grid values ``v_in`` (m)."""
+        """dI (n_theta, n_phi) = 2 Re(conj(E) . dE) (with a probe: of its reading, module
+        docstring) for grid values ``v_in`` (m)."""
         self.calls["jvp"] += 1
         dE = self.field_jvp(v_in)
-        return 2.0 * np.real(np.sum(np.conj(self.E) * dE, axis=-1)).reshape(self.shape)
+        E = self.E if self.v is None and self.g0 == 1.0 else self._reading()
+        return 2.0 * np.real(np.sum(np.conj(E) * dE, axis=-1)).reshape(self.shape)
 
     def vjp(self, y: NDArray[np.float64]) -> NDArray[np.float64]:
         """The transpose: weights ``y`` (n_theta, n_phi) on dI -> gradient on the grid values."""
         from raysim.optics import po_jacobian
 
         self.calls["vjp"] += 1
-        c = 2.0 * np.asarray(y, dtype=np.float64).reshape(-1, 1) * self.E
+        E = self.E if self.v is None and self.g0 == 1.0 else self._reading()
+        c = 2.0 * np.asarray(y, dtype=np.float64).reshape(-1, 1) * E
         g = po_jacobian.vjp(self.elements, self.points, c, self.model.device)
         out = self.samples.transpose(*g)
         if self.edges is not None:

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from raysim.maps.probe import probe_of
 from solver import metrics
 from solver.aperture import ApertureGrid
 from solver.fit import remove_terms
@@ -90,6 +91,9 @@ def surface_attrs(opts: InvertOptions, out: Outcome) -> dict[str, Any]:
     }
     for name, value in out.removed.items():
         attrs[f"removed_{name}"] = value
+    probe = probe_of(scan.attrs)
+    if not probe.ideal:  # the probe the scan was read with (raysim.maps.probe)
+        attrs["data_probe"] = probe.describe()
     return attrs
 
 

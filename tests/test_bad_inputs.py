@@ -177,6 +177,18 @@ def workspace(tmp_path_factory):
         "rim_header.csv": "a,b,c\n1,2,3\n",
         "rim_text.csv": "x,y,dz\n10.0,0.0,zero\n",
         "notes.txt": "a file of the user's, not a report\n",
+        "probe_q.toml": SCENE + "[probe]\npolarization_deg = 0.0\npattern_q = -1.0\n",
+        "probe_order.toml": SCENE + "[probe]\npattern = [[0.0, 1.0], [20.0, 0.5], [10.0, 0.2]]\n",
+        "probe_angle.toml": SCENE + "[probe]\npattern = [[0.0, 1.0], [200.0, 0.5]]\n",
+        "probe_both.toml": SCENE + "[probe]\npattern_q = 2.0\npattern = [[0.0, 1.0], [9.0, 0.5]]\n",
+        "probe_rows.toml": SCENE + "[probe]\npattern = [1.0, 0.5]\n",
+        "probe_typo.toml": SCENE + "[probe]\npolarisation_deg = 90.0\n",
+        "probe_text.toml": SCENE + '[probe]\npolarization_deg = "x"\n',
+        "rig_probe_q.toml": RIG + "[probe]\npattern_q = -2.0\n",
+        "rig_probe_order.toml": RIG + "[probe]\npattern = [[10.0, 1.0], [5.0, 0.5]]\n",
+        "rig_probe.toml": RIG + "[probe]\npolarization_deg = 0.0\n",
+        "plan_probe_q.toml": PLAN.replace('rig = "rig.toml"', 'rig = "rig_probe_q.toml"'),
+        "plan_probe.toml": PLAN.replace('rig = "rig.toml"', 'rig = "rig_probe.toml"'),
     }
     for name, text in files.items():
         (ws / name).write_text(text)
@@ -239,6 +251,13 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["simulate", "scene.toml", "-o", "o.nc", "--method", "po", "--samples-per-wavelength", "-1"],
          "must lie in (0, 20]"),
         (["simulate", "scene.toml", "-o", "/proc/o.nc"], "cannot write in /proc"),
+        (["simulate", "probe_q.toml", "-o", "o.nc"], "'probe': the pattern's q must be a number in 0..1000"),
+        (["simulate", "probe_order.toml", "-o", "o.nc"], "angles must increase from row to row"),
+        (["simulate", "probe_angle.toml", "-o", "o.nc"], "angles must lie in 0..180 deg, got 0..200"),
+        (["simulate", "probe_both.toml", "-o", "o.nc"], "(cos^q) or 'probe.pattern' (a table), not both"),
+        (["simulate", "probe_rows.toml", "-o", "o.nc"], "must be a list of [angle_deg, relative_power] rows"),
+        (["simulate", "probe_typo.toml", "-o", "o.nc"], "unknown key 'probe.polarisation_deg'"),
+        (["simulate", "probe_text.toml", "-o", "o.nc"], "'probe.polarization_deg' must be a number"),
         (["simulate", "binary.toml", "-o", "o.nc"], "not a text file"),
         (["simulate", "bad_toml.toml", "-o", "o.nc"], "not valid TOML"),
         (["simulate", "typo.toml", "-o", "o.nc"], "unknown key 'dish.diametre_m' (did you mean 'diameter_m'?)"),
@@ -360,6 +379,9 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["scan", "plan.toml", "-o", "o.nc", "--resource", "meter=TCPIP::127.0.0.1::{silent}::SOCKET",
           "--resource", "motion=TCPIP::127.0.0.1::{silent}::SOCKET"], "is silent"),
         (["scan", "plan.toml", "-o", "o.nc", "--simulate", "negative.nc"], "holds negative values"),
+        (["scan", "plan_probe_q.toml", "-o", "o.nc", "--simulate", "f.nc"], "pattern's q must be"),
+        (["scan", "plan_probe.toml", "-o", "o.nc", "--simulate", "f.nc"],
+         "was simulated with the probe 'ideal |E|^2 power meter', the rig has 'polarised at 0 deg"),
     ],
     "budget": [
         (["budget", "missing.toml"], "no such scan plan file"),
@@ -387,6 +409,7 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
          "is silent"),
         (["rig", "park", "rig.toml"], "no motion controller address"),
         (["rig", "park", "rig.toml", "--speed", "3"], "No such option"),
+        (["rig", "park", "rig_probe_order.toml", "--simulate"], "angles must increase from row to row"),
     ],
 }
 

@@ -89,7 +89,8 @@ def intensity(spec: DatasetSpec, deformation: Deformation | None, f_index: int,
         reflector = setup.ideal if deformation is None \
             else setup.ideal.deformed(Memo(deformation, setup.factors))
         report("deform", time.perf_counter() - start)
-        return setup.tracer.trace(reflector, _stage_timer(report)).intensity
+        return setup.tracer.trace(reflector, _stage_timer(report), scene.probe,
+                                  scene.source.e_hat).intensity
     ideal = spec_reflector(spec)
     reflector = ideal if deformation is None else ideal.deformed(Memo(deformation))
     report("deform", time.perf_counter() - start)
@@ -113,15 +114,17 @@ def ideal_intensity(spec: DatasetSpec, f_index: int, device: str = "cpu") -> np.
 
 def wave_intensity(scene, reflector: Reflector, method: str, device: str = "cpu") -> np.ndarray:
     """|E|^2 of ``reflector`` on the scene's sphere by PO (``po``) or PO plus the rim's fringe
-    field (``po+ptd``), the scattered field at the cell centres as ``raysim.simulate`` gives it."""
+    field (``po+ptd``), the scattered field at the cell centres as ``raysim.simulate`` gives it
+    (what the scene's probe reads of it, :func:`raysim.simulate.probe_power`)."""
     from raysim.optics import po, ptd
+    from raysim.simulate import probe_power
 
     source = scene.source
     wave = po.Illumination.plane_wave(source.frequency_hz, source.direction, source.e_hat)
     E = po.sphere_field(reflector, scene.sphere, wave, po.DEFAULT_SAMPLES_PER_WAVELENGTH, device).E
     if method == "po+ptd":
         E = E + ptd.sphere_edge_field(reflector, scene.sphere, wave, "rim", device=device).E
-    return np.sum(np.abs(E) ** 2, axis=-1)
+    return probe_power(scene, E)
 
 
 def _stage_timer(report: Stages) -> go.Progress:

@@ -35,9 +35,12 @@ def sample_fieldmap(ds: xr.Dataset, index: int, source: str = "clean") -> xr.Dat
     sample = ds.isel(sample=index)
     frequency = float(sample["frequency_hz"].values)
     ideal = ds["intensity_ideal"].sel(frequency=frequency)
+    from raysim.scene import scene_of
+
+    scene = scene_of(ds.attrs)  # its probe read the samples (raysim.maps.probe)
     attrs = {"dataset": ds.attrs.get("name", ""), "sample": int(index),
              "seed": str(int(sample["seed"].values)), "deformation_rms": float(sample["rms"].values),
-             "dataset_intensity": variable}
+             "dataset_intensity": variable, **(scene.probe.attrs() if scene is not None else {})}
     return fieldmap(grid_of(ds), sample[variable].values, ideal.values,
                     focal_length=ds.attrs["focal_length"], diameter=ds.attrs["diameter"],
                     frequency_hz=frequency, method=ds.attrs["method"], sampling=ds.attrs["sampling"],

@@ -11,4 +11,6 @@ Modules:
 - ``surfacemap``: the SurfaceMap contract (``xarray.Dataset``: delta on the aperture grid,
   with the inversion's assumptions in its attributes), its checks, saving and loading.
 - ``netcdf``: atomic NetCDF writing and reading shared by the contracts.
+- ``probe``: the probe on the sphere (polarisation, power pattern, what it reads of a field),
+  its ``[probe]`` table and its FieldMap attributes.
 """

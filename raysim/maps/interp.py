@@ -17,7 +17,8 @@ import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
 from raysim.maps.fieldmap import grid_of
-from raysim.maps.sphere import SphereGrid, ideal_go_intensity
+from raysim.maps.probe import probe_of
+from raysim.maps.sphere import SphereGrid, ideal_go_cell_mean, ideal_go_intensity
 
 
 class FieldSampler:
@@ -101,6 +102,12 @@ class SphereField:
     last lit cell below them, so that directions between the last lit centre and the rim
     image interpolate between finite values.
 
+    A map measured with a probe other than the ideal meter (:mod:`raysim.maps.probe`) holds the
+    probe's reading, which a cross-polar probe makes vanish in whole planes; its ratio is taken
+    to the ideal paraboloid's GO intensity without the probe instead (the cell means or centre
+    values its ``sampling`` says), which is positive up to the rim image, and so carries the
+    probe's smooth response: the value is still what that probe reads.
+
     Parameters
     ----------
     ratio : sampler of intensity / intensity_ideal (NaN where the ideal is 0).
@@ -116,6 +123,8 @@ class SphereField:
     def from_fieldmap(cls, ds: xr.Dataset) -> SphereField:
         """From a FieldMap's intensities and attributes (F, D, R in m)."""
         ideal = ds["intensity_ideal"].values
+        if not probe_of(ds).ideal:
+            ideal = _go_ideal(ds)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(ideal > 0, ds["intensity"].values / ideal, np.nan)
         for i in range(1, ratio.shape[0]):
@@ -144,6 +153,19 @@ class SphereField:
         ideal = ideal_go_intensity(theta, self.F, self.radius, self.D)
         value = self.ratio(theta, phi) * ideal * (self.radius / r) ** 2
         return np.where((ideal > 0.0) & np.isfinite(value), value, 0.0)
+
+
+def _go_ideal(ds: xr.Dataset) -> NDArray[np.float64]:
+    """The ideal paraboloid's GO intensity (n_theta, n_phi) on a FieldMap's grid, without a
+    probe: cell means for ``cell_mean`` maps, centre values otherwise (0 beyond the rim image)."""
+    grid = grid_of(ds)
+    F, D = float(ds.attrs["focal_length"]), float(ds.attrs["diameter"])
+    if ds.attrs.get("sampling") == "cell_mean":
+        e = grid.theta_edges
+        column = ideal_go_cell_mean(e[:-1], e[1:], F, grid.radius, D)
+    else:
+        column = ideal_go_intensity(grid.theta, F, grid.radius, D)
+    return np.repeat(np.asarray(column)[:, None], grid.n_phi, axis=1)
 
 
 def _snap(index: NDArray[np.float64]) -> NDArray[np.float64]:

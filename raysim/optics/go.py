@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from raysim.errors import RaysimError
+from raysim.maps.probe import Probe
 from raysim.maps.sphere import SphereGrid
 from raysim.optics import runtime
 from raysim.optics.bvh import ReflectorBVH
@@ -52,11 +53,14 @@ class GOResult:
     n_shadowed: int  # rays with another face in front of them
     n_missed: int  # lit rays that did not reach the sphere
     seconds: float
+    power_read: float | None = None  # with a probe: the lit tubes' power as the probe reads it
 
     @property
     def power_balance(self) -> float:
-        """power_on_grid / power_lit - 1: zero to round-off when the grid sees every tube."""
-        return self.power_on_grid / self.power_lit - 1.0 if self.power_lit > 0 else float("nan")
+        """power_on_grid / power_lit - 1 (with a probe: over power_read): zero to round-off
+        when the grid sees every tube."""
+        lit = self.power_lit if self.power_read is None else self.power_read
+        return self.power_on_grid / lit - 1.0 if lit > 0 else float("nan")
 
 
 # --- ray lattice -----------------------------------------------------------------------------
@@ -141,13 +145,18 @@ def lift_to_surface(reflector: Reflector, lattice: RayLattice, k_hat: NDArray,
 
 # --- the trace ------------------------------------------------------------------------------
 def trace(reflector: Reflector, grid: SphereGrid, direction=ON_AXIS, subdivisions: int = 1,
-          device: str | None = "cpu", progress: Progress | None = None) -> GOResult:
+          device: str | None = "cpu", progress: Progress | None = None,
+          probe: Probe | None = None, e_hat=None) -> GOResult:
     """GO intensity of ``reflector`` on ``grid`` for a plane wave travelling along ``direction``.
 
-    Returns cell means relative to the incident intensity (see the module docstring).
+    Returns cell means relative to the incident intensity (see the module docstring); with a
+    ``probe`` (not the ideal meter), cell means of what it reads of the wave polarised along
+    ``e_hat`` (unit, transverse to ``direction``; None: x, for the on-axis wave), see
+    :mod:`raysim.optics.goprobe`.
     """
     start = time.perf_counter()
-    result = Tracer(reflector, grid, direction, subdivisions, device).trace(reflector, progress)
+    result = Tracer(reflector, grid, direction, subdivisions, device).trace(reflector, progress,
+                                                                            probe, e_hat)
     return replace(result, seconds=time.perf_counter() - start)
 
 
@@ -238,14 +247,17 @@ class Tracer:
             return tube_power(lattice, self.k_hat)
         return self._power if self._same_xy(reflector) else tube_power(lattice, self.k_hat)
 
-    def trace(self, reflector: Reflector, progress: Progress | None = None) -> GOResult:
-        """The GO result of ``reflector`` (the template or a twin of it); see :func:`trace`.
+    def trace(self, reflector: Reflector, progress: Progress | None = None,
+              probe: Probe | None = None, e_hat=None) -> GOResult:
+        """The GO result of ``reflector`` (the template or a twin of it) as ``probe`` reads
+        it (None: the ideal meter); see :func:`trace`.
 
         One trace at a time: the BVH holds one twin's vertices (concurrent calls queue)."""
         with self._lock:
-            return self._trace(reflector, progress)
+            return self._trace(reflector, progress, probe, e_hat)
 
-    def _trace(self, reflector: Reflector, progress: Progress | None) -> GOResult:
+    def _trace(self, reflector: Reflector, progress: Progress | None, probe: Probe | None = None,
+               e_hat=None) -> GOResult:
         wp = runtime.init()
         from raysim.optics.kernels import go as K
 
@@ -283,6 +295,14 @@ class Tracer:
         report("deposit", 0.6)
         power_t = self._tube_power(reflector, lattice)
         tube_lit = lit_np[lattice.tubes].all(axis=1)
+        power_read = None
+        if probe is not None and not probe.ideal:
+            from raysim.optics.goprobe import tube_weights
+
+            e = np.array([1.0, 0.0, 0.0]) if e_hat is None else np.asarray(e_hat, dtype=np.float64)
+            power_t = power_t * tube_weights(probe, lattice.tubes, normals, k_hat, e,
+                                             chart.numpy(), ok_np)
+            power_read = float(power_t[tube_lit].sum())
         power = wp.zeros((grid.n_theta, grid.n_phi), dtype=wp.float64, device=dev)
         runtime.launch(
             K.deposit_tubes, self.n_tubes,
@@ -302,6 +322,7 @@ class Tracer:
             n_shadowed=int((~lit_np).sum()),
             n_missed=int((lit_np & ~ok_np).sum()),
             seconds=time.perf_counter() - start,
+            power_read=power_read,
         )
 
 
@@ -332,13 +353,17 @@ class ParaboloidTracer:
         return self._tracers[key]
 
     def intensity(self, grid: SphereGrid, F: float, D: float,
-                  deformation: Deformation | None = None) -> NDArray[np.float64]:
-        """GO cell-mean intensity (n_theta, n_phi) on ``grid``, relative to the incident one."""
+                  deformation: Deformation | None = None, probe: Probe | None = None,
+                  polarization: float = 0.0) -> NDArray[np.float64]:
+        """GO cell-mean intensity (n_theta, n_phi) on ``grid``, relative to the incident one,
+        as ``probe`` reads it (None: the ideal meter) of the on-axis wave polarised at
+        ``polarization`` (rad from x)."""
         tracer = self.tracer(grid, F, D)
         ideal = tracer.template
         reflector = ideal if deformation is None or isinstance(deformation, NoDeformation) \
             else ideal.deformed(deformation)
-        return tracer.trace(reflector).intensity
+        e_hat = (np.cos(polarization), np.sin(polarization), 0.0)
+        return tracer.trace(reflector, None, probe, e_hat).intensity
 
 
 def forward_intensity(grid: SphereGrid, F: float, D: float, deformation: Deformation | None = None,

@@ -1,10 +1,12 @@
 """Scenes: TOML files -> a validated :class:`Scene` in SI units.
 
 A scene names the dish (diameter and focal length, or a mesh file), its panels and gaps, the
-surface errors, the source (frequency, direction of incidence, polarization) and the probe
-sphere. Keys carry their unit in their name (``diameter_m``, ``frequency_hz``,
-``theta_max_deg``, ``amplitude_um``); degrees and micrometres are converted here, at the edge,
-and the rest of raysim sees metres, hertz and radians. Every defect raises
+surface errors, the source (frequency, direction of incidence, polarization), the probe
+sphere and, optionally, the probe on it (``[probe]``: polarisation and pattern,
+:mod:`raysim.maps.probe`; without it an ideal |E|^2 meter). Keys carry their unit in their
+name (``diameter_m``, ``frequency_hz``, ``theta_max_deg``, ``amplitude_um``); degrees and
+micrometres are converted here, at the edge, and the rest of raysim sees metres, hertz and
+radians. Every defect raises
 :class:`~raysim.errors.SceneError` with one line naming the file and the key.
 """
 
@@ -21,6 +23,7 @@ import numpy as np
 from raysim.constants import wavelength
 from raysim.errors import SceneError
 from raysim.files import find_input
+from raysim.maps.probe import IDEAL, PROBE_KEYS, Probe, probe_from_table
 from raysim.maps.sphere import SphereGrid, theta_rim
 from raysim.methods import METHODS
 from raysim.scene.deformations import deformation_of
@@ -93,6 +96,7 @@ class Scene:
     path: Path | None = None
     method: str = "go"
     files: tuple[Path, ...] = ()  # the files the scene names (meshes, maps, panel tables)
+    probe: Probe = IDEAL  # what the power meter on the sphere reads (raysim.maps.probe)
 
     def inputs(self) -> list[tuple[str, Path]]:
         """(what, path) of every file this scene was read from, for output checks."""
@@ -132,7 +136,7 @@ SCENE_METHODS = METHODS
 
 # the keys of a scene file: the top level and each table
 SCENE_KEYS = ("name", "description", "method", "dish", "panels", "deformation", "source",
-              "sphere", "go")
+              "sphere", "go", "probe")
 TABLE_KEYS = {
     "dish": ("diameter_m", "focal_length_m", "resolution_m", "mesh", "ideal_mesh", "mesh_unit_m"),
     "panels": ("ring_edges_m", "panels_per_ring", "gap_m", "phi0_deg"),
@@ -140,6 +144,7 @@ TABLE_KEYS = {
     "sphere": ("radius_m", "n_theta", "n_phi", "theta_min_deg", "theta_max_deg", "phi_min_deg",
                "phi_max_deg"),
     "go": ("subdivisions",),
+    "probe": PROBE_KEYS,
 }
 
 # the probe sphere's grid: one set of bounds for the scene file and the --n-theta/--n-phi options
@@ -205,13 +210,14 @@ def parse_scene(text: str, source: str = "scene", base: Path | None = None) -> S
     go = top.sub("go", keys=TABLE_KEYS["go"])
     subdivisions = go.integer("subdivisions", 1, lo=1, hi=16)
     go.done()
+    probe = probe_from_table(top.sub("probe", keys=TABLE_KEYS["probe"]))
     deformation = deformation_of(top.tables("deformation"), dish.diameter, dish.focal_length,
                                  panels, base)
     top.done()
     return Scene(name=str(name), dish=dish, panels=panels, deformation=deformation,
                  source=source_, sphere=sphere, subdivisions=subdivisions, text=text,
                  path=Path(source) if source != "scene" else None, method=method,
-                 files=tuple(top.files))
+                 files=tuple(top.files), probe=probe)
 
 
 def _dish(t: Table, base: Path) -> Dish:
