@@ -137,7 +137,8 @@ class SimulatedRig:
             rng = np.random.default_rng([self.settings.seed, self._index, self._reading])
             noise = self.settings.noise_db * float(rng.standard_normal())
         self._reading += 1
-        return self.power_unit_dbm + true_db + drift_db(self.settings, self._index) + noise
+        return (self.power_unit_dbm + self.settings.gain_db + true_db
+                + drift_db(self.settings, self._index) + noise)
 
 
 def _quiet(line: str) -> None:

@@ -22,6 +22,7 @@ BOUNDS: dict[str, tuple[float, float, str]] = {
     "seed": (0, 2**63 - 1, "--seed, [simulator] seed"),
     "noise_db": (0.0, 10.0, "--noise-db, [simulator] noise_db"),
     "drift_db": (0.0, 10.0, "--drift-db, [simulator] drift_db"),
+    "gain_db": (-30.0, 30.0, "[simulator] gain_db"),
     "drift_period": (1.0, 1e12, "[simulator] drift_period_samples"),
     "time_scale": (0.0, 1e3, "--time-scale, [simulator] time_scale"),
 }
@@ -33,7 +34,9 @@ class SimSettings:
 
     ``noise_db``: standard deviation of each power-meter reading (dB). ``drift_db``: amplitude
     of the slow receiver/source gain drift (dB) since the scan's start, a sinusoid of
-    ``drift_period`` samples whose phase follows from ``seed``. The axes move at the
+    ``drift_period`` samples whose phase follows from ``seed``. ``gain_db``: the receiver's
+    absolute gain that the plan's ``power_unit_dbm`` does not know (source flux, cable, probe
+    gain): every reading is off by it, so the scan's scale is unknown. The axes move at the
     velocity the driver sets (the rig file's ``speed_deg_s``); ``time_scale`` multiplies
     every move's duration (0: moves are instantaneous, 0.01: a hundred times faster).
     """
@@ -42,6 +45,7 @@ class SimSettings:
     noise_db: float = 0.0
     drift_db: float = 0.0
     drift_period: float = 2000.0
+    gain_db: float = 0.0
     centre_offset: tuple[float, float, float] | None = None
     slider_zero: float | None = None
     rotation_zero: float | None = None
@@ -99,6 +103,7 @@ def sim_settings_from_table(t: Table) -> SimSettings:
         "noise_db": t.number("noise_db", 0.0),
         "drift_db": t.number("drift_db", 0.0),
         "drift_period": t.number("drift_period_samples", 2000.0),
+        "gain_db": t.number("gain_db", 0.0),
         "centre_offset": offset,
         "slider_zero": t.angle("slider_zero_deg") if t.has("slider_zero_deg") else None,
         "rotation_zero": t.angle("rotation_zero_deg") if t.has("rotation_zero_deg") else None,

@@ -57,6 +57,16 @@ def test_scan_measures_the_field(tmp_path: Path) -> None:
     assert result.steps_taken == result.steps_total == 22
 
 
+def test_an_unknown_receiver_gain_scales_every_reading(tmp_path: Path) -> None:
+    """gain_db is what power_unit_dbm does not know: every intensity is off by it, drift
+    references included, so the scan's scale is unknown (and estimated when inverted)."""
+    plan = load_plan(write_plan(tmp_path))
+    plan = dataclasses.replace(plan, simulator=dataclasses.replace(plan.simulator, gain_db=0.4))
+    ds = scan(plan, tmp_path / "scan.nc", simulate=aligned_field(tmp_path)).fieldmap
+    assert np.allclose(ds["intensity"].values, expected_pattern() * 10 ** 0.04, rtol=1e-9, atol=0)
+    assert ds.attrs["sim_gain_db"] == 0.4
+
+
 def test_references_remove_the_drift(tmp_path: Path) -> None:
     """With drift and no noise, what remains is the drift's departure from its linear
     interpolation between the reference readings."""
