@@ -17,6 +17,7 @@ import typer
 
 from raysim.cli import (  # noqa: F401  (register commands)
     budget,
+    campaign,
     check,
     dataset,
     invert,

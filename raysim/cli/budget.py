@@ -1,4 +1,4 @@
-"""``raysim budget``: a scan plan's predicted deformation RMS and scan time (raysim.pipeline.campaign)."""
+"""``raysim budget``: a scan plan's predicted deformation RMS and scan time (raysim.pipeline.budget)."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ def budget_command(
 ) -> None:
     """Predict the deformation RMS a scan plan leaves, by mode, from the inversion's linear
     operator (no Monte Carlo), and the readings per point a target RMS needs."""
-    from raysim.pipeline.campaign import budget_rows, mode_lines, parse_levels, table_rows
+    from raysim.pipeline.budget import budget_rows, mode_lines, parse_levels, table_rows
     from solver.errors import SolverError
 
     if gain not in ("estimated", "known"):

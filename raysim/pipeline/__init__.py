@@ -9,4 +9,8 @@ Modules:
   frequency, with ``check_inputs`` (the dish, the deformation, the gaps, the engine rule),
   ``check_measures`` (the maps' differences, the bands, the gap signature) and
   ``check_page`` (the HTML page).
+- ``budget``: ``raysim budget``: a scan plan's predicted deformation RMS (solver.budget) and
+  scan time, per noise level.
+- ``campaign``: ``raysim campaign``: a simulated campaign end to end (budget, field, rig scan,
+  rim targets, inversion) with the prediction beside the RMS reached.
 """

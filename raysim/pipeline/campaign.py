@@ -1,102 +1,151 @@
-"""A campaign's error budget: a scan plan, noise levels, rim targets -> predicted RMS and scan time.
+"""A measurement campaign end to end, simulated: budget -> field -> rig scan -> rim targets -> map.
 
-Units: lengths in m (the table's figures in um), noise in dB per reading, times in s. The
-prediction is :func:`solver.budget.noise_budget` (the linear operator, no Monte Carlo) on the
-plan's sphere grid and dish; the scan time is :meth:`hardware.plan.ScanPlan.duration` at the
-readings per point asked for. ``raysim budget`` prints :func:`budget_rows`.
+Units: lengths in m (the summary's figures in um), noise in dB per reading, times in s.
+
+``raysim campaign SCENE PLAN -o DIR`` runs what a surface crew would do, with the truth known:
+
+1. the budget (:mod:`raysim.pipeline.budget`) picks the readings per point a target RMS needs
+   at the plan's noise (or the plan's own ``samples_per_point``);
+2. the scene (the telescope as it is: deformation, obstacles, probe) is simulated in GO;
+3. the plan is scanned through the simulated rig on loopback sockets (the PyVISA drivers, the
+   plan's noise, drift and unknown gain ``[simulator] gain_db``), at the budget's averaging;
+4. rim targets, as a laser tracker or photogrammetry would give them: the scene's deformation
+   at N points on the rim plus Gaussian errors of ``rim_std``;
+5. the measured scan is inverted as any measured scan is (gain estimated, delta_c removed,
+   the rim targets fixing the harmonic part) and compared with the truth.
+
+The folder gets ``field.nc``, ``scan.nc`` (and its journal), ``rim.csv``, ``surface.nc`` and
+``campaign.txt`` (the summary: the budget's prediction beside the RMS reached).
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
+import csv
+import os
+from dataclasses import dataclass, replace
 from pathlib import Path
 
-from hardware.plan import ScanPlan, load_plan
-from solver.budget import Budget, noise_response
-from solver.errors import SolverError
+import numpy as np
 
-MAX_READINGS = 100_000
+from hardware.plan import load_plan
+from hardware.session import scan
+from raysim.maps import fieldmap as fieldmaps
+from raysim.maps import surfacemap as surfacemaps
+from raysim.pipeline.budget import budget_rows
+from raysim.pipeline.report import output_folder, staging
+from raysim.progress import Progress
+from raysim.scene.scene import load_scene
+from raysim.simulate import simulate
+from solver.boundary import RimTargets
+from solver.errors import SolverError
+from solver.invert import invert
+
+FILES = ("field.nc", "scan.nc", "scan.nc.journal", "rim.csv", "surface.nc", "campaign.txt")
 
 
 @dataclass(frozen=True)
-class BudgetRow:
-    """The budget of one noise level: at the plan's readings, and what a target RMS needs."""
+class CampaignResult:
+    """What the campaign predicted and reached (m), with the choices it made."""
 
-    noise_db: float
+    folder: Path
     readings: int
-    budget: Budget
+    predicted: float
+    achieved: float
     hours: float
-    target: float | None            # m
-    readings_needed: int | None     # None: the target is out of reach (rim targets' part)
-    hours_needed: float | None
+    gain_injected: float
+    gain_estimated: float
+    lines: tuple[str, ...]
 
 
-def parse_levels(text: str) -> list[float]:
-    """Noise levels (dB per reading) from ``"0.001,0.01,0.05"``, each in (0, 10]."""
-    try:
-        levels = [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise SolverError(f"--noise-db must be numbers separated by commas, got {text!r}") from None
-    if not levels or any(not 0.0 < v <= 10.0 or not math.isfinite(v) for v in levels):
-        raise SolverError(f"--noise-db values must lie in (0, 10] dB, got {text!r}")
-    return levels
+def rim_targets(deformation, a: float, n: int, std: float, seed: int) -> RimTargets:
+    """``n`` targets evenly spaced on the rim r = a, dz = the deformation there plus N(0, std)."""
+    phi = 2.0 * np.pi * (np.arange(n) + 0.5) / n
+    x, y = a * np.cos(phi), a * np.sin(phi)
+    dz = np.asarray(deformation(x, y), dtype=np.float64)
+    dz = dz + std * np.random.default_rng(seed).standard_normal(n)
+    return RimTargets(x, y, dz, source=f"{n} simulated rim targets ({std * 1e6:g} um each)")
 
 
-def budget_rows(plan: ScanPlan | str | Path, levels: list[float], readings: int | None = None,
-                rim: int = 0, rim_std: float = 10e-6, gain_known: bool = False,
-                refine: bool = True, target: float | None = None) -> list[BudgetRow]:
-    """One :class:`BudgetRow` per noise level of ``plan`` (a ScanPlan or its file).
+def write_rim_csv(targets: RimTargets, path: str | os.PathLike[str]) -> None:
+    """The targets as the rim CSV ``raysim invert --rim`` reads (x, y, dz in m)."""
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(["x", "y", "dz"])
+        for row in zip(targets.x, targets.y, targets.dz, strict=True):
+            writer.writerow([f"{v:.9g}" for v in row])
 
-    ``readings``: readings per point (None: the plan's ``samples_per_point``); ``rim``: rim
-    targets (0: none) of std ``rim_std`` (m); ``refine``: the map is model-refined (its
-    delta_c is the refocus), else linear; ``target`` (m): the RMS to reach.
+
+def run_campaign(scene_path: str | os.PathLike[str], plan_path: str | os.PathLike[str],
+                 out_dir: str | os.PathLike[str], *, rim: int = 64, rim_std: float = 10e-6,
+                 target: float | None = None, readings: int | None = None, N: int = 256,
+                 refine: int = 3, seed: int = 0, progress: Progress | None = None
+                 ) -> CampaignResult:
+    """Run the campaign of the module docstring; see ``raysim campaign --help`` for each option.
+
+    ``target`` (m): let the budget choose the readings per point for it; ``readings``: fix
+    them (neither: the plan's ``samples_per_point``).
     """
-    plan = plan if isinstance(plan, ScanPlan) else load_plan(plan)
-    k = plan.samples_per_point if readings is None else readings
-    if not 1 <= k <= MAX_READINGS:
-        raise SolverError(f"--readings must be an integer in 1..{MAX_READINGS}, got {k}")
-    if rim and rim < 8:
-        raise SolverError(f"--rim needs at least 8 targets (or 0 for none), got {rim}")
-    if not 0.0 <= rim_std <= 1e-2:
-        raise SolverError(f"--rim-std-um must lie in 0..10000 um, got {rim_std * 1e6:g}")
-    if target is not None and not 0.0 < target <= 1e-2:
-        raise SolverError(f"--target-um must lie in (0, 10000] um, got {target * 1e6:g}")
-    response = noise_response(plan.grid, plan.focal_length, plan.diameter,
-                              "refocus" if refine else "linear")
-    options = dict(gain_known=gain_known, rim_targets=rim, target_std=rim_std)
-    rows = []
-    for level in levels:
-        budget = response.budget(level, k, **options)
-        needed = None if target is None else response.readings_for(target, level, **options)
-        rows.append(BudgetRow(level, k, budget, plan.duration(k) / 3600.0, target, needed,
-                              None if needed is None or needed > MAX_READINGS
-                              else plan.duration(needed) / 3600.0))
-    return rows
+    report = progress or (lambda stage, fraction: None)
+    scene = load_scene(scene_path)
+    plan = load_plan(plan_path)
+    if target is not None and readings is not None:
+        raise SolverError("give --target-um or --readings, not both")
+    if scene.dish.focal_length is None or scene.dish.diameter is None:
+        raise SolverError("a campaign needs a scene whose [dish] gives diameter_m and "
+                          "focal_length_m")
+    if abs(plan.focal_length - scene.dish.focal_length) > 1e-9 * scene.dish.focal_length or \
+            abs(plan.diameter - scene.dish.diameter) > 1e-9 * scene.dish.diameter:
+        raise SolverError(f"the plan's reflector (F {plan.focal_length:g} m, D {plan.diameter:g} m) "
+                          f"is not the scene's dish (F {scene.dish.focal_length:g} m, "
+                          f"D {scene.dish.diameter:g} m)")
+    folder = output_folder(out_dir, [("scene", scene_path), *plan.inputs()], FILES,
+                           "a raysim campaign")
+    noise = plan.simulator.noise_db
+    if not noise > 0:
+        raise SolverError("the plan's [simulator] noise_db must be above 0 for a campaign")
+    row = budget_rows(plan, [noise], readings, rim, rim_std, refine=refine > 0, target=target)[0]
+    k = row.readings if target is None else row.readings_needed
+    if k is None:
+        raise SolverError(f"the rim targets alone leave {row.budget.harmonic * 1e6:.1f} um: the "
+                          f"target {target * 1e6:g} um is out of reach")
+    if target is not None:
+        row = budget_rows(plan, [noise], k, rim, rim_std, refine=refine > 0)[0]
+    plan = replace(plan, samples_per_point=k)
+    a = 0.5 * scene.dish.diameter
+    with staging(folder) as tmp:
+        report("simulate", 0.0)
+        field = simulate(scene, method="go")
+        fieldmaps.save(field, tmp / "field.nc")
+        report("scan", 0.2)
+        measured = scan(plan, tmp / "scan.nc", simulate=tmp / "field.nc",
+                        sim=replace(plan.simulator, time_scale=0.0),
+                        progress=lambda stage, f: report(f"scan: {stage}", 0.2 + 0.6 * f)).fieldmap
+        targets = rim_targets(scene.deformation, a, rim, rim_std, seed) if rim else None
+        if targets is not None:
+            write_rim_csv(targets, tmp / "rim.csv")
+        report("invert", 0.8)
+        surface = invert(measured, rim=targets, N=N, refine_iterations=refine,
+                         truth=scene.deformation)
+        surfacemaps.save(surface, tmp / "surface.nc")
+        result = CampaignResult(folder, k, row.budget.total, float(surface.attrs["rms_m"]),
+                                row.hours, 10 ** (plan.simulator.gain_db / 10),
+                                float(surface.attrs["gain"]), ())
+        lines = summary_lines(result, noise, rim, rim_std, surface.attrs)
+        (tmp / "campaign.txt").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    report("done", 1.0)
+    return replace(result, lines=tuple(lines))
 
 
-def table_rows(rows: list[BudgetRow]) -> list[list[str]]:
-    """The printed table: a header and one row per noise level (figures in um, hours)."""
-    head = ["noise (dB)", "readings", "RMS (um)", "noise part", "delta_c", "rim targets",
-            "scan (h)"]
-    if rows and rows[0].target is not None:
-        head += [f"readings for {rows[0].target * 1e6:g} um", "scan (h)"]
-    out = [head]
-    for row in rows:
-        b = row.budget
-        line = [f"{row.noise_db:g}", str(row.readings), f"{b.total * 1e6:.2f}",
-                f"{b.noise * 1e6:.2f}",
-                f"{b.delta_c * 1e6:.2f} " + ("removed" if b.delta_c_removed else "kept"),
-                "unbounded (none)" if b.harmonic is None else f"{b.harmonic * 1e6:.2f}",
-                f"{row.hours:.2f}"]
-        if row.target is not None:
-            line += ["out of reach" if row.readings_needed is None else str(row.readings_needed),
-                     "-" if row.hours_needed is None else f"{row.hours_needed:.1f}"]
-        out.append(line)
-    return out
-
-
-def mode_lines(rows: list[BudgetRow]) -> list[str]:
-    """The largest Dirichlet-mode shares of the noise part at each level (um)."""
-    return [f"{row.noise_db:g} dB: largest modes " + ", ".join(
-        f"{m.label} {m.rms * 1e6:.2f}" for m in row.budget.modes) for row in rows]
+def summary_lines(result: CampaignResult, noise_db: float, rim: int, rim_std: float,
+                  attrs: dict) -> list[str]:
+    """The campaign's summary: the choices, the prediction beside the figure reached."""
+    targets = f"{rim} rim targets of {rim_std * 1e6:g} um" if rim else "no rim targets"
+    return [
+        f"scan: {noise_db:g} dB per reading, {result.readings} readings per point "
+        f"({result.hours:.1f} h on the rig), {targets}",
+        f"gain: {result.gain_injected:.6f} unknown to the plan, estimated {result.gain_estimated:.6f}"
+        f" +- {attrs.get('gain_std', 0.0):.1e}; delta_c removed "
+        f"({1e6 * attrs.get('removed_delta_c_centre_m', 0.0):.1f} um at the centre)",
+        f"predicted RMS (raysim budget): {result.predicted * 1e6:.1f} um",
+        f"achieved RMS against the truth: {result.achieved * 1e6:.1f} um",
+    ]
