@@ -75,6 +75,30 @@ class GainEstimate:
     coverage: float
 
 
+@dataclass(frozen=True)
+class MeasuredFA:
+    """FA of a scan after its gain, with the noise bias removed (NaN where a sample is missing).
+
+    ``gain``: whether the scale was trusted or estimated; ``estimate``: the scale divided out
+    (1 when trusted), its spread and coverage; ``noise_variance``: the relative variance v of
+    the readings and where it came from; ``n_rows``: the usable theta rows; ``missing``:
+    missing samples among them.
+    """
+
+    fa: NDArray[np.float64]
+    gain: GainChoice
+    estimate: GainEstimate
+    noise_variance: float
+    noise_source: str
+    n_rows: int
+    missing: int
+
+    @property
+    def scale(self) -> float:
+        """The scale divided out of the readings (1 when the gain is trusted)."""
+        return self.estimate.scale
+
+
 def estimate_gain(intensity: NDArray[np.float64], intensity_ideal: NDArray[np.float64],
                   sphere: SphereGrid, n_rows: int, v: float,
                   intensity_std: NDArray[np.float64] | None = None) -> GainEstimate:

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 
 import numpy as np
 import xarray as xr
@@ -30,11 +29,12 @@ from solver import boundary
 from solver.aperture import ApertureGrid, solver_grid
 from solver.equation import debias, intensity_ratio_fa, noise_variance, stated_noise_variance
 from solver.errors import SolverError
-from solver.fit import parse_terms, remove_terms
-from solver.forward import Forward, ForwardModel
+from solver.fit import remove_terms
+from solver.forward import Forward
 from solver.gainmode import (
     GainChoice,
     GainEstimate,
+    MeasuredFA,
     estimate_gain,
     refocus_mode,
     remove_mode,
@@ -49,86 +49,20 @@ from solver.gauss_newton import (
 )
 from solver.linear import MAX_INCIDENCE, LinearInverse, LinearSolution, Scan
 from solver.nonlinear import RefineHistory, refine
-from solver.options import check_options
+from solver.options import (
+    DEFAULT_N,
+    DEFAULT_REFINE,
+    DEFAULT_SOLVER,
+    WEIGHTS,
+    InvertOptions,
+)
 from solver.record import Outcome, accuracy_attrs, surface_attrs
 from solver.refinement import RefinementSetup, choose_model, refinement_setup
 from solver.resample import usable_rows
 from solver.wave import amplitude_weight
 
-DEFAULT_SOLVER = "multigrid"
-DEFAULT_N = 256
-DEFAULT_REFINE = 3
-WEIGHTS = ("auto", "amplitude", "none")
-
 __all__ = ["DEFAULT_N", "DEFAULT_REFINE", "DEFAULT_SOLVER", "MAX_INCIDENCE", "WEIGHTS",
            "InvertOptions", "LinearInverse", "MeasuredFA", "Scan", "invert", "measured_fa"]
-
-
-@dataclass(frozen=True)
-class InvertOptions:
-    """Every setting of an inversion, checked on construction (see :func:`invert` for each).
-
-    ``remove`` is kept as the tuple of term names it parses to (piston, tilt, focus).
-    """
-
-    solver: str = DEFAULT_SOLVER
-    N: int = DEFAULT_N
-    rim: boundary.RimTargets | None = None
-    remove: str | Sequence[str] | None = None
-    refine_iterations: int = DEFAULT_REFINE
-    gain: str = "auto"
-    iterations: int | None = None
-    omega: float | None = None
-    tol: float = 1e-10
-    forward: ForwardModel | Forward | None = field(default=None, compare=False)
-    device: str | None = "cpu"
-    uncertainty_samples: int = 32
-    seed: int = 0
-    max_harmonics: int = boundary.MAX_HARMONICS
-    model: str | None = None
-    weights: str = "auto"
-    refine_method: str = "defect"
-    gauss_newton: GaussNewtonOptions | None = None
-
-    def __post_init__(self) -> None:
-        check_options(solver=self.solver, N=self.N, refine=self.refine_iterations, gain=self.gain,
-                      iterations=self.iterations, remove=self.remove, model=self.model,
-                      refine_method=self.refine_method)
-        if self.weights not in WEIGHTS:
-            raise SolverError(f"unknown weights {self.weights!r}: choose one of {', '.join(WEIGHTS)}")
-        if self.rim is not None and self.solver == "fft":
-            raise SolverError("the fft solver works on the enclosing square and cannot use rim "
-                              "targets; choose direct, multigrid, sor or gauss-seidel")
-        object.__setattr__(self, "remove", parse_terms(self.remove))
-
-    @property
-    def terms(self) -> tuple[str, ...]:
-        """The terms to remove after the solve."""
-        return tuple(self.remove or ())
-
-
-@dataclass(frozen=True)
-class MeasuredFA:
-    """FA of a scan after its gain, with the noise bias removed (NaN where a sample is missing).
-
-    ``gain``: whether the scale was trusted or estimated; ``estimate``: the scale divided out
-    (1 when trusted), its spread and coverage; ``noise_variance``: the relative variance v of
-    the readings and where it came from; ``n_rows``: the usable theta rows; ``missing``:
-    missing samples among them.
-    """
-
-    fa: NDArray[np.float64]
-    gain: GainChoice
-    estimate: GainEstimate
-    noise_variance: float
-    noise_source: str
-    n_rows: int
-    missing: int
-
-    @property
-    def scale(self) -> float:
-        """The scale divided out of the readings (1 when the gain is trusted)."""
-        return self.estimate.scale
 
 
 def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_N,

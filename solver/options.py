@@ -9,18 +9,24 @@ from __future__ import annotations
 
 import numbers
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 
+from solver import boundary
 from solver.aperture import MIN_N
 from solver.equation import GAIN_MODES
 from solver.errors import SolverError
 from solver.fit import parse_terms
-from solver.forward import MODELS
-from solver.gauss_newton import IN_PROCESS, REFINE_METHODS
+from solver.forward import MODELS, Forward, ForwardModel
+from solver.gauss_newton import IN_PROCESS, REFINE_METHODS, GaussNewtonOptions
 from solver.poisson import SOLVERS
 
 MAX_N = 4096  # aperture grid points across D: 16.8 million unknowns, about 2 GB per solve
 MAX_REFINE = 50
 MAX_ITERATIONS = 1_000_000
+DEFAULT_SOLVER = "multigrid"
+DEFAULT_N = 256
+DEFAULT_REFINE = 3
+WEIGHTS = ("auto", "amplitude", "none")
 
 
 def _integer(name: str, value: object, lo: int, hi: int) -> None:
@@ -55,3 +61,46 @@ def check_options(*, solver: str | None = None, N: int | None = None, refine: in
     if refine_method == "gauss-newton" and blocks:
         raise SolverError(IN_PROCESS)
     parse_terms(remove)
+
+
+@dataclass(frozen=True)
+class InvertOptions:
+    """Every setting of an inversion, checked on construction (see :func:`invert` for each).
+
+    ``remove`` is kept as the tuple of term names it parses to (piston, tilt, focus).
+    """
+
+    solver: str = DEFAULT_SOLVER
+    N: int = DEFAULT_N
+    rim: boundary.RimTargets | None = None
+    remove: str | Sequence[str] | None = None
+    refine_iterations: int = DEFAULT_REFINE
+    gain: str = "auto"
+    iterations: int | None = None
+    omega: float | None = None
+    tol: float = 1e-10
+    forward: ForwardModel | Forward | None = field(default=None, compare=False)
+    device: str | None = "cpu"
+    uncertainty_samples: int = 32
+    seed: int = 0
+    max_harmonics: int = boundary.MAX_HARMONICS
+    model: str | None = None
+    weights: str = "auto"
+    refine_method: str = "defect"
+    gauss_newton: GaussNewtonOptions | None = None
+
+    def __post_init__(self) -> None:
+        check_options(solver=self.solver, N=self.N, refine=self.refine_iterations, gain=self.gain,
+                      iterations=self.iterations, remove=self.remove, model=self.model,
+                      refine_method=self.refine_method)
+        if self.weights not in WEIGHTS:
+            raise SolverError(f"unknown weights {self.weights!r}: choose one of {', '.join(WEIGHTS)}")
+        if self.rim is not None and self.solver == "fft":
+            raise SolverError("the fft solver works on the enclosing square and cannot use rim "
+                              "targets; choose direct, multigrid, sor or gauss-seidel")
+        object.__setattr__(self, "remove", parse_terms(self.remove))
+
+    @property
+    def terms(self) -> tuple[str, ...]:
+        """The terms to remove after the solve."""
+        return tuple(self.remove or ())

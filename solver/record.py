@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,13 +18,11 @@ from raysim.maps.probe import probe_of
 from solver import metrics
 from solver.aperture import ApertureGrid
 from solver.fit import remove_terms
-from solver.gainmode import remove_mode
+from solver.gainmode import MeasuredFA, remove_mode
 from solver.linear import LinearInverse, LinearSolution, Scan
 from solver.nonlinear import RefineHistory
+from solver.options import InvertOptions
 from solver.refinement import RefinementSetup
-
-if TYPE_CHECKING:
-    from solver.invert import InvertOptions, MeasuredFA
 
 
 @dataclass(frozen=True)
