@@ -28,6 +28,7 @@ from raysim.maps.surfacemap import surfacemap
 from raysim.progress import Progress
 from solver import boundary
 from solver.aperture import ApertureGrid, solver_grid
+from solver.central import central_attrs, hole_radius, remove_central_mode
 from solver.equation import (
     debias,
     intensity_ratio_fa,
@@ -187,7 +188,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     if opts.rim is not None:
         boundary.check_targets(opts.rim, grid.a)
     data = measured_fa(scan, opts.gain)
-    chosen = choose_model(scan.attrs, opts.refine_iterations, opts.model, opts.forward, opts.device)
+    chosen = choose_model(scan.attrs, opts.refine_iterations, opts.model, opts.forward, opts.device,
+                          scan.obstacles)
     method, why = choose_method(opts.refine_method, chosen.forward, scan, opts.refine_iterations)
     weighted = opts.weights == "amplitude" or (opts.weights == "auto" and chosen.wave)
     weight = amplitude_weight(scan.intensity_ideal, scan.sphere, scan.F,
@@ -205,13 +207,17 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     if scan.intensity_std is not None and opts.uncertainty_samples > 0:
         std = monte_carlo_std(scan, inverse, opts.gain, opts.uncertainty_samples, opts.seed,
                               linear.coverage.n_rows)
+    hole = hole_radius(scan.blocked, scan.sphere.theta_edges, scan.F)
+    delta, central = remove_central_mode(grid, delta, hole)
     delta_out, coef = remove_terms(grid, delta, opts.terms, scan.F)
     outcome = Outcome(scan, grid, inverse, linear, data, setup, history, weighted, coef,
                       gn.gain_factor if gn is not None else None)
     attrs = surface_attrs(opts, outcome)
     attrs.update(report_attrs(gn, why))
+    attrs.update(central_attrs(hole, central))
     truth_map = truth_on_grid(truth, scan, grid)
     if truth_map is not None:
+        truth_map = remove_central_mode(grid, truth_map, hole)[0]
         accuracy, truth_map = accuracy_attrs(grid, delta, delta_out, truth_map, opts.terms)
         attrs.update(accuracy)
     attrs["time_s"] = time.perf_counter() - start

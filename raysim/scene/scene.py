@@ -24,7 +24,9 @@ from raysim.files import find_input
 from raysim.maps.sphere import SphereGrid, theta_rim
 from raysim.methods import METHODS
 from raysim.scene.deformations import deformation_of
+from raysim.scene.obstacles import obstacles_of
 from raysim.surface.deformation import Deformation
+from raysim.surface.obstacles import Obstacle
 from raysim.surface.panels import PanelLayout
 from raysim.tomlschema import Table, parse_toml, read_text
 
@@ -93,6 +95,7 @@ class Scene:
     path: Path | None = None
     method: str = "go"
     files: tuple[Path, ...] = ()  # the files the scene names (meshes, maps, panel tables)
+    obstacles: tuple[Obstacle, ...] = ()  # cabins, legs, meshes in the beam (raysim.scene.obstacles)
 
     def inputs(self) -> list[tuple[str, Path]]:
         """(what, path) of every file this scene was read from, for output checks."""
@@ -132,7 +135,7 @@ SCENE_METHODS = METHODS
 
 # the keys of a scene file: the top level and each table
 SCENE_KEYS = ("name", "description", "method", "dish", "panels", "deformation", "source",
-              "sphere", "go")
+              "sphere", "go", "obstacle")
 TABLE_KEYS = {
     "dish": ("diameter_m", "focal_length_m", "resolution_m", "mesh", "ideal_mesh", "mesh_unit_m"),
     "panels": ("ring_edges_m", "panels_per_ring", "gap_m", "phi0_deg"),
@@ -207,11 +210,12 @@ def parse_scene(text: str, source: str = "scene", base: Path | None = None) -> S
     go.done()
     deformation = deformation_of(top.tables("deformation"), dish.diameter, dish.focal_length,
                                  panels, base)
+    obstacles = obstacles_of(top.tables("obstacle"), dish.diameter, dish.focal_length, base)
     top.done()
     return Scene(name=str(name), dish=dish, panels=panels, deformation=deformation,
                  source=source_, sphere=sphere, subdivisions=subdivisions, text=text,
                  path=Path(source) if source != "scene" else None, method=method,
-                 files=tuple(top.files))
+                 files=tuple(top.files), obstacles=obstacles)
 
 
 def _dish(t: Table, base: Path) -> Dish:
