@@ -36,7 +36,7 @@ from raysim.maps.sphere import SphereGrid
 from raysim.optics import runtime
 from raysim.surface.obstacles import ObstacleMesh
 
-BLOCKED_SHARE = 0.01  # a cell is blocked when obstacles take more than this of its GO power
+BLOCKED_SHARE = 1e-6  # a cell is blocked when obstacles take more than this of its GO power
 BLOCKAGE_RAY_SPACING = 0.15  # m: ray spacing of the GO trace that maps the blocked cells
 
 
