@@ -64,6 +64,7 @@ class Run:
     attrs: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)  # further FieldMap variables
     coords: dict = field(default_factory=dict)
+    blocked_share: NDArray[np.float64] | None = None  # GO engine with obstacles: the ideal's
 
 
 Engine = Callable[[Scene, Reflector, Reflector, Options, str | None, Progress], Run]
@@ -115,6 +116,7 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
     ideal, deformed = reflectors_for(scene)
     mesh_seconds = time.perf_counter() - start
     run = ENGINES[method](scene, ideal, deformed, options, device, report)
+    run = with_blockage(ideal, run, scene.sphere, scene.source.direction, device)
     report("done", 1.0)
     attrs = {**scene_attrs(scene, deformed), **run.attrs, "device": str(device or "cpu"),
              "seconds_mesh": mesh_seconds, "seconds_total": time.perf_counter() - start}
@@ -162,6 +164,24 @@ def fieldmap_of(scene: Scene, method: str, run: Run, F: float, D: float, attrs: 
     return ds.assign_coords(run.coords) if run.coords else ds
 
 
+def with_blockage(ideal: Reflector, run: Run, grid, direction, device: str | None) -> Run:
+    """``run`` with the obstacles' FieldMap variables and attributes
+    (:func:`raysim.optics.blockage.fieldmap_variables`) when ``ideal`` has obstacles: the
+    blocked share of the GO engine's own ideal trace, or of a GO trace of ``ideal`` made here
+    for the wave engines (their FieldMaps mark the cells GO rays cannot reach)."""
+    if ideal.obstacles is None:
+        return run
+    from raysim.optics import blockage
+
+    share = run.blocked_share
+    if share is None:
+        share = blockage.ideal_blocked_share(ideal, grid, direction, device)
+    extra, attrs = blockage.fieldmap_variables(share, ideal.obstacles)
+    run.extra = {**run.extra, **extra}
+    run.attrs = {**run.attrs, **attrs}
+    return run
+
+
 def _check_options(method: str, options: Options) -> None:
     """Refuse options that do not apply to ``method`` (one line for the user)."""
     if options.edges is not None and method != "po+ptd":
@@ -203,7 +223,10 @@ def _run_go(scene: Scene, ideal: Reflector, deformed: Reflector, options: Option
         "power_balance_ideal": result_ideal.power_balance,
         "shadowed_rays": int(result_def.n_shadowed),
     }
-    return Run(result_def.intensity, result_ideal.intensity, "cell_mean", attrs)
+    if ideal.obstacles is not None:
+        attrs["blocked_rays"] = int(result_def.n_blocked)
+    return Run(result_def.intensity, result_ideal.intensity, "cell_mean", attrs,
+               blocked_share=result_ideal.blocked_share)
 
 
 class BlockContext(Protocol):

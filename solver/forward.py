@@ -11,6 +11,10 @@ attributes was read by an ideal |E|^2 meter) and the incident polarisation (attr
 the wave models the frequency and whether the probe saw the scattered field alone or the total
 field (attribute ``field``). Every model reads its field with the scan's probe, so the model's
 intensity is the quantity the scan measured.
+A FieldMap of a scene with obstacles carries their triangles (``obstacle_vertices``,
+``obstacle_faces``): every model then puts the same obstacles in the beam (``obstacles``, a
+:class:`raysim.surface.obstacles.ObstacleMesh`), so its ideal reflector casts the shadows the
+data show.
 
 - ``go``: the project's GO engine (:func:`raysim.optics.go.forward_intensity`): cell means, no
   diffraction. Cheap (a second or two per call on the paper grid).
@@ -138,6 +142,7 @@ class GOForward(ForwardModel):
     device: str | None = "cpu"
     probe: Probe = IDEAL
     polarization: float = 0.0
+    obstacles: Any = None  # ObstacleMesh in the beam, or None
     name = "go"
     _ideal: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     _tracer: Any = field(default=None, init=False, repr=False, compare=False)
@@ -146,7 +151,7 @@ class GOForward(ForwardModel):
         if self._tracer is None:
             from raysim.optics.go import ParaboloidTracer
 
-            self._tracer = ParaboloidTracer(self.device)
+            self._tracer = ParaboloidTracer(self.device, obstacles=self.obstacles)
         if delta is None:
             key = (sphere, float(F), float(D))
             if key not in self._ideal:
@@ -162,9 +167,10 @@ class GOForward(ForwardModel):
         return "raysim.optics.go GO engine (cell means, no diffraction)" + _probe_note(self.probe)
 
 
-def go_forward(device: str | None = "cpu") -> GOForward:
-    """The project's GO engine as the refinement's forward model (a new :class:`GOForward`)."""
-    return GOForward(device)
+def go_forward(device: str | None = "cpu", obstacles: Any = None) -> GOForward:
+    """The project's GO engine as the refinement's forward model (a new :class:`GOForward`),
+    with ``obstacles`` (an ObstacleMesh) in the beam."""
+    return GOForward(device, obstacles=obstacles)
 
 
 @dataclass
@@ -182,6 +188,7 @@ class WaveForward(WaveModel):
     device : Warp device.
     probe : what reads the field (:meth:`raysim.maps.probe.Probe.power`, the field taken to
         arrive on the probe's boresight, as the simulation's wave methods read it).
+    obstacles : an :class:`raysim.surface.obstacles.ObstacleMesh` in the beam, or None.
     """
 
     frequency_hz: float
@@ -192,6 +199,7 @@ class WaveForward(WaveModel):
     face_m: float = PO_FACE_M
     device: str | None = "cpu"
     probe: Probe = IDEAL
+    obstacles: Any = None
     calls: int = field(default=0, compare=False)
     seconds: float = field(default=0.0, compare=False)
     _ideal: OrderedDict = field(default_factory=OrderedDict, init=False, repr=False, compare=False)
@@ -251,7 +259,8 @@ class WaveForward(WaveModel):
         if key not in self._meshes:
             from raysim.surface.mesh import paraboloid
 
-            self._meshes[key] = paraboloid(key[0], key[1], float(self.face_m))
+            self._meshes[key] = paraboloid(key[0], key[1], float(self.face_m)).with_obstacles(
+                self.obstacles)
         return self._meshes[key]
 
     def wavenumber(self) -> float:
@@ -301,7 +310,7 @@ class WaveForward(WaveModel):
         spw = self.samples_per_wavelength
         job = ForwardJob("", float(D), float(F), float(self.face_m), float(self.frequency_hz),
                          float(self.polarization), spw, self.ptd, sphere, str(self.device or "cpu"),
-                         surface)
+                         surface, obstacles=self.obstacles)
         return replace(job, key=job.fingerprint())
 
 
@@ -381,6 +390,7 @@ class ForwardJob:
     device: str
     surface: tuple | None
     threads: int = 1
+    obstacles: Any = None
 
     @property
     def n_points(self) -> int:
@@ -390,6 +400,8 @@ class ForwardJob:
         h = hashlib.sha256(repr((self.D, self.F, self.face_m, self.frequency_hz, self.polarization,
                                  self.samples_per_wavelength, self.ptd, self.sphere,
                                  self.device)).encode())
+        if self.obstacles is not None:
+            h.update(self.obstacles.digest().encode())
         for grid in self.surface or ():
             h.update(np.ascontiguousarray(grid, dtype=np.float64).tobytes())
         return h.hexdigest()
@@ -411,7 +423,8 @@ class ForwardJob:
         from raysim.surface.mesh import paraboloid
 
         reflector = deformed(ideal if ideal is not None else
-                             paraboloid(self.D, self.F, self.face_m), self.surface)
+                             paraboloid(self.D, self.F, self.face_m).with_obstacles(self.obstacles),
+                             self.surface)
         spw = po.DEFAULT_SAMPLES_PER_WAVELENGTH if self.samples_per_wavelength is None \
             else self.samples_per_wavelength
         sources = Sources(reflector, self.wave(), spw, "rim" if self.ptd else None, device, keep)
@@ -441,8 +454,10 @@ class _ForwardContext:
 
 
 def forward_for(model: str, attrs: dict, device: str | None = "cpu",
-                samples_per_wavelength: float | None = None) -> tuple[ForwardModel, str]:
-    """The forward model named ``model`` for a scan with FieldMap attributes ``attrs``.
+                samples_per_wavelength: float | None = None,
+                obstacles: Any = None) -> tuple[ForwardModel, str]:
+    """The forward model named ``model`` for a scan with FieldMap attributes ``attrs`` and
+    ``obstacles`` (the scan's ObstacleMesh, or None) in the beam.
 
     Returns the model and a one-line description for the SurfaceMap.
     """
@@ -451,8 +466,8 @@ def forward_for(model: str, attrs: dict, device: str | None = "cpu",
     probe = probe_of(attrs)
     polarization = float(attrs.get("polarization", 0.0))
     if model == "go":
-        go = GOForward(device, probe, polarization)
-        return go, go.describe()
+        go = GOForward(device, probe, polarization, obstacles)
+        return go, go.describe() + _with_obstacles(obstacles)
     frequency = float(attrs.get("frequency_hz", 0.0))
     if not frequency > 0:
         raise SolverError(f"model {model} needs the scan's frequency_hz (> 0), got {frequency}")
@@ -460,10 +475,15 @@ def forward_for(model: str, attrs: dict, device: str | None = "cpu",
     wave = kind(frequency, polarization,
                 total=str(attrs.get("field", "scattered")) == "total",
                 ptd=model == "po+ptd", samples_per_wavelength=samples_per_wavelength,
-                device=device, probe=probe)
-    return wave, wave.describe()
+                device=device, probe=probe, obstacles=obstacles)
+    return wave, wave.describe() + _with_obstacles(obstacles)
 
 
 def _probe_note(probe: Probe) -> str:
     """The model description's probe clause (nothing for the ideal |E|^2 meter)."""
     return "" if probe.ideal else f", read by the scan's probe ({probe.describe()})"
+
+
+def _with_obstacles(obstacles: Any) -> str:
+    """The words a model's description gets for its obstacles."""
+    return "" if obstacles is None else f", with the scan's obstacles ({obstacles.description})"

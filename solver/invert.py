@@ -27,6 +27,7 @@ from raysim.maps.surfacemap import surfacemap
 from raysim.progress import Progress
 from solver import boundary
 from solver.aperture import ApertureGrid, solver_grid
+from solver.central import CentralMode, central_mode_of, hole_radius
 from solver.equation import debias, intensity_ratio_fa, noise_variance, stated_noise_variance
 from solver.errors import SolverError
 from solver.fit import remove_terms
@@ -133,7 +134,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     if opts.rim is not None:
         boundary.check_targets(opts.rim, grid.a)
     data = measured_fa(scan, resolve_gain(opts.gain, str(scan.attrs.get("method", ""))))
-    chosen = choose_model(scan.attrs, opts.refine_iterations, opts.model, opts.forward, opts.device)
+    chosen = choose_model(scan.attrs, opts.refine_iterations, opts.model, opts.forward, opts.device,
+                          scan.obstacles)
     method, why = choose_method(opts.refine_method, chosen.forward, scan, opts.refine_iterations)
     weighted = opts.weights == "amplitude" or (opts.weights == "auto" and chosen.wave)
     weight = amplitude_weight(scan.intensity_ideal, scan.sphere, scan.F,
@@ -152,15 +154,27 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     std = None
     if scan.intensity_std is not None and opts.uncertainty_samples > 0:
         std = monte_carlo_std(scan, inverse, data, opts.uncertainty_samples, opts.seed, mode)
+    central = _central_mode(inverse, delta, data, setup, opts)
+    if central is not None:
+        delta, central_coef = central.remove(grid, delta)
     delta_fit, delta_c = remove_mode(grid, delta, mode) if mode is not None else (delta, 0.0)
     delta_out, coef = remove_terms(grid, delta_fit, opts.terms, scan.F)
     outcome = Outcome(scan, grid, inverse, linear, data, setup, history, weighted, coef,
                       gn.gain_factor if gn is not None else None, delta_c, mode)
     attrs = surface_attrs(opts, outcome)
     attrs.update(report_attrs(gn, why))
+    if central is not None:
+        attrs.update(central.attrs(central_coef))
+    if scan.blocked is not None:
+        attrs["samples_blocked"] = int(scan.blocked[:data.n_rows].sum())
     truth_map = truth_on_grid(truth, scan, grid)
     if truth_map is not None:
+        raw_truth = truth_map
+        if central is not None:
+            truth_map = central.remove(grid, truth_map)[0]
         accuracy, truth_map = accuracy_attrs(grid, delta, delta_out, truth_map, opts.terms, mode)
+        if central is not None:
+            accuracy = central.rescale(accuracy, grid, raw_truth)
         attrs.update(accuracy)
     attrs["time_s"] = time.perf_counter() - start
     return surfacemap(grid, delta_out, attrs, truth=truth_map, deformation_std=std)
@@ -173,6 +187,20 @@ def _refine(inverse: LinearInverse, linear: LinearSolution, data: MeasuredFA,
     return refine(linear.delta, data.fa, scan.sphere, scan.F, scan.D, inverse.grid, data.n_rows,
                   setup.correct, opts.refine_iterations, setup.forward, opts.device,
                   weight=inverse.weight, fit_gain=setup.fit_gain, progress=setup.progress)
+
+
+def _central_mode(inverse: LinearInverse, delta: NDArray[np.float64], data: MeasuredFA,
+                  setup: RefinementSetup, opts: InvertOptions) -> CentralMode | None:
+    """The unobservable mode of a blocked centre (:mod:`solver.central`; None without one):
+    the refinement model's null shape at ``delta``, or the log mode of a linear answer."""
+    scan = inverse.scan
+    r_h = hole_radius(scan.blocked, scan.sphere.theta_edges, scan.F)
+    refined = opts.refine_iterations > 0 and setup.forward is not None
+    observed = np.isfinite(data.fa)
+    observed[data.n_rows:] = False
+    return central_mode_of(r_h, inverse.grid, delta, setup.forward if refined else None,
+                           setup.correct, scan.sphere, scan.F, scan.D, observed, inverse.weight,
+                           setup.progress)
 
 
 def _gauss_newton(inverse: LinearInverse, delta: NDArray[np.float64], data: MeasuredFA,

@@ -24,20 +24,26 @@ from numpy.typing import NDArray
 from raysim.maps.fieldmap import grid_of
 from raysim.maps.fieldmap import validate as validate_fieldmap
 from raysim.maps.sphere import SphereGrid
+from raysim.surface.obstacles import ObstacleMesh
 from solver import boundary
 from solver.aperture import ApertureGrid
 from solver.equation import G
 from solver.errors import SolverError
 from solver.nonlinear import extend_outside
 from solver.poisson import SolveInfo, solve_poisson
-from solver.resample import Coverage, sphere_to_aperture
+from solver.resample import Coverage, fill_along_phi, sphere_to_aperture, usable_rows
 
 MAX_INCIDENCE = 1e-3  # rad: the equation and the GO model assume an on-axis plane wave
 
 
 @dataclass(frozen=True)
 class Scan:
-    """What the inversion reads from a FieldMap (attributes alone, no scene needed)."""
+    """What the inversion reads from a FieldMap (attributes alone, no scene needed).
+
+    ``blocked`` (n_theta, n_phi) bool: the cells obstacles hide (the FieldMap's ``blocked``;
+    None without), whose samples the scan then holds as missing (NaN); ``obstacles``: their
+    triangles (an ObstacleMesh), which the forward models put in the beam.
+    """
 
     sphere: SphereGrid
     F: float
@@ -47,6 +53,8 @@ class Scan:
     intensity_ideal: NDArray[np.float64]
     intensity_std: NDArray[np.float64] | None
     attrs: dict
+    blocked: NDArray[np.bool_] | None = None
+    obstacles: ObstacleMesh | None = None
 
     @classmethod
     def from_fieldmap(cls, ds: xr.Dataset) -> Scan:
@@ -56,10 +64,31 @@ class Scan:
             raise SolverError(f"the inversion assumes an on-axis plane wave; this scan's source "
                               f"is {np.degrees(tilt):.3f} deg off axis")
         std = ds["intensity_std"].values if "intensity_std" in ds.data_vars else None
+        intensity = ds["intensity"].values.astype(np.float64)
+        blocked = ds["blocked"].values.astype(bool) if "blocked" in ds.data_vars else None
+        if blocked is not None:
+            # hidden cells are missing samples: filled like any other hole (solver.resample)
+            intensity = np.where(blocked, np.nan, intensity)
         return cls(grid_of(ds), float(ds.attrs["focal_length"]), float(ds.attrs["diameter"]),
-                   float(ds.attrs["sphere_radius"]), ds["intensity"].values.astype(np.float64),
+                   float(ds.attrs["sphere_radius"]), intensity,
                    ds["intensity_ideal"].values.astype(np.float64),
-                   None if std is None else std.astype(np.float64), dict(ds.attrs))
+                   None if std is None else std.astype(np.float64), dict(ds.attrs),
+                   blocked, obstacles_of(ds))
+
+
+def obstacles_of(ds: xr.Dataset) -> ObstacleMesh | None:
+    """The obstacles' triangles a FieldMap carries (``obstacle_vertices`` in m, reflector frame,
+    and ``obstacle_faces``), or None."""
+    if "obstacle_vertices" not in ds.data_vars or "obstacle_faces" not in ds.data_vars:
+        return None
+    vertices = np.asarray(ds["obstacle_vertices"].values, dtype=np.float64)
+    faces = np.asarray(ds["obstacle_faces"].values, dtype=np.int64)
+    if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3 \
+            or not np.all(np.isfinite(vertices)) or (faces.size and (faces.min() < 0 or
+                                                                     faces.max() >= len(vertices))):
+        raise SolverError("the FieldMap's obstacle_vertices / obstacle_faces are not a triangle "
+                          "mesh ((n, 3) finite metres, (m, 3) indices into them)")
+    return ObstacleMesh(vertices, faces, str(ds.attrs.get("obstacles", "")))
 
 
 @dataclass(frozen=True)
@@ -108,8 +137,16 @@ class LinearInverse:
         return self.solve_poisson(fa_aperture, g)[0]
 
     def resample(self, fa_sphere: NDArray[np.float64]) -> tuple[NDArray[np.float64], Coverage]:
-        """FA on the sphere -> on the aperture grid (ideal GO mapping), and the data's coverage."""
-        return sphere_to_aperture(fa_sphere, self.scan.sphere, self.grid, self.scan.F, self.scan.D)
+        """FA on the sphere -> on the aperture grid (ideal GO mapping), and the data's coverage.
+
+        Blocked cells (``scan.blocked``) are filled along phi first (:func:`fill_along_phi`:
+        a leg's shadow is narrow in phi, long in theta); wholly blocked rows and other missing
+        samples by the inpainting of :func:`solver.resample.fill_missing`."""
+        scan = self.scan
+        if scan.blocked is not None:
+            fa_sphere, _ = fill_along_phi(fa_sphere, scan.blocked,
+                                          usable_rows(scan.sphere, scan.F, scan.D))
+        return sphere_to_aperture(fa_sphere, scan.sphere, self.grid, scan.F, scan.D)
 
     def to_aperture(self, fa_sphere: NDArray[np.float64]) -> NDArray[np.float64]:
         """:meth:`resample`'s values alone."""

@@ -12,6 +12,7 @@ surface when the gain is not trusted.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -62,11 +63,13 @@ class ModelChoice:
 
 
 def choose_model(attrs: dict, iterations: int, model: str | None,
-                 forward: ForwardModel | Forward | None, device: str | None) -> ModelChoice:
+                 forward: ForwardModel | Forward | None, device: str | None,
+                 obstacles: Any = None) -> ModelChoice:
     """The caller's ``forward``, else the ``model`` named, else the data's (FieldMap attrs).
 
     A caller's model says what physics it is through its ``name`` (go, po, po+ptd; a plain
-    function is wrapped as ``caller``, :func:`solver.forward.as_model`).
+    function is wrapped as ``caller``, :func:`solver.forward.as_model`). A model made here
+    puts the scan's ``obstacles`` (an ObstacleMesh, or None) in its beam.
     """
     data_method = str(attrs.get("method", ""))
     if forward is not None:
@@ -75,7 +78,7 @@ def choose_model(attrs: dict, iterations: int, model: str | None,
     if iterations == 0:
         return ModelChoice(None, "none", "refine 0", "none (no refinement)")
     name = model or model_for_method(data_method)
-    forward, description = forward_for(name, attrs, device)
+    forward, description = forward_for(name, attrs, device, obstacles=obstacles)
     return ModelChoice(forward, name, "requested" if model else
                        f"from the data's method {data_method!r}", description)
 

@@ -111,6 +111,37 @@ def fill_missing(values: NDArray[np.float64], n_rows: int) -> tuple[NDArray[np.f
     return out, n_holes
 
 
+def fill_along_phi(values: NDArray[np.float64], holes: NDArray[np.bool_],
+                   n_rows: int) -> tuple[NDArray[np.float64], int]:
+    """Fill the NaN samples among ``holes`` of the first ``n_rows`` rows along phi, row by row,
+    by the periodic cubic spline through the row's finite samples.
+
+    For holes narrow in phi and long in theta (the shadows of an obstacle's legs): across them
+    a smooth field varies little, while along theta it may vary fast (the inpainting of
+    :func:`fill_missing` then errs by the field's fourth theta derivative times the hole's
+    width to the fourth). Rows with fewer than four finite samples are left as they are.
+    Returns the filled copy and the number of samples filled.
+    """
+    from scipy.interpolate import CubicSpline
+
+    out = np.array(values, dtype=np.float64, copy=True)
+    n_p = out.shape[1]
+    cells = np.arange(n_p, dtype=np.float64)
+    count = 0
+    for i in range(min(n_rows, out.shape[0])):
+        row = out[i]
+        fill = holes[i] & ~np.isfinite(row)
+        known = np.isfinite(row)
+        if not fill.any() or known.sum() < 4:
+            continue
+        x = np.append(cells[known], cells[known][0] + n_p)
+        y = np.append(row[known], row[known][0])
+        row[fill] = CubicSpline(x, y, bc_type="periodic")(
+            np.where(cells[fill] < x[0], cells[fill] + n_p, cells[fill]))
+        count += int(fill.sum())
+    return out, count
+
+
 def extend_rows(values: NDArray[np.float64], n_rows: int) -> NDArray[np.float64]:
     """Rows 0..n_rows-1 kept; EXTRA_ROWS more continued by the cubic through the last four."""
     k = np.arange(-3.0, 1.0)                                  # the last four rows, at 0

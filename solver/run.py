@@ -90,6 +90,11 @@ def summary(result: xr.Dataset) -> list[str]:
     if a["harmonic_part"] == "unobservable":
         lines.append("harmonic part (tilt, astigmatism, any r^n cos n phi) is UNOBSERVABLE "
                      "without rim targets: the map assumes zero on the rim")
+    if "removed_central_mode_m" in a:
+        lines.append(f"blocked centre r < {a['central_hole_radius_m']:.2f} m: its central mode is "
+                     f"UNOBSERVABLE and removed (c = {a['removed_central_mode_m'] * 1e6:.2f} um)")
+    if a.get("samples_blocked"):
+        lines.append(f"{a['samples_blocked']} samples hidden by obstacles: treated as missing")
     if a.get("gain_known", True):
         lines.append(f"gain known ({a['gain_choice']}): scale {a['gain']:.6f} trusted, delta_c "
                      "kept")

@@ -38,6 +38,13 @@ def _scene(extra: str = "", **replace: str) -> str:
     return text + extra
 
 
+def _obstacle_scene(table: str) -> str:
+    return SCENE + "[[obstacle]]\n" + table + "\n"
+
+
+LEGS = 'type = "legs"\ncount = 4\nwidth_m = 0.3\nfoot_radius_m = 7.0\n'
+
+
 def _map_scene(name: str) -> str:
     return SCENE + f'[[deformation]]\ntype = "map"\nfile = "{name}"\n'
 
@@ -158,6 +165,18 @@ def workspace(tmp_path_factory):
                                       'focal_length_m = 8.0\nmesh = "dish_mm.stl"'),
         "big_sphere.toml": _scene(n_theta__10="n_theta = 100000"),
         "method_bad.toml": 'method = "fdtd"\n' + SCENE,
+        "obst_kind.toml": _obstacle_scene('type = "tower"'),
+        "obst_width.toml": _obstacle_scene(LEGS.replace("width_m = 0.3", "width_m = -0.3")),
+        "obst_count.toml": _obstacle_scene(LEGS.replace("count = 4", "count = 0")),
+        "obst_mm.toml": _obstacle_scene(LEGS.replace("width_m = 0.3", "width_m = 300.0")),
+        "obst_foot.toml": _obstacle_scene(LEGS.replace("foot_radius_m = 7.0", "foot_radius_m = 12.0")),
+        "obst_apex.toml": _obstacle_scene(LEGS + "apex_z_m = 1.0\n"),
+        "obst_typo.toml": _obstacle_scene(LEGS + "rotation = 45.0\n"),
+        "obst_disk.toml": _obstacle_scene('type = "disk"\nradius_m = 10.0'),
+        "obst_nofile.toml": _obstacle_scene('type = "mesh"\nfile = "cabin.stl"'),
+        "obst_junk.toml": _obstacle_scene('type = "mesh"\nfile = "notes.txt"'),
+        "spec_obstacles.toml": SPEC.replace('scene = "scene.toml"', 'scene = "obst_ok.toml"'),
+        "obst_ok.toml": _obstacle_scene(LEGS),
         "map_um.csv": _csv_map(_grid_rows(lambda x, y: 300.0)),
         "map_text.csv": _edit_row(_csv_map(_grid_rows()), 3, 2, "abc"),
         "map_inf.csv": _csv_map(_grid_rows(lambda x, y: np.inf if x > 10 else 1e-4)),
@@ -264,6 +283,16 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["simulate", "bad_toml.toml", "-o", "o.nc"], "not valid TOML"),
         (["simulate", "typo.toml", "-o", "o.nc"], "unknown key 'dish.diametre_m' (did you mean 'diameter_m'?)"),
         (["simulate", "no_edges.toml", "-o", "o.nc"], "'panels.ring_edges_m' needs at least 2"),
+        (["simulate", "obst_kind.toml", "-o", "o.nc"], "'obstacle[0].type' must be one of disk, legs, mesh"),
+        (["simulate", "obst_width.toml", "-o", "o.nc"], "'obstacle[0].width_m' must be > 0"),
+        (["simulate", "obst_count.toml", "-o", "o.nc"], "'obstacle[0].count' must be >= 1"),
+        (["simulate", "obst_mm.toml", "-o", "o.nc"], "is it in mm?"),
+        (["simulate", "obst_foot.toml", "-o", "o.nc"], "is beyond the rim"),
+        (["simulate", "obst_apex.toml", "-o", "o.nc"], "is not above the feet"),
+        (["simulate", "obst_typo.toml", "-o", "o.nc"], "did you mean 'rotation_deg'?"),
+        (["simulate", "obst_disk.toml", "-o", "o.nc"], "covers the whole dish"),
+        (["simulate", "obst_nofile.toml", "-o", "o.nc"], "'obstacle[0].file': no such file"),
+        (["simulate", "obst_junk.toml", "-o", "o.nc"], "trimesh cannot read the obstacle mesh"),
         (["simulate", "nan_edge.toml", "-o", "o.nc"], "'panels.ring_edges_m' must hold finite numbers"),
         (["simulate", "zernike_nan.toml", "-o", "o.nc"], "must be a finite number"),
         (["simulate", "paper_huge.toml", "-o", "o.nc"], "scale' = 1e+07 makes a"),
@@ -346,6 +375,7 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["dataset", "spec_typo.toml", "-o", "d.zarr"], "unknown key 'sede' (did you mean 'seed'?)"),
         (["dataset", "spec_nan.toml", "-o", "d.zarr"], "'errors[0].rms_um' must be a finite number"),
         (["dataset", "spec_ghz.toml", "-o", "d.zarr"], "in Hz, not GHz"),
+        (["dataset", "spec_obstacles.toml", "-o", "d.zarr"], "has [[obstacle]] tables"),
         (["dataset", "spec.toml", "-o", "d.zarr", "--scheduler", "notanaddress"], "tcp://HOST:PORT"),
         (["dataset", "spec.toml", "-o", "d.zarr", "--scheduler", "tcp://127.0.0.1:{silent}"],
          "did not answer within"),

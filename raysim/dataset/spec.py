@@ -120,6 +120,9 @@ def _build(top: Table, text: str, source: str, base: Path) -> DatasetSpec:
     if scene.dish.mesh is not None:
         raise top.fail("the dataset's scene must be a generated paraboloid (no dish.mesh): the "
                        "stored deformation maps could not include the mesh's own errors")
+    if scene.obstacles:
+        raise top.fail("the dataset's scene has [[obstacle]] tables: datasets store no blocked "
+                       "mask yet, so their samples would hold shadows nobody marks")
     name = top.string("name", None) or (Path(source).stem if source != "spec" else "dataset")
     description = top.string("description", "")
     samples = top.integer("samples", lo=1, hi=10_000_000)

@@ -33,7 +33,7 @@ from raysim.distributed.partial import PartialStore, partial_path
 from raysim.progress import Progress
 from raysim.scene import Scene
 from raysim.scene.scene import parse_scene
-from raysim.simulate import BLOCK_ENGINES, BlockContext, Options, check_method, fieldmap_of
+from raysim.simulate import BLOCK_ENGINES, BlockContext, Options, check_method, fieldmap_of, with_blockage
 from raysim.surface.mesh import reflectors_for
 from raysim.version import __version__
 
@@ -111,7 +111,8 @@ def _check_rebuilds(scene: Scene, job: SceneJob) -> None:
         raise ClusterError(f"the scene cannot be rebuilt from its text on the workers ({exc})") from exc
     same = (again.dish == scene.dish and again.source == scene.source and again.sphere == scene.sphere
             and again.subdivisions == scene.subdivisions and repr(again.panels) == repr(scene.panels)
-            and again.deformation.describe() == scene.deformation.describe())
+            and again.deformation.describe() == scene.deformation.describe()
+            and again.obstacles == scene.obstacles)
     if not same:
         raise ClusterError("the scene differs from its TOML text (changed in Python?): workers rebuild "
                            "it from the text, with only the frequency and grid overridden")
@@ -219,6 +220,8 @@ def _fieldmap(scene: Scene, method: str, options: Options, store: PartialStore, 
             figures[key] = figures.get(key, 0.0) + value
     engine = BLOCK_ENGINES[method]
     run = engine.finish(scene, options, context, store.read(), figures)
+    if scene.obstacles:
+        run = with_blockage(reflectors_for(scene)[0], run, scene.sphere, scene.source.direction, device)
     counts = np.array([records[i]["count"] for i in range(store.n_blocks)])
     build = [records[i]["build_seconds"] for i in range(store.n_blocks)]
     attrs = {**context["mesh"], **run.attrs, "device": str(device),

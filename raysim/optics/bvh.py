@@ -1,5 +1,9 @@
 """The reflector's Warp BVH and the one shadow rule of every engine (GO rays, PO samples, edges).
 
+With obstacles in the beam (``Reflector.obstacles``) the BVH holds theirs beside it
+(:class:`raysim.optics.blockage.ObstacleBVH`): a point is lit when neither the dish nor an
+obstacle stands on its incident ray.
+
 Warp's BVH holds float32 points: it finds the face a ray meets first, and the engines recompute
 hit points and normals in float64 from the float64 vertices. A deformed twin shares the ideal
 mesh's triangulation, so its BVH is the ideal one refitted to the moved vertices
@@ -15,6 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from raysim.optics import runtime
+from raysim.optics.blockage import ObstacleBVH
 from raysim.surface.mesh import Reflector
 
 
@@ -40,12 +45,20 @@ def standoff(vertices: NDArray[np.float64]) -> float:
     return float(np.ptp(vertices, axis=0).max() + 10.0)
 
 
+def reflector_standoff(reflector: Reflector) -> float:
+    """:func:`standoff` of the reflector and its obstacles together."""
+    if reflector.obstacles is None:
+        return standoff(reflector.vertices)
+    return standoff(np.vstack([reflector.vertices, reflector.obstacles.vertices]))
+
+
 @dataclass
 class ReflectorBVH:
     """A reflector's faces in a Warp BVH on ``device``, with the shadow test's two lengths.
 
-    ``standoff`` (m): where a shadow ray starts, up-beam of its point; ``tolerance`` (m): see
-    :func:`shadow_tolerance`.
+    ``standoff`` (m): where a shadow ray starts, up-beam of its point (beyond the obstacles
+    too); ``tolerance`` (m): see :func:`shadow_tolerance`; ``obstacles``: the BVH of the
+    reflector's obstacles (None without).
     """
 
     mesh: Any
@@ -53,6 +66,7 @@ class ReflectorBVH:
     standoff: float
     tolerance: float
     _points: Any = field(repr=False, default=None)
+    obstacles: ObstacleBVH | None = None
 
     @classmethod
     def build(cls, reflector: Reflector, device: str | None = "cpu") -> ReflectorBVH:
@@ -61,7 +75,9 @@ class ReflectorBVH:
         points = wp.array(reflector.vertices.astype(np.float32), dtype=wp.vec3, device=dev)
         indices = wp.array(reflector.faces.astype(np.int32).ravel(), dtype=wp.int32, device=dev)
         mesh = wp.Mesh(points=points, indices=indices)
-        return cls(mesh, dev, standoff(reflector.vertices), shadow_tolerance(reflector), points)
+        obstacles = None if reflector.obstacles is None else ObstacleBVH.build(reflector.obstacles, dev)
+        return cls(mesh, dev, reflector_standoff(reflector), shadow_tolerance(reflector), points,
+                   obstacles)
 
     def refit(self, reflector: Reflector) -> None:
         """Move the BVH to ``reflector``'s vertices (same triangulation) and refit it."""
@@ -69,15 +85,17 @@ class ReflectorBVH:
         self._points.assign(wp.array(reflector.vertices.astype(np.float32), dtype=wp.vec3,
                                      device=self.device))
         self.mesh.refit()
-        self.standoff = standoff(reflector.vertices)
+        self.standoff = reflector_standoff(reflector)
         self.tolerance = shadow_tolerance(reflector)
 
-    def lit(self, points: ArrayLike, k_hat: ArrayLike, face: ArrayLike | None = None) -> NDArray[np.bool_]:
+    def lit(self, points: ArrayLike, k_hat: ArrayLike, face: ArrayLike | None = None,
+            obstacles: bool = True) -> NDArray[np.bool_]:
         """(n,) bool: the plane wave travelling along ``k_hat`` reaches each point (m).
 
         ``face`` (n,) gives each point's own face (a point on a facet); None for points that
         belong to several faces (vertices), which then count as lit unless a face lies more
-        than ``tolerance`` in front of them.
+        than ``tolerance`` in front of them. ``obstacles`` False leaves the obstacles out
+        (the dish's own shadow alone).
         """
         from raysim.optics.kernels import visibility
 
@@ -94,4 +112,7 @@ class ReflectorBVH:
                         wp.array(faces, dtype=wp.int32, device=dev),
                         wp.vec3d(*np.asarray(k_hat, dtype=np.float64)), self.standoff,
                         self.tolerance, out], dev)
-        return out.numpy().astype(bool)
+        lit = out.numpy().astype(bool)
+        if obstacles and self.obstacles is not None:
+            lit[lit] = ~self.obstacles.incident_blocked(pts[lit], k_hat, self.standoff)
+        return lit

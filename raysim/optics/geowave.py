@@ -23,6 +23,10 @@ smooth surface (float64), reflected and followed to the sphere (:func:`reflect_r
   :mod:`raysim.optics.kernels.geowave`): the field is PO's stationary-phase value, which the
   edge currents of :mod:`raysim.optics.goedge` complete.
 
+Obstacles (``Reflector.obstacles``, :mod:`raysim.optics.blockage`): a ray blocked on its way
+in (the shadow test) or out (from its hit to the sphere) carries nothing, and neither do the
+tubes it bounds.
+
 Per tube: the number of caustics the tube crosses before the sphere (roots of its
 cross-section, a quadratic in the distance along the rays), each a factor j. The field at a
 point is the sum over the tubes that contain it (:func:`geometric_field`).
@@ -253,6 +257,10 @@ def trace_wave(reflector: Reflector, focus, radius: float, wave: Illumination, s
         wp.vec3d(*k_hat), wp.vec3d(*e_hat), wp.vec3d(*focus), float(radius), ok,
         out["chart"], out["exit_point"], out["direction"], out["path"], out["distance"], out["polar"]], dev)
     ok_np = ok.numpy().astype(bool)
+    if bvh.obstacles is not None:  # the reflected leg: an obstacle between the hit and the sphere
+        out_blocked = bvh.obstacles.blocked(hits[ok_np], out["exit_point"].numpy()[ok_np])
+        ok_np[np.flatnonzero(ok_np)[out_blocked]] = False
+        ok = wp.array(ok_np.astype(np.int32), dtype=wp.int32, device=dev)
     tubes = lattice.tubes
     n_tubes = len(tubes)
     geo = {name: wp.zeros(n_tubes, dtype=dtype, device=dev) for name, dtype in (

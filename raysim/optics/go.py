@@ -17,6 +17,12 @@ spread over the (theta, phi) cells by the exact area each cell shares with the t
 sphere's equal-area Lambert chart). So folds add, gaps and shadows give nothing, and the power
 on the sphere equals the lit aperture's power to round-off. Cells hold means: power through
 the cell over its area, relative to the incident intensity.
+
+Obstacles in the beam (``Reflector.obstacles``, :mod:`raysim.optics.blockage`): a ray is
+blocked when an obstacle crosses its incident leg (from up-beam to its hit) or its reflected
+leg (from the hit to where it enters the sphere), and a tube with a blocked ray carries no
+power. What the blocked tubes would have brought each cell gives its blocked share
+(:attr:`GOResult.blocked_share`).
 """
 
 from __future__ import annotations
@@ -33,10 +39,12 @@ from raysim.errors import RaysimError
 from raysim.maps.probe import Probe
 from raysim.maps.sphere import SphereGrid
 from raysim.optics import runtime
+from raysim.optics.blockage import blocked_share, sphere_points
 from raysim.optics.bvh import ReflectorBVH
 from raysim.progress import Progress
 from raysim.surface.deformation import Deformation, NoDeformation
 from raysim.surface.mesh import Reflector, paraboloid
+from raysim.surface.obstacles import ObstacleMesh
 
 ON_AXIS = (0.0, 0.0, -1.0)
 
@@ -54,6 +62,8 @@ class GOResult:
     n_missed: int  # lit rays that did not reach the sphere
     seconds: float
     power_read: float | None = None  # with a probe: the lit tubes' power as the probe reads it
+    n_blocked: int = 0  # lit rays an obstacle blocks on their incident or reflected leg
+    blocked_share: NDArray[np.float64] | None = None  # (n_theta, n_phi); None without obstacles
 
     @property
     def power_balance(self) -> float:
@@ -278,7 +288,7 @@ class Tracer:
         else:
             self._update_bvh(reflector)
             report("visibility", 0.2)
-            lit_np = self.bvh.lit(lattice.points, k_hat)
+            lit_np = self.bvh.lit(lattice.points, k_hat, obstacles=False)
 
         report("surface", 0.4)
         hits, normals = lift_to_surface(reflector, lattice, k_hat)
@@ -292,7 +302,6 @@ class Tracer:
                              wp.vec3d(*k_hat), wp.vec3d(*focus), float(grid.radius), ok, chart], dev)
         ok_np = ok.numpy().astype(bool)
 
-        report("deposit", 0.6)
         power_t = self._tube_power(reflector, lattice)
         tube_lit = lit_np[lattice.tubes].all(axis=1)
         power_read = None
@@ -302,15 +311,22 @@ class Tracer:
             e = np.array([1.0, 0.0, 0.0]) if e_hat is None else np.asarray(e_hat, dtype=np.float64)
             power_t = power_t * tube_weights(probe, lattice.tubes, normals, k_hat, e,
                                              chart.numpy(), ok_np)
+        blocked_np = removed = None
+        if self.bvh.obstacles is not None:
+            report("obstacles", 0.55)
+            blocked_np = self._blocked(hits, lit_np, ok_np, chart.numpy(), focus)
+            tube_blocked = blocked_np[lattice.tubes].any(axis=1)
+            tube_lit &= ~tube_blocked
+            # what the blocked tubes would have brought, for the cells' blocked share
+            gone = np.flatnonzero(tube_blocked & ok_np[lattice.tubes].all(axis=1))
+            removed = self._deposit(chart, ok, wp.array(lattice.tubes[gone], dtype=wp.vec3i, device=dev),
+                                    power_t[gone])
+            ok = wp.array((ok_np & ~blocked_np).astype(np.int32), dtype=wp.int32, device=dev)
+        if probe is not None and not probe.ideal:
             power_read = float(power_t[tube_lit].sum())
-        power = wp.zeros((grid.n_theta, grid.n_phi), dtype=wp.float64, device=dev)
-        runtime.launch(
-            K.deposit_tubes, self.n_tubes,
-            [chart, ok, self._tubes, wp.array(power_t, dtype=wp.float64, device=dev), self._rho_edges,
-             float(grid.theta_min), float(grid.dtheta), grid.n_theta,
-             float(grid.phi_min), float(grid.dphi), grid.n_phi, int(grid.full_circle), power],
-            dev, private=(12,), min_chunk=2048)
-        power_np = power.numpy()
+
+        report("deposit", 0.6)
+        power_np = self._deposit(chart, ok, self._tubes, power_t)
         intensity = power_np / grid.cell_area()
         report("done", 1.0)
         return GOResult(
@@ -323,7 +339,37 @@ class Tracer:
             n_missed=int((lit_np & ~ok_np).sum()),
             seconds=time.perf_counter() - start,
             power_read=power_read,
+            n_blocked=0 if blocked_np is None else int(blocked_np.sum()),
+            blocked_share=None if removed is None else blocked_share(power_np, removed),
         )
+
+    def _deposit(self, chart, ok, tubes, power_t: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Power (n_theta, n_phi) the ``tubes`` (Warp vec3i) of power ``power_t`` (m^2) bring to
+        the grid's cells, rays flagged by ``ok``."""
+        wp = runtime.init()
+        from raysim.optics.kernels import go as K
+
+        grid, dev = self.grid, self.device
+        power = wp.zeros((grid.n_theta, grid.n_phi), dtype=wp.float64, device=dev)
+        runtime.launch(
+            K.deposit_tubes, len(power_t),
+            [chart, ok, tubes, wp.array(power_t, dtype=wp.float64, device=dev), self._rho_edges,
+             float(grid.theta_min), float(grid.dtheta), grid.n_theta,
+             float(grid.phi_min), float(grid.dphi), grid.n_phi, int(grid.full_circle), power],
+            dev, private=(12,), min_chunk=2048)
+        return power.numpy()
+
+    def _blocked(self, hits: NDArray, lit: NDArray[np.bool_], reached: NDArray[np.bool_],
+                 chart: NDArray, focus: NDArray) -> NDArray[np.bool_]:
+        """(n_rays,) bool: lit rays an obstacle blocks on the way in (to ``hits``) or out (from
+        ``hits`` to their sphere entry, for the rays that ``reached`` the sphere)."""
+        obstacles = self.bvh.obstacles
+        blocked = np.zeros(len(hits), dtype=bool)
+        blocked[lit] = obstacles.incident_blocked(hits[lit], self.k_hat, self.bvh.standoff)
+        out = reached & ~blocked
+        entry = sphere_points(chart[out], focus, self.grid.radius)
+        blocked[out] = obstacles.blocked(hits[out], entry)
+        return blocked
 
 
 class ParaboloidTracer:
@@ -333,13 +379,15 @@ class ParaboloidTracer:
     mesh (``resolution`` m faces) and one :class:`Tracer` per (D, F, grid) are made once by
     this object and kept while it lives (the last ``keep``); a deformed mesh displaces the ideal
     one and is traced with the BVH refitted. Whoever needs repeated traces holds one (the
-    refinement's GO model does).
+    refinement's GO model does). ``obstacles`` (m, reflector frame) stand in the beam of every
+    reflector it traces.
     """
 
     def __init__(self, device: str | None = "cpu", resolution: float = 0.15,
-                 subdivisions: int = 1, keep: int = 2) -> None:
+                 subdivisions: int = 1, keep: int = 2, obstacles: ObstacleMesh | None = None) -> None:
         self.device = runtime.resolve_device(device)
         self.resolution, self.subdivisions, self.keep = float(resolution), int(subdivisions), keep
+        self.obstacles = obstacles
         self._tracers: dict[tuple, Tracer] = {}
 
     def tracer(self, grid: SphereGrid, F: float, D: float) -> Tracer:
@@ -349,6 +397,8 @@ class ParaboloidTracer:
             while len(self._tracers) >= self.keep:
                 self._tracers.pop(next(iter(self._tracers)))
             ideal = paraboloid(float(D), float(F), self.resolution)
+            if self.obstacles is not None:
+                ideal = ideal.with_obstacles(self.obstacles)
             self._tracers[key] = Tracer(ideal, grid, ON_AXIS, self.subdivisions, self.device)
         return self._tracers[key]
 
@@ -368,8 +418,9 @@ class ParaboloidTracer:
 
 def forward_intensity(grid: SphereGrid, F: float, D: float, deformation: Deformation | None = None,
                       device: str | None = "cpu", resolution: float = 0.15,
-                      subdivisions: int = 1) -> NDArray[np.float64]:
+                      subdivisions: int = 1, obstacles: ObstacleMesh | None = None) -> NDArray[np.float64]:
     """GO cell-mean intensity on ``grid`` of the paraboloid (D, F in m) plus ``deformation``,
-    in one call (:class:`ParaboloidTracer` builds the ideal mesh and its tracer; hold one of
-    those for repeated calls)."""
-    return ParaboloidTracer(device, resolution, subdivisions).intensity(grid, F, D, deformation)
+    with ``obstacles`` in the beam, in one call (:class:`ParaboloidTracer` builds the ideal
+    mesh and its tracer; hold one of those for repeated calls)."""
+    return ParaboloidTracer(device, resolution, subdivisions, obstacles=obstacles).intensity(
+        grid, F, D, deformation)

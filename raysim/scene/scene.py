@@ -27,7 +27,9 @@ from raysim.maps.probe import IDEAL, PROBE_KEYS, Probe, probe_from_table
 from raysim.maps.sphere import SphereGrid, theta_rim
 from raysim.methods import METHODS
 from raysim.scene.deformations import deformation_of
+from raysim.scene.obstacles import obstacles_of
 from raysim.surface.deformation import Deformation
+from raysim.surface.obstacles import Obstacle
 from raysim.surface.panels import PanelLayout
 from raysim.tomlschema import Table, parse_toml, read_text
 
@@ -97,6 +99,7 @@ class Scene:
     method: str = "go"
     files: tuple[Path, ...] = ()  # the files the scene names (meshes, maps, panel tables)
     probe: Probe = IDEAL  # what the power meter on the sphere reads (raysim.maps.probe)
+    obstacles: tuple[Obstacle, ...] = ()  # cabins, legs, meshes in the beam (raysim.scene.obstacles)
 
     def inputs(self) -> list[tuple[str, Path]]:
         """(what, path) of every file this scene was read from, for output checks."""
@@ -136,7 +139,7 @@ SCENE_METHODS = METHODS
 
 # the keys of a scene file: the top level and each table
 SCENE_KEYS = ("name", "description", "method", "dish", "panels", "deformation", "source",
-              "sphere", "go", "probe")
+              "sphere", "go", "probe", "obstacle")
 TABLE_KEYS = {
     "dish": ("diameter_m", "focal_length_m", "resolution_m", "mesh", "ideal_mesh", "mesh_unit_m"),
     "panels": ("ring_edges_m", "panels_per_ring", "gap_m", "phi0_deg"),
@@ -213,11 +216,12 @@ def parse_scene(text: str, source: str = "scene", base: Path | None = None) -> S
     probe = probe_from_table(top.sub("probe", keys=TABLE_KEYS["probe"]))
     deformation = deformation_of(top.tables("deformation"), dish.diameter, dish.focal_length,
                                  panels, base)
+    obstacles = obstacles_of(top.tables("obstacle"), dish.diameter, dish.focal_length, base)
     top.done()
     return Scene(name=str(name), dish=dish, panels=panels, deformation=deformation,
                  source=source_, sphere=sphere, subdivisions=subdivisions, text=text,
                  path=Path(source) if source != "scene" else None, method=method,
-                 files=tuple(top.files), probe=probe)
+                 files=tuple(top.files), probe=probe, obstacles=obstacles)
 
 
 def _dish(t: Table, base: Path) -> Dish:

@@ -15,7 +15,7 @@ interpolated vertex normals, the same for its ideal counterpart.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 
@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from raysim.errors import MeshError
 from raysim.surface.deformation import Deformation, NoDeformation
+from raysim.surface.obstacles import ObstacleMesh, obstacle_mesh
 from raysim.surface.panels import PanelLayout
 
 
@@ -59,6 +60,8 @@ class Reflector:
 
     ``vertex_normals`` are unit normals towards +z, smooth within a panel. ``surface`` is the
     smooth surface hits belong on, or None for a loaded mesh (hits on the facets).
+    ``obstacles``: what stands in the beam (:mod:`raysim.surface.obstacles`), shared by the
+    deformed twin; None for a clear aperture.
     """
 
     vertices: NDArray[np.float64]
@@ -69,6 +72,11 @@ class Reflector:
     D: float
     surface: ParaboloidSurface | None = None
     layout: PanelLayout | None = None
+    obstacles: ObstacleMesh | None = None
+
+    def with_obstacles(self, obstacles: ObstacleMesh | None) -> Reflector:
+        """This reflector with ``obstacles`` in its beam (None: a clear aperture)."""
+        return replace(self, obstacles=obstacles)
 
     @cached_property
     def vertex_panel(self) -> NDArray[np.int64]:
@@ -111,7 +119,7 @@ class Reflector:
             surface = None
             normals = facet_vertex_normals(vertices, self.faces)
         return Reflector(vertices, self.faces, self.face_panel, normals, self.F, self.D, surface,
-                         self.layout)
+                         self.layout, self.obstacles)
 
     def _panel_for_deformation(self) -> NDArray[np.int64] | None:
         # scene panel ids only mean something for deformations when the layout made the mesh
@@ -377,12 +385,20 @@ def _components(faces: NDArray, n_vertices: int) -> NDArray[np.int64]:
 
 
 def reflectors_for(scene) -> tuple[Reflector, Reflector]:
-    """The (ideal, deformed) reflector pair a :class:`~raysim.scene.scene.Scene` describes."""
+    """The (ideal, deformed) reflector pair a :class:`~raysim.scene.scene.Scene` describes, both
+    with the scene's obstacles (built on the reflector's focal length)."""
     dish = scene.dish
+    specs = getattr(scene, "obstacles", ())
     if dish.mesh is not None:
         ideal, loaded, _ = load_reflector(dish.mesh, dish.mesh_unit, dish.focal_length, dish.ideal_mesh)
+        obstacles = obstacle_mesh(specs, ideal.F)
+        if obstacles is not None:
+            ideal, loaded = ideal.with_obstacles(obstacles), loaded.with_obstacles(obstacles)
         if isinstance(scene.deformation, NoDeformation):
             return ideal, loaded
         return ideal, loaded.deformed(scene.deformation)
     ideal = paraboloid(dish.diameter, dish.focal_length, dish.resolution, scene.panels)
+    obstacles = obstacle_mesh(specs, ideal.F)
+    if obstacles is not None:
+        ideal = ideal.with_obstacles(obstacles)
     return ideal, ideal.deformed(scene.deformation)

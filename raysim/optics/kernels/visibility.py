@@ -1,4 +1,5 @@
-"""The shadow test every engine shares: does the plane wave reach a point on the reflector?
+"""The shadow tests every engine shares: does the plane wave reach a point on the reflector, and
+does an obstacle cross a ray's path (:func:`blocked_segments`)?
 
 Warp's BVH holds the mesh in float32 (a 4 um step at 55 m), so it only decides which face a ray
 meets first; the caller keeps its geometry in float64. A ray of the incident wave starts
@@ -39,3 +40,23 @@ def lit_points(
     if q.result:
         if q.face != face[i] and wp.float64(q.t) < standoff - tolerance:
             lit[i] = 0
+
+
+@wp.kernel
+def blocked_segments(
+    mesh: wp.uint64,
+    origins: wp.array(dtype=wp.vec3d),
+    ends: wp.array(dtype=wp.vec3d),
+    blocked: wp.array(dtype=wp.int32),
+    offset: int,
+):
+    """blocked[i] = 1 when a face of ``mesh`` (an obstacle) crosses the segment origins[i] ->
+    ends[i]; a segment of zero length is never blocked."""
+    i = wp.tid() + offset
+    d = ends[i] - origins[i]
+    length = wp.length(d)
+    blocked[i] = 0
+    if length > wp.float64(0.0):
+        q = wp.mesh_query_ray(mesh, wp.vec3(origins[i]), wp.vec3(d / length), float(length))
+        if q.result:
+            blocked[i] = 1
