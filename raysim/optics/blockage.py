@@ -50,11 +50,9 @@ class ObstacleBVH:
 
     @classmethod
     def build(cls, obstacles: ObstacleMesh, device: str | None = "cpu") -> ObstacleBVH:
-        wp = runtime.init()
         dev = runtime.resolve_device(device)
-        points = wp.array(obstacles.vertices.astype(np.float32), dtype=wp.vec3, device=dev)
-        indices = wp.array(obstacles.faces.astype(np.int32).ravel(), dtype=wp.int32, device=dev)
-        return cls(wp.Mesh(points=points, indices=indices), dev, points)
+        mesh, points = runtime.warp_mesh(obstacles.vertices, obstacles.faces, dev)
+        return cls(mesh, dev, points)
 
     def blocked(self, origins: ArrayLike, ends: ArrayLike) -> NDArray[np.bool_]:
         """(n,) bool: an obstacle crosses the segment from each origin to its end (m)."""

@@ -70,11 +70,8 @@ class ReflectorBVH:
 
     @classmethod
     def build(cls, reflector: Reflector, device: str | None = "cpu") -> ReflectorBVH:
-        wp = runtime.init()
         dev = runtime.resolve_device(device)
-        points = wp.array(reflector.vertices.astype(np.float32), dtype=wp.vec3, device=dev)
-        indices = wp.array(reflector.faces.astype(np.int32).ravel(), dtype=wp.int32, device=dev)
-        mesh = wp.Mesh(points=points, indices=indices)
+        mesh, points = runtime.warp_mesh(reflector.vertices, reflector.faces, dev)
         obstacles = None if reflector.obstacles is None else ObstacleBVH.build(reflector.obstacles, dev)
         return cls(mesh, dev, reflector_standoff(reflector), shadow_tolerance(reflector), points,
                    obstacles)

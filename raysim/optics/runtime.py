@@ -16,6 +16,8 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from raysim.errors import DeviceError
 
 _lock = threading.Lock()
@@ -129,3 +131,13 @@ def launch(kernel: Any, dim: int, inputs: Sequence[Any], device: str, min_chunk:
         total = inputs[i].numpy()  # a view of the CPU array's memory
         for k in range(1, n):
             total += copies[k][i].numpy()
+
+
+def warp_mesh(vertices, faces, device) -> tuple[Any, Any]:
+    """A Warp BVH mesh of triangles (``vertices`` (n, 3) m, ``faces`` (m, 3)) on ``device``,
+    and its float32 points array (kept alive beside the mesh; the BVH finds faces only, the
+    geometry is recomputed in float64 by the callers)."""
+    wp = init()
+    points = wp.array(np.asarray(vertices).astype(np.float32), dtype=wp.vec3, device=device)
+    indices = wp.array(np.asarray(faces).astype(np.int32).ravel(), dtype=wp.int32, device=device)
+    return wp.Mesh(points=points, indices=indices), points

@@ -16,6 +16,7 @@ from raysim.optics import po
 from raysim.scene.scene import load_scene
 from raysim.simulate import simulate
 from raysim.surface.mesh import paraboloid, reflectors_for
+from tests.surfaces import smooth_taper
 
 D, F, R = 110.0, 33.0, 10.0
 SCENES = Path(__file__).resolve().parents[3] / "scenes"
@@ -26,19 +27,6 @@ def sphere_points(theta_deg, phi_deg):
     T, P = np.meshgrid(np.radians(theta_deg), np.radians(phi_deg), indexing="ij")
     d = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), -np.cos(T)], axis=-1)
     return (np.array([0.0, 0.0, F]) + R * d).reshape(-1, 3), T.ravel()
-
-
-def smooth_taper(r0: float, r1: float):
-    """Weight 1 for r <= r0 falling to 0 at r1 through a C-infinity step (no edge to diffract)."""
-
-    def f(u):
-        return np.where(u > 0, np.exp(-1.0 / np.maximum(u, 1e-300)), 0.0)
-
-    def taper(x, y):
-        t = np.clip((r1 - np.hypot(x, y)) / (r1 - r0), 0.0, 1.0)
-        return f(t) / (f(t) + f(1.0 - t))
-
-    return taper
 
 
 @pytest.mark.slow

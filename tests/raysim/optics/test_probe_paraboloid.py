@@ -21,6 +21,7 @@ from raysim.optics import po
 from raysim.scene import parse_scene
 from raysim.simulate import simulate
 from raysim.surface.mesh import paraboloid
+from tests.surfaces import smooth_taper
 
 D, F, R = 10.0, 4.0, 2.0
 N_PHI = 72  # 5 deg cells centred on phi = 0, 5, ..., 45, ..., 90
@@ -132,19 +133,6 @@ def test_go_cross_polar_nulls_and_peak(go_maps):
                           np.argmax(cross_ref[lit, first], axis=1))
     assert np.all(np.abs(phi[np.argmax(cross_ref[lit, first], axis=1)] - 45.0) <= 10.0)
     assert np.abs(ratio[lit, j45] / ratio_ref[lit, j45] - 1).max() < 1e-3
-
-
-def smooth_taper(r0: float, r1: float):
-    """Weight 1 for r <= r0 falling to 0 at r1 through a C-infinity step (no edge to diffract)."""
-
-    def f(u):
-        return np.where(u > 0, np.exp(-1.0 / np.maximum(u, 1e-300)), 0.0)
-
-    def taper(x, y):
-        t = np.clip((r1 - np.hypot(x, y)) / (r1 - r0), 0.0, 1.0)
-        return f(t) / (f(t) + f(1.0 - t))
-
-    return taper
 
 
 def test_po_cross_polar_ratio_without_the_rim_wave():
