@@ -210,6 +210,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     central = _central_mode(inverse, delta, data, setup, opts)
     if central is not None:
         delta, central_coef = central.remove(grid, delta)
+        delta = central.blank(grid, delta)
     delta_out, coef = remove_terms(grid, delta, opts.terms, scan.F)
     outcome = Outcome(scan, grid, inverse, linear, data, setup, history, weighted, coef,
                       gn.gain_factor if gn is not None else None)

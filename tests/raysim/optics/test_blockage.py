@@ -93,7 +93,7 @@ def _reference(grid, radius_legs: float, radius_cabin: float):
     focus = np.array([0.0, 0.0, F])
     u = (dish - focus) / np.linalg.norm(dish - focus, axis=-1, keepdims=True)
     entry = focus + R * u  # where the ray reflected at p towards the focus meets the sphere
-    above = dish + [0.0, 0.0, 100.0]  # the incident ray comes straight down to p
+    above = dish + np.array([0.0, 0.0, 100.0])  # the incident ray comes straight down to p
     feet, apexes = leg_ends(Legs(4, WIDTH, FOOT, None, APEX_R, math.radians(ROTATION)), F)
     incident = r < radius_cabin
     reflected = np.zeros_like(incident)
