@@ -9,7 +9,7 @@ Modules, in the order the data flow through them:
   N the solvers accept.
 - ``equation``: FA = I_ideal / I_def - 1, G = -2 F d / R, the power gain, the noise bias.
 - ``resample``: sphere (theta, phi) -> aperture (x, y) through r = 2F tan(theta/2), with
-  inpainting of missing samples and the continuation to the rim.
+  inpainting of missing samples (blocked cells along phi) and the continuation to the rim.
 - ``poisson``: the Shortley-Weller Laplacian on the disk and the solvers direct, multigrid,
   gauss-seidel, sor (on that matrix) and fft (the paper's square comparison).
 - ``boundary``: rim values: zero (the paper) or a harmonic fit to rim targets (CSV x,y,dz).
@@ -18,6 +18,7 @@ Modules, in the order the data flow through them:
 - ``wave``: how wave-optics intensity answers a deformation: weights, the wave preconditioner.
 - ``nonlinear``: model-based refinement (defect correction with Anderson acceleration).
 - ``refinement``: the choice of forward model and preconditioner.
+- ``central``: the mode a blocked centre (a feed cabin's shadow) leaves unobservable.
 - ``fit``: piston / tilt / focus removal and the per-panel adjustment table.
 - ``metrics``: the paper's RMS and RRMS over the aperture's grid points.
 - ``surface``: the SurfaceMap NetCDF contract (:mod:`raysim.maps.surfacemap`, re-exported).

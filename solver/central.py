@@ -21,7 +21,8 @@ refinement's own defect correction with Anderson acceleration; a few more model 
 
 Like piston, tilt and focus when they are removed, the inversion then fits that shape over
 the observed annulus r >= r_h by least squares and removes it, records its coefficient c (m)
-and says the mode is unobservable; the truth gets the same removal before the RMS.
+and says the mode is unobservable; the truth gets the same removal before the RMS. Inside the
+hidden disk the map is NaN: nothing was measured there (and the RMS skips it).
 """
 
 from __future__ import annotations
@@ -59,6 +60,11 @@ class CentralMode:
         c = float(np.dot(self.shape[use], delta[use]) / np.dot(self.shape[use], self.shape[use]))
         return delta - c * self.shape, c
 
+    def blank(self, grid: ApertureGrid, delta: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``delta`` with NaN at r < r_h: the hidden centre holds no data, and what the solve put
+        there (the inpainted FA's answer) is no measurement."""
+        return np.where(grid.r < self.r_h, np.nan, delta)
+
     def rescale(self, accuracy: dict, grid: ApertureGrid, truth: NDArray[np.float64]) -> dict:
         """``accuracy`` (:func:`solver.record.accuracy_attrs` of the truth without the mode)
         with the RRMS against the peak-to-peak of ``truth`` as it was (m), before the removal."""
@@ -73,7 +79,10 @@ class CentralMode:
                 "central_mode": f"unobservable: the blocked centre r < central_hole_radius_m leaves "
                                 f"{shape}; fitted over r >= central_hole_radius_m and removed from "
                                 "the map (and from the truth before the RMS)",
-                "central_mode_shape": self.kind, "central_mode_observable": False}
+                "central_mode_shape": self.kind, "central_mode_observable": False,
+                "central_hole": "no data: the map is NaN at r < central_hole_radius_m",
+                "rms_definition": "over the grid points with central_hole_radius_m <= r < D/2 "
+                                  "(the hidden centre holds no data)"}
 
 
 def hole_radius(blocked: NDArray[np.bool_] | None, theta_edges: NDArray[np.float64],

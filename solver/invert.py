@@ -157,6 +157,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     central = _central_mode(inverse, delta, data, setup, opts)
     if central is not None:
         delta, central_coef = central.remove(grid, delta)
+        delta = central.blank(grid, delta)
     delta_fit, delta_c = remove_mode(grid, delta, mode) if mode is not None else (delta, 0.0)
     delta_out, coef = remove_terms(grid, delta_fit, opts.terms, scan.F)
     outcome = Outcome(scan, grid, inverse, linear, data, setup, history, weighted, coef,

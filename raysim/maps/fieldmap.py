@@ -7,6 +7,9 @@ solver, the renderer) shares:
   both seen from the focus);
 - ``intensity``: |E|^2 of the deformed (or measured) reflector relative to the incident wave;
   ``intensity_ideal`` on the same grid; optional ``intensity_std``; NaN where no sample exists;
+  optional ``blocked`` (0/1): cells obstacles hide (:mod:`raysim.optics.blockage`), which
+  readers treat as missing, with the obstacles' triangles ``obstacle_vertices`` (m) and
+  ``obstacle_faces``;
 - attributes ``focal_length``, ``diameter``, ``sphere_radius`` (m), ``frequency_hz`` (Hz),
   ``method`` (go, po, po+ptd, go+edge, measured), ``sampling`` (``cell_mean`` or ``centre``), and
   ``scene`` (the scene's TOML text) when a scene made it. A reader works from the attributes
@@ -150,12 +153,16 @@ def validate(ds: xr.Dataset, source: str = "FieldMap") -> xr.Dataset:
     for name in REQUIRED_VARS:
         if name not in ds.data_vars:
             raise FieldMapError(f"{source}: missing variable '{name}'")
-    for name in (*REQUIRED_VARS, "intensity_std"):
+    for name in (*REQUIRED_VARS, "intensity_std", "blocked"):
         if name not in ds.data_vars:
             continue
         if ds[name].dims != ("theta", "phi"):
             raise FieldMapError(f"{source}: variable '{name}' must have dims (theta, phi), "
                                 f"got {ds[name].dims}")
+        if name == "blocked":
+            if not np.all(np.isin(np.asarray(ds[name].values), (0, 1))):
+                raise FieldMapError(f"{source}: variable 'blocked' must hold 0 or 1 per cell")
+            continue
         _check_intensity(ds[name].values, name, source)
     for name in ("focal_length", "diameter", "sphere_radius"):
         if name not in ds.attrs:

@@ -5,6 +5,7 @@ Modules:
 - ``runtime``: Warp set-up shared by every engine (kernel cache, device choice, launches
   split across the CPU's threads).
 - ``go``: geometric-optics ray tubes -> cell-mean intensity (and the GO forward model).
+- ``blockage``: obstacles in the beam: which rays they block, which sphere cells they hide.
 - ``goprobe``: each ray tube's weight for a probe (its reflected polarisation and arrival
   angle as the probe reads them).
 - ``po``: physical-optics surface currents radiated in float64 through the full dyadic

@@ -3,6 +3,7 @@
 Modules:
 
 - ``deformations``: the ``[[deformation]]`` tables -> a :class:`~raysim.surface.deformation.Deformation`.
+- ``obstacles``: the ``[[obstacle]]`` tables -> obstacle specs (:mod:`raysim.surface.obstacles`).
 - ``scene``: the scene itself (dish, panels, source, sphere, method), :func:`load_scene` and
   :func:`scene_of` (the scene a FieldMap records, re-parsed in one place).
 

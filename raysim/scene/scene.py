@@ -1,11 +1,11 @@
 """Scenes: TOML files -> a validated :class:`Scene` in SI units.
 
 A scene names the dish (diameter and focal length, or a mesh file), its panels and gaps, the
-surface errors, the source (frequency, direction of incidence, polarization), the probe
-sphere and, optionally, the probe on it (``[probe]``: polarisation and pattern,
-:mod:`raysim.maps.probe`; without it an ideal |E|^2 meter). Keys carry their unit in their
-name (``diameter_m``, ``frequency_hz``, ``theta_max_deg``, ``amplitude_um``); degrees and
-micrometres are converted here, at the edge, and the rest of raysim sees metres, hertz and
+surface errors, the obstacles in the beam, the source (frequency, direction of incidence,
+polarization), the probe sphere and, optionally, the probe on it (``[probe]``: polarisation
+and pattern, :mod:`raysim.maps.probe`; without it an ideal |E|^2 meter). Keys carry their unit
+in their name (``diameter_m``, ``frequency_hz``, ``theta_max_deg``, ``amplitude_um``); degrees
+and micrometres are converted here, at the edge, and the rest of raysim sees metres, hertz and
 radians. Every defect raises
 :class:`~raysim.errors.SceneError` with one line naming the file and the key.
 """

@@ -13,4 +13,5 @@ Modules:
 - ``quadrature``: Gauss points with vector areas over the faces, lifted onto the smooth
   surface (the PO surface integral).
 - ``edges``: the free edges of a mesh (rim, holes, panel-gap edges) and their line quadrature.
+- ``obstacles``: feed cabins, support legs and meshes in the beam, as specs and triangles.
 """
