@@ -116,6 +116,15 @@ def read_rim_csv(path: str | os.PathLike[str]) -> RimTargets:
     return RimTargets(data[:, 0], data[:, 1], data[:, 2], source=str(path))
 
 
+def write_rim_csv(targets: RimTargets, path: str | os.PathLike[str]) -> None:
+    """Write ``targets`` as the rim CSV :func:`read_rim_csv` reads (header x,y,dz; metres)."""
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(["x", "y", "dz"])
+        for row in zip(targets.x, targets.y, targets.dz, strict=True):
+            writer.writerow([f"{v:.9g}" for v in row])
+
+
 def check_targets(targets: RimTargets, a: float) -> None:
     """Raise :class:`RimTargetsError` unless there are >= 8 targets near the rim of radius a (m):
     between 0.8 a and 1.05 a, with |dz| under 1 % of a."""

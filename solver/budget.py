@@ -97,7 +97,7 @@ QUADRATURE = 6  # radius samples per sphere row in the rings' radial integrals
 class Rings:
     """The scan's usable sphere rows seen from the aperture, as the inversion resamples them.
 
-    ``r`` (m): radius samples 0..a; ``dA_dr`` (m): 2 pi r... per unit angle, r dr/dr = r;
+    ``r`` (m): radius samples 0..a; ``G`` (m) there; ``n_phi`` cells of ``dphi`` (rad) per ring;
     ``basis[p]`` (rows, samples): the value at each radius of the aperture field the resampling
     makes from a unit value in one row (:func:`solver.resample.sphere_to_aperture`: the cubic
     continuation to the rim, the padding across the pole, the cubic spline), for p = 0 (even

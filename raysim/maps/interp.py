@@ -110,7 +110,8 @@ class SphereField:
     to the probe's exact reading of the ideal paraboloid at the point
     (:func:`raysim.maps.probe.ideal_weight` times (rho / R)^2). Either way the simulation's own
     discretisation error, common to both intensities, cancels: at the 1e-5 level that moves an
-    inverted map by tens of um (G is about 0.4 m per unit FA on the paper's dish).
+    inverted map by tens of um (the constant-FA shape delta_c is 2.5 m at the centre per unit FA on
+    the paper's dish, solver.gainmode).
 
     Parameters
     ----------

@@ -20,7 +20,6 @@ The folder gets ``field.nc``, ``scan.nc`` (and its journal), ``rim.csv``, ``surf
 
 from __future__ import annotations
 
-import csv
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -36,7 +35,7 @@ from raysim.pipeline.report import output_folder, staging
 from raysim.progress import Progress
 from raysim.scene.scene import load_scene
 from raysim.simulate import simulate
-from solver.boundary import RimTargets
+from solver.boundary import RimTargets, write_rim_csv
 from solver.errors import SolverError
 from solver.invert import invert
 
@@ -64,15 +63,6 @@ def rim_targets(deformation, a: float, n: int, std: float, seed: int) -> RimTarg
     dz = np.asarray(deformation(x, y), dtype=np.float64)
     dz = dz + std * np.random.default_rng(seed).standard_normal(n)
     return RimTargets(x, y, dz, source=f"{n} simulated rim targets ({std * 1e6:g} um each)")
-
-
-def write_rim_csv(targets: RimTargets, path: str | os.PathLike[str]) -> None:
-    """The targets as the rim CSV ``raysim invert --rim`` reads (x, y, dz in m)."""
-    with open(path, "w", newline="", encoding="utf-8") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(["x", "y", "dz"])
-        for row in zip(targets.x, targets.y, targets.dz, strict=True):
-            writer.writerow([f"{v:.9g}" for v in row])
 
 
 def run_campaign(scene_path: str | os.PathLike[str], plan_path: str | os.PathLike[str],

@@ -3,7 +3,14 @@
 import numpy as np
 import pytest
 
-from solver.boundary import RimTargets, check_targets, fit_harmonic, harmonic_order, read_rim_csv
+from solver.boundary import (
+    RimTargets,
+    check_targets,
+    fit_harmonic,
+    harmonic_order,
+    read_rim_csv,
+    write_rim_csv,
+)
 from solver.errors import RimTargetsError
 
 A = 55.0
@@ -83,3 +90,15 @@ def test_the_order_follows_count_and_gaps():
     phi = np.linspace(0, np.pi / 2, 20)                       # one quadrant only
     with pytest.raises(RimTargetsError, match="gap"):
         harmonic_order(RimTargets(A * np.cos(phi), A * np.sin(phi), np.zeros(20)))
+
+
+def test_rim_csv_round_trip(tmp_path):
+    """What write_rim_csv writes, read_rim_csv reads back to 9 significant digits."""
+    phi = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
+    targets = RimTargets(50.0 * np.cos(phi), 50.0 * np.sin(phi), 1e-5 * np.sin(3 * phi))
+    path = tmp_path / "rim.csv"
+    write_rim_csv(targets, path)
+    back = read_rim_csv(path)
+    for name in ("x", "y", "dz"):
+        np.testing.assert_allclose(getattr(back, name), getattr(targets, name), rtol=1e-8,
+                                   atol=1e-15)
