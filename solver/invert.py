@@ -38,7 +38,6 @@ from solver.gainmode import (
     MeasuredFA,
     estimate_gain,
     refocus_mode,
-    remove_mode,
     resolve_gain,
 )
 from solver.gauss_newton import (
@@ -60,7 +59,7 @@ from solver.options import (
 from solver.record import Outcome, accuracy_attrs, surface_attrs
 from solver.refinement import RefinementSetup, choose_model, refinement_setup
 from solver.resample import usable_rows
-from solver.unobservable import unobservable
+from solver.unobservable import Unobservable, unobservable
 from solver.wave import amplitude_weight
 
 __all__ = ["DEFAULT_N", "DEFAULT_REFINE", "DEFAULT_SOLVER", "MAX_INCIDENCE", "WEIGHTS",
@@ -152,13 +151,15 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         delta, gn = _gauss_newton(inverse, delta, data, setup, history, opts, log)
     refined = setup.forward is not None and opts.refine_iterations > 0
     mode = delta_c_mode(inverse, refined) if data.gain.estimated else None
-    std = None
-    if scan.intensity_std is not None and opts.uncertainty_samples > 0:
-        std = monte_carlo_std(scan, inverse, data, opts.uncertainty_samples, opts.seed, mode)
     central = _central_mode(inverse, delta, data, setup, opts)
     # delta_c and the central mode overlap on the annulus: removed by one joint fit
     unseen = unobservable(grid, {"central": central.shape if central is not None else None,
                                  "delta_c": mode}, central.r_h if central is not None else None)
+    std = None
+    if scan.intensity_std is not None and opts.uncertainty_samples > 0:
+        std = monte_carlo_std(scan, inverse, data, opts.uncertainty_samples, opts.seed, unseen)
+        if central is not None:
+            std = central.blank(grid, std)
     removed = {}
     if unseen is not None:
         delta, removed = unseen.remove(grid, delta)
@@ -284,13 +285,13 @@ def truth_on_grid(truth, scan: Scan, grid: ApertureGrid) -> NDArray[np.float64] 
 
 
 def monte_carlo_std(scan: Scan, inverse: LinearInverse, data: MeasuredFA, samples: int,
-                    seed: int, mode: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+                    seed: int, unseen: Unobservable | None = None) -> NDArray[np.float64]:
     """Std (m) of the linear solution under Gaussian intensity noise of ``intensity_std``.
 
     The inversion is linear in FA and FA is smooth in the intensity, so the linear solve's
-    spread is the refined map's spread to first order. Each draw gets the data's gain
-    treatment: the scale estimated again and ``mode`` (delta_c) removed when the gain is
-    estimated.
+    spread is the refined map's spread to first order. Each draw gets the data's treatment:
+    the scale estimated again when the gain is, and the ``unseen`` shapes (delta_c, the
+    central mode: :mod:`solver.unobservable`) removed as from the map.
     """
     rng = np.random.default_rng(seed)
     sigma = np.where(np.isfinite(scan.intensity_std), scan.intensity_std, 0.0)
@@ -300,7 +301,7 @@ def monte_carlo_std(scan: Scan, inverse: LinearInverse, data: MeasuredFA, sample
         c = (estimate_gain(noisy, scan.intensity_ideal, scan.sphere, data.n_rows,
                            data.noise_variance).scale if data.gain.estimated else 1.0)
         delta = inverse.solve(intensity_ratio_fa(noisy / c, scan.intensity_ideal)).delta
-        if mode is not None:
-            delta, _ = remove_mode(inverse.grid, delta, mode)
+        if unseen is not None:
+            delta, _ = unseen.remove(inverse.grid, delta)
         draws.append(delta)
     return np.std(np.stack(draws), axis=0, ddof=1)

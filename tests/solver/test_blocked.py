@@ -120,6 +120,19 @@ def test_the_surface_map_states_the_hidden_centre(small_map):
     assert "removed_central_mode_m" in a and "rms_m" in a
 
 
+def test_the_uncertainty_map_holds_nothing_inside_the_hidden_centre(small_map):
+    noisy = small_map.copy(deep=True)
+    noisy["intensity_std"] = 1e-3 * noisy["intensity"]
+    surface = invert(noisy, N=48, refine_iterations=0, gain="power", uncertainty_samples=4)
+    r_h = surface.attrs["central_hole_radius_m"]
+    X, Y = np.meshgrid(surface["x"].values, surface["y"].values)
+    r = np.hypot(X, Y)
+    std = surface["deformation_std"].values
+    assert np.all(np.isnan(std[r < r_h]))
+    annulus = (r > r_h + 0.5) & (r < 9.0)
+    assert np.all(np.isfinite(std[annulus])) and np.all(std[annulus] > 0)
+
+
 @pytest.mark.slow
 def test_the_paper_case_through_a_quadripod_and_a_cabin_within_twice_the_clear_error():
     # the paper's GO case (scenes/paper_go.toml) against the same with a feed cabin and a
