@@ -23,6 +23,13 @@ ring. The RMS over the disk is sqrt(E ||delta||^2 / (pi a^2)), the inversion's R
   disk (the harmonics (r/a)^m have mean square 1 / (m + 1) there). Without targets the harmonic
   part is not bounded by the data at all: the map assumes zero on the rim.
 
+- Cells that carry no data (``used`` false: the cells obstacles hide, which the inversion
+  fills from the rest of their row): a row with n_used of its n_phi cells measured has its
+  variance scaled by n_phi / n_used, the variance of a mean over the cells that remain (the
+  fill along phi spreads their noise over the row); a row with none (a feed cabin's) adds
+  nothing: the map is not reported there (solver.central). An approximation, not checked by
+  Monte Carlo.
+
 Checked against the scatter of the inversion itself over noisy scans in tests/solver.
 """
 
@@ -175,6 +182,7 @@ class NoiseResponse:
     modes: tuple[tuple[int, int, float], ...]   # (m, n, mean square)
     total: float
     along_delta_c: float
+    unused_cells: int = 0   # usable cells that carry no data (blocked), counted as such
 
     def budget(self, noise_db: float, readings: int = 1, gain_known: bool = False,
                rim_targets: int = 0, target_std: float = 0.0, n_modes: int = 6) -> Budget:
@@ -198,10 +206,29 @@ class NoiseResponse:
         return max(1, math.ceil((one.noise**2 / left) * (1 - 1e-12)))
 
 
-def noise_response(sphere: SphereGrid, F: float, D: float,
-                   delta_c: str = "refocus") -> NoiseResponse:
-    """The :class:`NoiseResponse` of a scan on ``sphere`` of a dish (F, D in m); see the module."""
+def row_factors(used: NDArray[np.bool_] | None, n_rows: int) -> tuple[NDArray[np.float64], int]:
+    """Per usable row, the factor on its noise variance when only the ``used`` cells
+    (n_theta, n_phi) carry data: n_phi / n_used, 0 for a row with none (see the module); and
+    the usable cells without data."""
+    if used is None:
+        return np.ones(n_rows), 0
+    rows = np.asarray(used, dtype=bool)[:n_rows]
+    n_used = rows.sum(axis=1)
+    factors = np.divide(rows.shape[1], n_used, out=np.zeros(n_rows), where=n_used > 0)
+    return factors, int(rows.size - n_used.sum())
+
+
+def noise_response(sphere: SphereGrid, F: float, D: float, delta_c: str = "refocus",
+                   used: NDArray[np.bool_] | None = None) -> NoiseResponse:
+    """The :class:`NoiseResponse` of a scan on ``sphere`` of a dish (F, D in m); see the module.
+
+    ``used`` (n_theta, n_phi) bool: the cells that carry data (None: all of them); a scan with
+    obstacles passes the cells they leave (not ``blocked``)."""
     ring = rings(sphere, F, D)
+    if used is not None and np.shape(used) != (sphere.n_theta, sphere.n_phi):
+        raise SolverError(f"the used-cell mask {np.shape(used)} is not the scan's grid "
+                          f"({sphere.n_theta}, {sphere.n_phi})")
+    factors, unused = row_factors(used, ring.basis[0].shape[0])
     a = 0.5 * D
     area = math.pi * a * a
     dr = ring.r[1] - ring.r[0]
@@ -222,20 +249,22 @@ def noise_response(sphere: SphereGrid, F: float, D: float,
         cells = ring.n_phi if m == 0 else ring.n_phi / 2.0           # sum of cos^2 over a ring
         azimuth = (ring.dphi * spline_response(m, ring.dphi)) ** 2 * cells
         phases = 1 if m == 0 else 2
-        var = phases * norm2 * azimuth * np.sum(rows**2, axis=1) / (zeros / a) ** 4
+        var = phases * norm2 * azimuth * np.sum(rows**2 * factors, axis=1) / (zeros / a) ** 4
         shares += [(m, n + 1, float(v) / area) for n, v in enumerate(var)]
         m += 1
     s = np.linspace(0.0, a, 4001)
     shape = delta_c_shape(s, F, sphere.radius, delta_c)
     unit = shape / math.sqrt(float(trapezoid(2.0 * math.pi * s * shape**2, s)))
     psi = np.interp(ring.r, s, _radial_inverse(s, unit))
-    along = float(ring.n_phi * ring.dphi**2 * np.sum(((psi * kernel) @ ring.basis[0].T) ** 2))
-    return NoiseResponse(tuple(shares), sum(v for *_, v in shares), along / area)
+    along = float(ring.n_phi * ring.dphi**2
+                  * np.sum(((psi * kernel) @ ring.basis[0].T) ** 2 * factors))
+    return NoiseResponse(tuple(shares), sum(v for *_, v in shares), along / area, unused)
 
 
 def noise_budget(sphere: SphereGrid, F: float, D: float, noise_db: float, readings: int = 1,
                  gain_known: bool = False, rim_targets: int = 0, target_std: float = 0.0,
-                 delta_c: str = "refocus", n_modes: int = 6) -> Budget:
+                 delta_c: str = "refocus", n_modes: int = 6,
+                 used: NDArray[np.bool_] | None = None) -> Budget:
     """The budget of a scan on ``sphere`` of a dish (F, D in m); see the module docstring."""
-    return noise_response(sphere, F, D, delta_c).budget(noise_db, readings, gain_known,
+    return noise_response(sphere, F, D, delta_c, used).budget(noise_db, readings, gain_known,
                                                          rim_targets, target_std, n_modes)

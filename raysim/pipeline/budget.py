@@ -3,7 +3,9 @@
 Units: lengths in m (the table's figures in um), noise in dB per reading, times in s. The
 prediction is :func:`solver.budget.noise_budget` (the linear operator, no Monte Carlo) on the
 plan's sphere grid and dish; the scan time is :meth:`hardware.plan.ScanPlan.duration` at the
-readings per point asked for. ``raysim budget`` prints :func:`budget_rows`.
+readings per point asked for. A plan with obstacles passes the cells they leave
+(:attr:`hardware.plan.ScanPlan.blocked_share` at the FieldMap's threshold): blocked cells
+carry no data. ``raysim budget`` prints :func:`budget_rows`.
 """
 
 from __future__ import annotations
@@ -12,7 +14,11 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+from numpy.typing import NDArray
+
 from hardware.plan import ScanPlan, load_plan
+from raysim.optics.blockage import BLOCKED_SHARE
 from solver.budget import Budget, noise_response
 from solver.errors import SolverError
 
@@ -30,6 +36,7 @@ class BudgetRow:
     target: float | None            # m
     readings_needed: int | None     # None: the target is out of reach (rim targets' part)
     hours_needed: float | None
+    blocked_cells: int = 0          # usable cells the plan's obstacles hide (no data)
 
 
 def parse_levels(text: str) -> list[float]:
@@ -63,7 +70,7 @@ def budget_rows(plan: ScanPlan | str | Path, levels: list[float], readings: int 
     if target is not None and not 0.0 < target <= 1e-2:
         raise SolverError(f"--target-um must lie in (0, 10000] um, got {target * 1e6:g}")
     response = noise_response(plan.grid, plan.focal_length, plan.diameter,
-                              "refocus" if refine else "linear")
+                              "refocus" if refine else "linear", used_cells(plan))
     options = dict(gain_known=gain_known, rim_targets=rim, target_std=rim_std)
     rows = []
     for level in levels:
@@ -71,8 +78,15 @@ def budget_rows(plan: ScanPlan | str | Path, levels: list[float], readings: int 
         needed = None if target is None else response.readings_for(target, level, **options)
         rows.append(BudgetRow(level, k, budget, plan.duration(k) / 3600.0, target, needed,
                               None if needed is None or needed > MAX_READINGS
-                              else plan.duration(needed) / 3600.0))
+                              else plan.duration(needed) / 3600.0, response.unused_cells))
     return rows
+
+
+def used_cells(plan: ScanPlan) -> NDArray[np.bool_] | None:
+    """(n_theta, n_phi): the plan's cells that carry data, those its obstacles do not hide
+    (the measured FieldMap's ``blocked`` rule); None without obstacles."""
+    share = plan.blocked_share
+    return None if share is None else ~(share > BLOCKED_SHARE)
 
 
 def table_rows(rows: list[BudgetRow]) -> list[list[str]]:
