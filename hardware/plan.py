@@ -99,7 +99,8 @@ class ScanPlan:
 
     def inputs(self) -> list[tuple[str, Path]]:
         """(what, path) of the files this plan was read from, for output checks."""
-        return [("plan, rig or obstacle mesh file", f) for f in self.files]
+        return [("plan or rig file" if f.suffix == ".toml" else "obstacle mesh file the plan names",
+                 f) for f in self.files]
 
     def steps(self) -> list[Step]:
         """Every step of the scan in acquisition order (see the module docstring)."""
