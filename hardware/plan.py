@@ -22,7 +22,7 @@ import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass, field, replace
-from functools import cached_property
+from functools import cached_property, lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -31,9 +31,11 @@ from numpy.typing import NDArray
 
 from hardware.config import Table, plan_table, read_toml
 from hardware.drift import DRIFT_MODES
+from hardware.errors import PlanError
 from hardware.rig import Rig, load_rig, rig_from_table
 from hardware.sim.settings import SimSettings, sim_settings_from_table
 from raysim.files import find_input
+from raysim.maps.probe import Probe
 from raysim.maps.sphere import SphereGrid
 from raysim.scene.obstacles import obstacles_of
 from raysim.surface.obstacles import Obstacle, ObstacleMesh, obstacle_mesh
@@ -161,30 +163,49 @@ class ScanPlan:
             n_samples += step.kind == SAMPLE
         return moves, n_samples, len(steps) - n_samples
 
-    @cached_property
+    @property
     def obstacle_mesh(self) -> ObstacleMesh | None:
         """The obstacles' triangles on this plan's dish (m, reflector frame), None without."""
-        return obstacle_mesh(self.obstacles, self.focal_length)
+        return _obstacle_mesh(self.obstacles, self.focal_length)
 
-    @cached_property
+    @property
     def blocked_share(self) -> NDArray[np.float64] | None:
-        """(n_theta, n_phi): the share of each cell's GO power the obstacles take from the
-        ideal paraboloid as the rig's probe reads it, on the plan's grid (None without
-        obstacles); traced as the inversion's GO model traces it
-        (:func:`raysim.optics.blockage.paraboloid_blocked_share`), once per plan."""
-        if self.obstacle_mesh is None:
+        """(n_theta, n_phi), read-only: the share of each cell's GO power the obstacles take
+        from the ideal paraboloid as the rig's probe reads it, on the plan's grid (None
+        without obstacles); traced as the inversion's GO model traces it
+        (:func:`raysim.optics.blockage.paraboloid_blocked_share`), once per geometry (a plan
+        copied with other acquisition settings shares it)."""
+        if not self.obstacles:
             return None
-        from raysim.optics.blockage import paraboloid_blocked_share
-
         probe = self.rig.probe_response
-        return paraboloid_blocked_share(self.grid, self.focal_length, self.diameter,
-                                        self.obstacle_mesh, None if probe.ideal else probe,
-                                        self.polarization)
+        return _blocked_share(self.grid, self.focal_length, self.diameter, self.obstacles,
+                              None if probe.ideal else probe, self.polarization)
 
     def check_reach(self) -> None:
         """Raise :class:`PlanError` if a step lies outside the rig's reach."""
         for step in self.steps():
             self.rig.axes(step.theta, step.phi)
+
+
+@lru_cache(maxsize=4)
+def _obstacle_mesh(obstacles: tuple[Obstacle, ...], F: float) -> ObstacleMesh | None:
+    """:func:`raysim.surface.obstacles.obstacle_mesh`, kept for the last few plans."""
+    return obstacle_mesh(obstacles, F)
+
+
+@lru_cache(maxsize=4)
+def _blocked_share(grid: SphereGrid, F: float, D: float, obstacles: tuple[Obstacle, ...],
+                   probe: Probe | None, polarization: float) -> NDArray[np.float64]:
+    """:func:`raysim.optics.blockage.paraboloid_blocked_share` of one plan geometry, kept
+    (read-only) for the last few: the trace takes seconds on a large dish."""
+    from raysim.optics.blockage import paraboloid_blocked_share
+
+    mesh = _obstacle_mesh(obstacles, F)
+    if mesh is None:
+        raise PlanError("no obstacles to trace")
+    share = paraboloid_blocked_share(grid, F, D, mesh, probe, polarization)
+    share.setflags(write=False)
+    return share
 
 
 def load_plan(path: str | Path, rig: str | Path | None = None) -> ScanPlan:
