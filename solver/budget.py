@@ -23,12 +23,22 @@ ring. The RMS over the disk is sqrt(E ||delta||^2 / (pi a^2)), the inversion's R
   disk (the harmonics (r/a)^m have mean square 1 / (m + 1) there). Without targets the harmonic
   part is not bounded by the data at all: the map assumes zero on the rim.
 
+- Drift references: when the readings are corrected for receiver drift by reference readings
+  every K lines (each the mean of S readings), a reference's own error e_k (relative std
+  sigma_1 / sqrt(S), sigma_1 one reading's) is applied to every cell read near it: line j gets
+  epsilon_j = sum_k H_jk e_k - e_0, H the linear interpolation in time between the references
+  that bracket the line (at its middle) and e_0 the first reference's, relative to which the
+  gains are taken. That error is constant along theta, so a mode's row weights add before they
+  are squared, and its azimuthal weight is ||H^T cos(m phi)||^2 + ||H^T sin(m phi)||^2 instead of
+  n_phi / 2. With the gain estimated its phi-constant part (m = 0) is a scale error and goes
+  with the gain; a ``smooth`` correction (line fits over several references) averages the
+  references and is counted here as ``linear``, an upper bound.
 - Cells that carry no data (``used`` false: the cells obstacles hide, which the inversion
   fills from the rest of their row): a row with n_used of its n_phi cells measured has its
   variance scaled by n_phi / n_used, the variance of a mean over the cells that remain (the
   fill along phi spreads their noise over the row); a row with none (a feed cabin's) adds
-  nothing: the map is not reported there (solver.central). An approximation, not checked by
-  Monte Carlo.
+  nothing, to the readings' part or to the references': the map is not reported there
+  (solver.central). An approximation, not checked by Monte Carlo.
 
 Checked against the scatter of the inversion itself over noisy scans in tests/solver.
 """
@@ -81,7 +91,8 @@ class Budget:
     ``noise``: the noise's part after delta_c's removal (when the gain is estimated);
     ``delta_c``: the share along delta_c (removed with an estimated gain, else kept);
     ``harmonic``: the rim targets' part (None without targets: unbounded); ``modes``: the
-    largest Dirichlet-mode shares, largest first; ``sigma``: relative std per cell.
+    largest Dirichlet-mode shares, largest first; ``sigma``: relative std per cell;
+    ``reference``: the drift references' part (0 when the readings are not drift-corrected).
     """
 
     noise: float
@@ -90,11 +101,12 @@ class Budget:
     harmonic: float | None
     modes: tuple[Mode, ...]
     sigma: float
+    reference: float = 0.0
 
     @property
     def total(self) -> float:
-        """The RMS the map is predicted to have (noise and rim targets together, m)."""
-        return math.hypot(self.noise, self.harmonic or 0.0)
+        """The RMS the map is predicted to have (noise, references and rim targets, m)."""
+        return math.hypot(self.noise, self.reference, self.harmonic or 0.0)
 
 
 QUADRATURE = 6  # radius samples per sphere row in the rings' radial integrals
@@ -177,33 +189,86 @@ def harmonic_rms(n_targets: int, target_std: float) -> float:
 @dataclass(frozen=True)
 class NoiseResponse:
     """The map's mean-square response (m^2 over the disk, per unit relative variance of a
-    cell's reading) of one scan geometry: per Dirichlet mode, and along delta_c."""
+    cell's reading) of one scan geometry: per Dirichlet mode, and along delta_c; and per unit
+    relative variance of a drift reference (``reference``: per mode, empty when the readings
+    are not drift-corrected)."""
 
     modes: tuple[tuple[int, int, float], ...]   # (m, n, mean square)
     total: float
     along_delta_c: float
+    reference: tuple[tuple[int, int, float], ...] = ()
     unused_cells: int = 0   # usable cells that carry no data (blocked), counted as such
 
+    def reference_share(self, gain_known: bool) -> float:
+        """Mean square (m^2) per unit reference variance; m = 0 goes with an estimated gain."""
+        return sum(ms for m, _, ms in self.reference if gain_known or m > 0)
+
     def budget(self, noise_db: float, readings: int = 1, gain_known: bool = False,
-               rim_targets: int = 0, target_std: float = 0.0, n_modes: int = 6) -> Budget:
-        """The :class:`Budget` of readings of ``noise_db`` averaged ``readings`` times."""
+               rim_targets: int = 0, target_std: float = 0.0, n_modes: int = 6,
+               reference_samples: int = 0) -> Budget:
+        """The :class:`Budget` of readings of ``noise_db`` averaged ``readings`` times, drift
+        references (when the response has them) each the mean of ``reference_samples``."""
         sigma = relative_std(noise_db, readings)
         v = sigma**2
         noise = self.total if gain_known else max(self.total - self.along_delta_c, 0.0)
         harmonic = harmonic_rms(rim_targets, target_std) if rim_targets else None
         largest = sorted(self.modes, key=lambda mode: -mode[2])[:n_modes]
+        reference = 0.0
+        if self.reference and reference_samples > 0:
+            v_ref = relative_std(noise_db, reference_samples) ** 2
+            reference = math.sqrt(v_ref * self.reference_share(gain_known))
         return Budget(math.sqrt(v * noise), math.sqrt(v * self.along_delta_c), not gain_known,
                       harmonic, tuple(Mode(m, n, math.sqrt(v * ms)) for m, n, ms in largest),
-                      sigma)
+                      sigma, reference)
 
     def readings_for(self, target: float, noise_db: float, **options) -> int | None:
         """Readings per point for a predicted total RMS of at most ``target`` (m); None when
-        the rim targets' part alone exceeds it."""
+        the rim targets' and the references' parts alone exceed it (more readings per point
+        do not shrink those)."""
         one = self.budget(noise_db, 1, **options)
-        left = target**2 - (one.harmonic or 0.0) ** 2
+        left = target**2 - (one.harmonic or 0.0) ** 2 - one.reference**2
         if left <= 0:
             return None
         return max(1, math.ceil((one.noise**2 / left) * (1 - 1e-12)))
+
+
+def reference_weights(n_phi: int, every: int) -> NDArray[np.float64]:
+    """H (n_phi, references) minus the first reference: each phi line's drift-gain error per
+    unit error of each reference (see the module). References are read before the first line,
+    after every ``every`` lines and after the last; a line is read between two of them, and
+    the gain at its middle is interpolated linearly between them."""
+    bounds = np.unique(np.append(np.arange(0, n_phi, every), n_phi)).astype(np.float64)
+    H = np.zeros((n_phi, bounds.size))
+    for j in range(n_phi):
+        k = min(int(np.searchsorted(bounds, j + 0.5)) - 1, bounds.size - 2)
+        t = (j + 0.5 - bounds[k]) / (bounds[k + 1] - bounds[k])
+        H[j, k] += 1.0 - t
+        H[j, k + 1] += t
+    H[:, 0] -= 1.0
+    return H
+
+
+def _radial_kernel(ring: Rings) -> NDArray[np.float64]:
+    """dA / (dphi G) along the radius samples (trapezoid weights), m / m."""
+    quad = np.full(ring.r.size, ring.r[1] - ring.r[0])
+    quad[[0, -1]] *= 0.5
+    return quad * ring.r / ring.G
+
+
+def _mode_rows(ring: Rings, a: float, kernel: NDArray[np.float64]):
+    """Per azimuthal order m: the Bessel zeros j_mn < J_MAX, the unit-norm factor of each mode,
+    and each mode's weight on each sphere row (<FA / G, phi_k> per unit value in the row)."""
+    m = 0
+    while True:
+        zeros = jn_zeros(m, max(1, int(J_MAX / math.pi) + 2))
+        zeros = zeros[zeros < J_MAX]
+        if zeros.size == 0:
+            return
+        # unit-norm radial factor: int_0^a J_m(j r/a)^2 r dr = a^2 J_{m+1}(j)^2 / 2
+        norm2 = 1.0 / (0.5 * a * a * jv(m + 1, zeros) ** 2 * (2.0 * math.pi if m == 0 else math.pi))
+        rows = (jv(m, np.outer(zeros, ring.r / a)) * kernel) @ ring.basis[m % 2].T
+        yield m, zeros, norm2, rows
+        m += 1
 
 
 def row_factors(used: NDArray[np.bool_] | None, n_rows: int) -> tuple[NDArray[np.float64], int]:
@@ -219,8 +284,10 @@ def row_factors(used: NDArray[np.bool_] | None, n_rows: int) -> tuple[NDArray[np
 
 
 def noise_response(sphere: SphereGrid, F: float, D: float, delta_c: str = "refocus",
+                   reference_every: int | None = None,
                    used: NDArray[np.bool_] | None = None) -> NoiseResponse:
-    """The :class:`NoiseResponse` of a scan on ``sphere`` of a dish (F, D in m); see the module.
+    """The :class:`NoiseResponse` of a scan on ``sphere`` of a dish (F, D in m), with drift
+    references every ``reference_every`` phi lines (None: not drift-corrected); see the module.
 
     ``used`` (n_theta, n_phi) bool: the cells that carry data (None: all of them); a scan with
     obstacles passes the cells they leave (not ``blocked``)."""
@@ -231,40 +298,42 @@ def noise_response(sphere: SphereGrid, F: float, D: float, delta_c: str = "refoc
     factors, unused = row_factors(used, ring.basis[0].shape[0])
     a = 0.5 * D
     area = math.pi * a * a
-    dr = ring.r[1] - ring.r[0]
-    quad = np.full(ring.r.size, dr)
-    quad[[0, -1]] *= 0.5
-    kernel = quad * ring.r / ring.G                            # dA / (dphi G) along r
+    H = None if reference_every is None else reference_weights(ring.n_phi, reference_every)
+    phi = np.arange(ring.n_phi) * ring.dphi
     shares: list[tuple[int, int, float]] = []
-    m = 0
-    while True:
-        zeros = jn_zeros(m, max(1, int(J_MAX / math.pi) + 2))
-        zeros = zeros[zeros < J_MAX]
-        if zeros.size == 0:
-            break
-        # unit-norm radial factor: int_0^a J_m(j r/a)^2 r dr = a^2 J_{m+1}(j)^2 / 2
-        norm2 = 1.0 / (0.5 * a * a * jv(m + 1, zeros) ** 2 * (2.0 * math.pi if m == 0 else math.pi))
+    references: list[tuple[int, int, float]] = []
+    kernel = _radial_kernel(ring)
+    for m, zeros, norm2, rows in _mode_rows(ring, a, kernel):
         # <FA / G, phi_k> = sum over cells of noise x (row weight) x (azimuthal weight)
-        rows = (jv(m, np.outer(zeros, ring.r / a)) * kernel) @ ring.basis[m % 2].T
+        spline = (ring.dphi * spline_response(m, ring.dphi)) ** 2
         cells = ring.n_phi if m == 0 else ring.n_phi / 2.0           # sum of cos^2 over a ring
-        azimuth = (ring.dphi * spline_response(m, ring.dphi)) ** 2 * cells
         phases = 1 if m == 0 else 2
-        var = phases * norm2 * azimuth * np.sum(rows**2 * factors, axis=1) / (zeros / a) ** 4
-        shares += [(m, n + 1, float(v) / area) for n, v in enumerate(var)]
-        m += 1
+        scale = norm2 / (zeros / a) ** 4 / area
+        var = phases * spline * cells * scale * np.sum(rows**2 * factors, axis=1)
+        shares += [(m, n + 1, float(v)) for n, v in enumerate(var)]
+        if H is not None:
+            # one error per line, the same in every row: the rows' weights add first
+            lines = float(np.sum((H.T @ np.cos(m * phi)) ** 2)
+                          + (np.sum((H.T @ np.sin(m * phi)) ** 2) if m else 0.0))
+            ref = spline * lines * scale * np.sum(rows * (factors > 0), axis=1) ** 2
+            references += [(m, n + 1, float(v)) for n, v in enumerate(ref)]
     s = np.linspace(0.0, a, 4001)
     shape = delta_c_shape(s, F, sphere.radius, delta_c)
     unit = shape / math.sqrt(float(trapezoid(2.0 * math.pi * s * shape**2, s)))
     psi = np.interp(ring.r, s, _radial_inverse(s, unit))
     along = float(ring.n_phi * ring.dphi**2
                   * np.sum(((psi * kernel) @ ring.basis[0].T) ** 2 * factors))
-    return NoiseResponse(tuple(shares), sum(v for *_, v in shares), along / area, unused)
+    return NoiseResponse(tuple(shares), sum(v for *_, v in shares), along / area,
+                         tuple(references), unused)
 
 
 def noise_budget(sphere: SphereGrid, F: float, D: float, noise_db: float, readings: int = 1,
                  gain_known: bool = False, rim_targets: int = 0, target_std: float = 0.0,
-                 delta_c: str = "refocus", n_modes: int = 6,
-                 used: NDArray[np.bool_] | None = None) -> Budget:
-    """The budget of a scan on ``sphere`` of a dish (F, D in m); see the module docstring."""
-    return noise_response(sphere, F, D, delta_c, used).budget(noise_db, readings, gain_known,
-                                                         rim_targets, target_std, n_modes)
+                 delta_c: str = "refocus", n_modes: int = 6, reference_every: int | None = None,
+                 reference_samples: int = 0, used: NDArray[np.bool_] | None = None) -> Budget:
+    """The budget of a scan on ``sphere`` of a dish (F, D in m), drift references every
+    ``reference_every`` lines of ``reference_samples`` readings (None: no drift correction);
+    see the module docstring."""
+    response = noise_response(sphere, F, D, delta_c, reference_every, used)
+    return response.budget(noise_db, readings, gain_known, rim_targets, target_std, n_modes,
+                           reference_samples)

@@ -20,8 +20,9 @@ finds it (the log mode minus the part of its answer the GO inversion can explain
 refinement's own defect correction with Anderson acceleration; a few more model calls).
 
 Like piston, tilt and focus when they are removed, the inversion then fits that shape over
-the observed annulus r >= r_h by least squares and removes it, records its coefficient c (m)
-and says the mode is unobservable; the truth gets the same removal before the RMS. Inside the
+the observed annulus r >= r_h by least squares and removes it (jointly with delta_c when the
+gain is estimated: :mod:`solver.unobservable`), records its coefficient c (m) and says the
+mode is unobservable; the truth gets the same removal before the RMS. Inside the
 hidden disk the map is NaN: nothing was measured there (and the RMS skips it).
 """
 
@@ -33,7 +34,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from raysim.progress import Progress
-from solver import metrics
 from solver.aperture import ApertureGrid
 from solver.equation import intensity_ratio_fa
 from solver.forward import ForwardModel
@@ -52,24 +52,10 @@ class CentralMode:
     shape: NDArray[np.float64]
     kind: str
 
-    def remove(self, grid: ApertureGrid, delta: NDArray[np.float64]
-               ) -> tuple[NDArray[np.float64], float]:
-        """``delta`` (m) minus its least-squares multiple of the shape over the annulus
-        r >= r_h, and the coefficient c (m)."""
-        use = grid.mask & (grid.r >= self.r_h) & np.isfinite(delta) & np.isfinite(self.shape)
-        c = float(np.dot(self.shape[use], delta[use]) / np.dot(self.shape[use], self.shape[use]))
-        return delta - c * self.shape, c
-
     def blank(self, grid: ApertureGrid, delta: NDArray[np.float64]) -> NDArray[np.float64]:
         """``delta`` with NaN at r < r_h: the hidden centre holds no data, and what the solve put
         there (the inpainted FA's answer) is no measurement."""
         return np.where(grid.r < self.r_h, np.nan, delta)
-
-    def rescale(self, accuracy: dict, grid: ApertureGrid, truth: NDArray[np.float64]) -> dict:
-        """``accuracy`` (:func:`solver.record.accuracy_attrs` of the truth without the mode)
-        with the RRMS against the peak-to-peak of ``truth`` as it was (m), before the removal."""
-        M = metrics.peak_to_peak(grid, truth)
-        return {**accuracy, "truth_peak_to_peak_m": M, "rrms": accuracy["rms_m"] / M}
 
     def attrs(self, c: float) -> dict:
         """The SurfaceMap attributes of the removed mode with coefficient ``c`` (m)."""

@@ -60,6 +60,7 @@ from solver.options import (
 from solver.record import Outcome, accuracy_attrs, surface_attrs
 from solver.refinement import RefinementSetup, choose_model, refinement_setup
 from solver.resample import usable_rows
+from solver.unobservable import unobservable
 from solver.wave import amplitude_weight
 
 __all__ = ["DEFAULT_N", "DEFAULT_REFINE", "DEFAULT_SOLVER", "MAX_INCIDENCE", "WEIGHTS",
@@ -155,27 +156,29 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     if scan.intensity_std is not None and opts.uncertainty_samples > 0:
         std = monte_carlo_std(scan, inverse, data, opts.uncertainty_samples, opts.seed, mode)
     central = _central_mode(inverse, delta, data, setup, opts)
+    # delta_c and the central mode overlap on the annulus: removed by one joint fit
+    unseen = unobservable(grid, {"central": central.shape if central is not None else None,
+                                 "delta_c": mode}, central.r_h if central is not None else None)
+    removed = {}
+    if unseen is not None:
+        delta, removed = unseen.remove(grid, delta)
     if central is not None:
-        delta, central_coef = central.remove(grid, delta)
         delta = central.blank(grid, delta)
-    delta_fit, delta_c = remove_mode(grid, delta, mode) if mode is not None else (delta, 0.0)
-    delta_out, coef = remove_terms(grid, delta_fit, opts.terms, scan.F)
+    delta_c = removed.get("delta_c", 0.0)
+    delta_out, coef = remove_terms(grid, delta, opts.terms, scan.F)
     outcome = Outcome(scan, grid, inverse, linear, data, setup, history, weighted, coef,
                       gn.gain_factor if gn is not None else None, delta_c, mode)
     attrs = surface_attrs(opts, outcome)
     attrs.update(report_attrs(gn, why))
     if central is not None:
-        attrs.update(central.attrs(central_coef))
+        attrs.update(central.attrs(removed["central"]))
+    if unseen is not None:
+        attrs.update(unseen.attrs(grid))
     if scan.blocked is not None:
         attrs["samples_blocked"] = int(scan.blocked[:data.n_rows].sum())
     truth_map = truth_on_grid(truth, scan, grid)
     if truth_map is not None:
-        raw_truth = truth_map
-        if central is not None:
-            truth_map = central.remove(grid, truth_map)[0]
-        accuracy, truth_map = accuracy_attrs(grid, delta, delta_out, truth_map, opts.terms, mode)
-        if central is not None:
-            accuracy = central.rescale(accuracy, grid, raw_truth)
+        accuracy, truth_map = accuracy_attrs(grid, delta, delta_out, truth_map, opts.terms, unseen)
         attrs.update(accuracy)
     attrs["time_s"] = time.perf_counter() - start
     return surfacemap(grid, delta_out, attrs, truth=truth_map, deformation_std=std)

@@ -18,11 +18,12 @@ from raysim.maps.probe import probe_of
 from solver import metrics
 from solver.aperture import ApertureGrid
 from solver.fit import remove_terms
-from solver.gainmode import MeasuredFA, remove_mode
+from solver.gainmode import MeasuredFA
 from solver.linear import LinearInverse, LinearSolution, Scan
 from solver.nonlinear import RefineHistory
 from solver.options import InvertOptions
 from solver.refinement import RefinementSetup
+from solver.unobservable import Unobservable
 
 
 @dataclass(frozen=True)
@@ -118,18 +119,18 @@ def _gain_source(estimated: bool, fitted: bool) -> str:
 
 def accuracy_attrs(grid: ApertureGrid, delta: NDArray[np.float64], delta_out: NDArray[np.float64],
                    truth: NDArray[np.float64], terms: Sequence[str],
-                   mode: NDArray[np.float64] | None = None
+                   unseen: Unobservable | None = None
                    ) -> tuple[dict[str, float], NDArray[np.float64]]:
     """RMS and RRMS of the recovered map against the truth (m), the paper's definitions.
 
-    ``delta`` is the map before any removal, ``delta_out`` after; the truth gets the same
-    removal (the ``mode`` delta_c when given, then the terms), and is returned so (the
-    SurfaceMap's ``truth``). RRMS = RMS / peak-to-peak of the truth before removal (NaN for a
-    flat truth, the ideal dish).
+    ``delta`` is the map with the ``unseen`` modes removed (:mod:`solver.unobservable`), before
+    the terms' removal; ``delta_out`` after it. The truth gets the same removals, the modes'
+    projection then the terms, and is returned so (the SurfaceMap's ``truth``). RRMS = RMS /
+    peak-to-peak of the truth as it is (NaN for a flat truth, the ideal dish).
     """
     M = metrics.peak_to_peak(grid, truth)
-    before = metrics.rms_error(grid, delta, truth)
-    removed = truth if mode is None else remove_mode(grid, truth, mode)[0]
+    removed = truth if unseen is None else unseen.remove(grid, truth)[0]
+    before = metrics.rms_error(grid, delta, removed)
     removed, _ = remove_terms(grid, removed, terms)
     rms = metrics.rms_error(grid, delta_out, removed)
     return ({"rms_before_removal_m": before, "rms_m": rms, "rrms": rms / M if M > 0 else float("nan"),

@@ -53,3 +53,6 @@ def budget_command(
             "obstacles and counted as carrying no data")
     say("predicted from the inversion's linear operator (solver.budget); delta_c is the shape an "
         "unknown gain makes, removed when the gain is estimated")
+    if any(row.budget.reference for row in rows):
+        say("references: the drift references' own noise, carried into every line they correct "
+            "(more reference_samples shrink it; more readings per point do not)")

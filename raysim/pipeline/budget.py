@@ -2,10 +2,12 @@
 
 Units: lengths in m (the table's figures in um), noise in dB per reading, times in s. The
 prediction is :func:`solver.budget.noise_budget` (the linear operator, no Monte Carlo) on the
-plan's sphere grid and dish; the scan time is :meth:`hardware.plan.ScanPlan.duration` at the
-readings per point asked for. A plan with obstacles passes the cells they leave
-(:attr:`hardware.plan.ScanPlan.blocked_share` at the FieldMap's threshold): blocked cells
-carry no data. ``raysim budget`` prints :func:`budget_rows`.
+plan's sphere grid and dish, with the drift references' noise when the plan corrects for drift
+(``drift_correction`` other than ``none``; ``smooth`` counted as ``linear``, an upper bound);
+the scan time is :meth:`hardware.plan.ScanPlan.duration` at the readings per point asked for.
+A plan with obstacles passes the cells they leave (:attr:`hardware.plan.ScanPlan.blocked_share`
+at the FieldMap's threshold): blocked cells carry no data. ``raysim budget`` prints
+:func:`budget_rows`.
 """
 
 from __future__ import annotations
@@ -69,9 +71,12 @@ def budget_rows(plan: ScanPlan | str | Path, levels: list[float], readings: int 
         raise SolverError(f"--rim-std-um must lie in 0..10000 um, got {rim_std * 1e6:g}")
     if target is not None and not 0.0 < target <= 1e-2:
         raise SolverError(f"--target-um must lie in (0, 10000] um, got {target * 1e6:g}")
+    corrected = plan.drift_correction != "none"
     response = noise_response(plan.grid, plan.focal_length, plan.diameter,
-                              "refocus" if refine else "linear", used_cells(plan))
-    options = dict(gain_known=gain_known, rim_targets=rim, target_std=rim_std)
+                              "refocus" if refine else "linear",
+                              plan.reference_every if corrected else None, used_cells(plan))
+    options = dict(gain_known=gain_known, rim_targets=rim, target_std=rim_std,
+                   reference_samples=plan.reference_samples if corrected else 0)
     rows = []
     for level in levels:
         budget = response.budget(level, k, **options)
@@ -91,8 +96,8 @@ def used_cells(plan: ScanPlan) -> NDArray[np.bool_] | None:
 
 def table_rows(rows: list[BudgetRow]) -> list[list[str]]:
     """The printed table: a header and one row per noise level (figures in um, hours)."""
-    head = ["noise (dB)", "readings", "RMS (um)", "noise part", "delta_c", "rim targets",
-            "scan (h)"]
+    head = ["noise (dB)", "readings", "RMS (um)", "noise part", "delta_c", "references",
+            "rim targets", "scan (h)"]
     if rows and rows[0].target is not None:
         head += [f"readings for {rows[0].target * 1e6:g} um", "scan (h)"]
     out = [head]
@@ -101,6 +106,7 @@ def table_rows(rows: list[BudgetRow]) -> list[list[str]]:
         line = [f"{row.noise_db:g}", str(row.readings), f"{b.total * 1e6:.2f}",
                 f"{b.noise * 1e6:.2f}",
                 f"{b.delta_c * 1e6:.2f} " + ("removed" if b.delta_c_removed else "kept"),
+                f"{b.reference * 1e6:.2f}" if b.reference else "none",
                 "unbounded (none)" if b.harmonic is None else f"{b.harmonic * 1e6:.2f}",
                 f"{row.hours:.2f}"]
         if row.target is not None:

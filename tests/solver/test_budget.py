@@ -3,7 +3,9 @@
 Monte Carlo is the test, not the method: each case inverts 32 noisy GO scans of the ideal
 dish (exact cell means from tests/reference_go.py, noise in dB per reading like a power
 meter's) with the whole linear pipeline, gain estimated, and compares the RMS scatter of the
-maps with the budget's prediction, for two scan plans and three noise levels.
+maps with the budget's prediction, for two scan plans and three noise levels; and the drift
+references' part against scans whose every reading is divided by the gain interpolated in
+time between noisy references, in the rig's order of steps.
 """
 
 import numpy as np
@@ -13,7 +15,7 @@ from raysim.maps.fieldmap import fieldmap
 from raysim.maps.sphere import SphereGrid
 from solver.aperture import ApertureGrid
 from solver.boundary import RimTargets, fit_harmonic
-from solver.budget import harmonic_rms, noise_budget
+from solver.budget import harmonic_rms, noise_budget, relative_std
 from solver.errors import SolverError
 from solver.invert import invert
 from tests.reference_go import cell_mean_intensity
@@ -59,6 +61,46 @@ def test_the_rim_targets_part_is_the_harmonic_fits_scatter():
                                   + series.sin * np.sin(k * ang[:, None]))).sum(axis=1)
         squares.append(np.mean(h**2))
     assert harmonic_rms(64, 10e-6) == pytest.approx(np.sqrt(np.mean(squares)), rel=0.05)
+
+
+def rig_order(n_theta, n_phi, every):
+    """Each cell's step index in the rig's order (a reference, then ``every`` lines of
+    alternating theta sweeps, ..., a reference after the last line) and the references'."""
+    step = np.zeros((n_theta, n_phi))
+    refs, n = [], 0
+    for j in range(n_phi):
+        if j % every == 0:
+            refs.append(n)
+            n += 1
+        for i in (range(n_theta) if j % 2 == 0 else range(n_theta - 1, -1, -1)):
+            step[i, j] = n
+            n += 1
+    return step, np.array([*refs, n], dtype=float)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("gain", ["power", "known"])
+def test_the_budget_predicts_what_noisy_drift_references_add(gain):
+    # references of 16 readings of 0.01 dB every 3 lines, no other noise: each reading is
+    # corrected by the gain interpolated between the references around it (relative to the
+    # first), so every line carries its references' error along theta
+    sphere = SphereGrid(R, 45, 180)
+    ideal = cell_mean_intensity(sphere, F, D)
+    step, refs = rig_order(45, 180, 3)
+    sigma = relative_std(0.01, 16)
+    rng = np.random.default_rng(17)
+    squares = []
+    for _ in range(24):
+        error = sigma * rng.standard_normal(refs.size)
+        reading = ideal / (1.0 + np.interp(step, refs, error - error[0]))
+        scan = fieldmap(sphere, reading, ideal, focal_length=F, diameter=D,
+                        frequency_hz=3e8, method="measured", sampling="cell_mean")
+        out = invert(scan, refine_iterations=0, N=256, gain=gain, truth=lambda x, y: 0.0 * x)
+        squares.append(out.attrs["rms_m"] ** 2)
+    predicted = noise_budget(sphere, F, D, 0.01, readings=10**12, gain_known=gain == "known",
+                             delta_c="linear", reference_every=3, reference_samples=16)
+    assert predicted.noise < 1e-3 * predicted.reference
+    assert predicted.reference == pytest.approx(np.sqrt(np.mean(squares)), rel=0.15)
 
 
 def test_cells_without_data_raise_the_noise_of_their_rows():
