@@ -12,6 +12,12 @@ the rig's probe reads it (:func:`raysim.maps.probe.ideal_weight`: times its read
 ideal reflected polarisation; 1 for the ideal |E|^2 meter), so that FA compares like with like;
 a polarised probe's scan records the plan's incident ``polarization`` (rad) as well.
 Cells without a record stay NaN, so a FieldMap can be written from a partial journal.
+
+A plan with obstacles (:attr:`hardware.plan.ScanPlan.blocked_share`) gives the FieldMap what a
+simulated one carries (:func:`raysim.optics.blockage.fieldmap_variables`): ``blocked``,
+``blocked_share`` and the obstacles' triangles, and an ``intensity_ideal`` that is the blocked
+ideal, the exact ideal above times (1 - blocked share). Blocked cells keep their readings (the
+meter read whatever field is there); the inversion treats them as missing samples.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from hardware.rig import rig_attrs
 from raysim.maps.fieldmap import fieldmap
 from raysim.maps.probe import ideal_weight
 from raysim.maps.sphere import ideal_go_intensity
+from raysim.optics.blockage import fieldmap_variables
 
 CELL_VARS = {
     "power": ("W", "mean power-meter reading"),
@@ -76,11 +83,7 @@ def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
                   "time": rec.time, "sample_index": rec.n}
         for name, value in values.items():
             cells[name][i, j] = value
-    ideal = np.repeat(ideal_go_intensity(grid.theta, plan.focal_length, R,
-                                         plan.diameter)[:, None], grid.n_phi, axis=1)
-    if not plan.rig.probe_response.ideal:
-        ideal = ideal * ideal_weight(plan.rig.probe_response, grid.theta[:, None], grid.phi[None, :],
-                                     plan.focal_length, plan.polarization)
+    ideal = ideal_intensity(plan)
     # recorded where it matters (a polarised probe, a wave model): older scans had neither
     probe_attrs = {"polarization": plan.polarization} \
         if plan.polarization != 0.0 or not plan.rig.probe_response.ideal else {}
@@ -99,6 +102,10 @@ def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
     }
     for name, (values, unit, text) in ref_vars.items():
         extra[name] = (("reference",), values, {"units": unit, "long_name": text})
+    blockage_attrs: dict[str, Any] = {}
+    if plan.blocked_share is not None and plan.obstacle_mesh is not None:
+        blockage_vars, blockage_attrs = fieldmap_variables(plan.blocked_share, plan.obstacle_mesh)
+        extra.update(blockage_vars)
     all_attrs: dict[str, Any] = {
         **rig_attrs(plan.rig),
         "power_unit": plan.power_unit,
@@ -120,8 +127,24 @@ def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
         "plan": plan.text,
         "rig": plan.rig_text,
         **probe_attrs,
+        **blockage_attrs,
         **(attrs or {}),
     }
     return fieldmap(grid, intensity, ideal, focal_length=plan.focal_length,
                     diameter=plan.diameter, frequency_hz=plan.frequency_hz, method="measured",
                     sampling="centre", intensity_std=std, attrs=all_attrs, extra=extra)
+
+
+def ideal_intensity(plan: ScanPlan) -> np.ndarray:
+    """(n_theta, n_phi): the ideal paraboloid's GO intensity at the plan's cell centres as the
+    rig's probe reads it (relative to the incident wave), blocked by the plan's obstacles:
+    times (1 - blocked share) in every cell, as a GO scene's ideal cell means are."""
+    grid = plan.grid
+    ideal = np.repeat(ideal_go_intensity(grid.theta, plan.focal_length, plan.rig.radius,
+                                         plan.diameter)[:, None], grid.n_phi, axis=1)
+    if not plan.rig.probe_response.ideal:
+        ideal = ideal * ideal_weight(plan.rig.probe_response, grid.theta[:, None], grid.phi[None, :],
+                                     plan.focal_length, plan.polarization)
+    if plan.blocked_share is not None:
+        ideal = ideal * (1.0 - np.clip(plan.blocked_share, 0.0, 1.0))
+    return ideal

@@ -7,6 +7,13 @@ phi line, phi ascending, the sweep direction alternating from line to line, and 
 fixed reference position before the first line, after every K lines and after the last line
 (to follow slow source and receiver drift). Every step has a global index; the journal and the
 simulator's noise and drift are keyed by it.
+
+A plan may name the obstacles in the telescope's beam (feed cabin, legs, any mesh) in the
+``[[obstacle]]`` tables a scene takes (read by the scene's own parser,
+:func:`raysim.scene.obstacles.obstacles_of`, in the reflector frame, metres). They do not
+change what is measured, only how the scan is assembled: :attr:`ScanPlan.blocked_share` is
+the share of each cell's GO power they take from the ideal paraboloid, the cells the measured
+FieldMap marks ``blocked`` (:mod:`hardware.assemble`).
 """
 
 from __future__ import annotations
@@ -15,16 +22,23 @@ import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass, field, replace
-from functools import cached_property
+from functools import cached_property, lru_cache
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from hardware.config import Table, plan_table, read_toml
 from hardware.drift import DRIFT_MODES
+from hardware.errors import PlanError
 from hardware.rig import Rig, load_rig, rig_from_table
 from hardware.sim.settings import SimSettings, sim_settings_from_table
 from raysim.files import find_input
+from raysim.maps.probe import Probe
 from raysim.maps.sphere import SphereGrid
+from raysim.scene.obstacles import obstacles_of
+from raysim.surface.obstacles import Obstacle, ObstacleMesh, obstacle_mesh
 
 SAMPLE = "sample"
 REFERENCE = "reference"
@@ -59,7 +73,8 @@ class ScanPlan:
     ``refer_to_sphere`` scales each reading by (r / R)^2, r the probe's distance from the
     focus per the rig's calibration, to refer it to the sphere of radius R (the rays of a
     focusing reflector converge on the focus). ``polarization`` (rad from x) is the incident
-    wave's E, which a polarised probe's ideal reading depends on.
+    wave's E, which a polarised probe's ideal reading depends on. ``obstacles``: what stands
+    in the beam (the plan's ``[[obstacle]]`` tables, reflector frame, m), none by default.
     """
 
     focal_length: float
@@ -80,12 +95,14 @@ class ScanPlan:
     simulator: SimSettings = field(default_factory=SimSettings)
     text: str = ""
     rig_text: str = ""
-    files: tuple[Path, ...] = ()  # the plan file and the rig file it was read from
+    files: tuple[Path, ...] = ()  # the plan file, its rig file and its obstacle mesh files
     polarization: float = 0.0
+    obstacles: tuple[Obstacle, ...] = ()
 
     def inputs(self) -> list[tuple[str, Path]]:
         """(what, path) of the files this plan was read from, for output checks."""
-        return [("plan or rig file", f) for f in self.files]
+        return [("plan or rig file" if f.suffix == ".toml" else "obstacle mesh file the plan names",
+                 f) for f in self.files]
 
     def steps(self) -> list[Step]:
         """Every step of the scan in acquisition order (see the module docstring)."""
@@ -108,15 +125,16 @@ class ScanPlan:
     def fingerprint(self, extra: dict[str, Any] | None = None) -> str:
         """A hash of everything that decides the samples (plan, rig, ``extra`` settings).
 
-        The drift correction is left out: it only decides how the journal's readings are
-        turned into intensities, so it may change between a scan and its resumption.
+        The drift correction and the obstacles are left out: they only decide how the
+        journal's readings are turned into a FieldMap, so they may change between a scan and
+        its resumption.
         """
         rig = asdict(self.rig)
         rig.pop("resources")
         if self.rig.probe_response.ideal:
             rig.pop("probe_response")  # the journals of scans made before probes existed still match
         skip = ("text", "rig_text", "files", "rig", "simulator", "drift_correction",
-                "drift_window", "reading_s") + (("polarization",) if self.polarization == 0.0
+                "drift_window", "reading_s", "obstacles") + (("polarization",) if self.polarization == 0.0
                                                 else ())
         content = {k: v for k, v in asdict(self).items() if k not in skip}
         content["rig"] = rig
@@ -145,10 +163,49 @@ class ScanPlan:
             n_samples += step.kind == SAMPLE
         return moves, n_samples, len(steps) - n_samples
 
+    @property
+    def obstacle_mesh(self) -> ObstacleMesh | None:
+        """The obstacles' triangles on this plan's dish (m, reflector frame), None without."""
+        return _obstacle_mesh(self.obstacles, self.focal_length)
+
+    @property
+    def blocked_share(self) -> NDArray[np.float64] | None:
+        """(n_theta, n_phi), read-only: the share of each cell's GO power the obstacles take
+        from the ideal paraboloid as the rig's probe reads it, on the plan's grid (None
+        without obstacles); traced as the inversion's GO model traces it
+        (:func:`raysim.optics.blockage.paraboloid_blocked_share`), once per geometry (a plan
+        copied with other acquisition settings shares it)."""
+        if not self.obstacles:
+            return None
+        probe = self.rig.probe_response
+        return _blocked_share(self.grid, self.focal_length, self.diameter, self.obstacles,
+                              None if probe.ideal else probe, self.polarization)
+
     def check_reach(self) -> None:
         """Raise :class:`PlanError` if a step lies outside the rig's reach."""
         for step in self.steps():
             self.rig.axes(step.theta, step.phi)
+
+
+@lru_cache(maxsize=4)
+def _obstacle_mesh(obstacles: tuple[Obstacle, ...], F: float) -> ObstacleMesh | None:
+    """:func:`raysim.surface.obstacles.obstacle_mesh`, kept for the last few plans."""
+    return obstacle_mesh(obstacles, F)
+
+
+@lru_cache(maxsize=4)
+def _blocked_share(grid: SphereGrid, F: float, D: float, obstacles: tuple[Obstacle, ...],
+                   probe: Probe | None, polarization: float) -> NDArray[np.float64]:
+    """:func:`raysim.optics.blockage.paraboloid_blocked_share` of one plan geometry, kept
+    (read-only) for the last few: the trace takes seconds on a large dish."""
+    from raysim.optics.blockage import paraboloid_blocked_share
+
+    mesh = _obstacle_mesh(obstacles, F)
+    if mesh is None:
+        raise PlanError("no obstacles to trace")
+    share = paraboloid_blocked_share(grid, F, D, mesh, probe, polarization)
+    share.setflags(write=False)
+    return share
 
 
 def load_plan(path: str | Path, rig: str | Path | None = None) -> ScanPlan:
@@ -211,12 +268,14 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
     acq.done()
 
     simulator = sim_settings_from_table(top.sub("simulator", required=False))
+    obstacles = obstacles_of(top.tables("obstacle"), D, F, base)
     top.done()
 
     plan = ScanPlan(F, D, frequency_hz, grid, rig, settle_s, samples, every, reference,
                     reference_samples, drift, window, dbm_to_w(power_unit_dbm), refer,
                     reading_s, simulator, text, rig_text,
-                    (rig_file,) if rig_file is not None else (), polarization)
+                    ((rig_file,) if rig_file is not None else ()) + tuple(top.files),
+                    polarization, obstacles)
     plan.check_reach()
     return plan
 

@@ -257,8 +257,12 @@ def _instrument_addresses(plan: ScanPlan, resources: Mapping[str, str] | None,
             raise PlanError(f"{simulate}: {name} {float(ds.attrs[name]):g} m differs from the "
                             f"plan's {ours:g} m")
     _check_probe(plan, ds, simulate)
+    _check_obstacles(plan, ds, simulate)
     field = SphereField.from_fieldmap(ds)
-    digest = hashlib.sha256(np.ascontiguousarray(field.ratio.values).tobytes()).hexdigest()[:16]
+    sha = hashlib.sha256(np.ascontiguousarray(field.ratio.values).tobytes())
+    if field.blocked is not None:  # a map with obstacles: their shadows decide the readings too
+        sha.update(np.ascontiguousarray(field.blocked.values).tobytes())
+    digest = sha.hexdigest()[:16]
     extra = {"simulated": 1, "sim_field": str(simulate), "sim_field_sha256": digest,
              **settings.record()}
     sim_rig = SimulatedRig(plan.rig, settings, field,
@@ -280,3 +284,27 @@ def _check_probe(plan: ScanPlan, ds: xr.Dataset, simulate: str | os.PathLike[str
         raise PlanError(f"{simulate} has the incident wave polarised at {math.degrees(pol):g} deg, "
                         f"the plan at {math.degrees(plan.polarization):g} deg "
                         "([reflector] polarization_deg)")
+
+
+def _check_obstacles(plan: ScanPlan, ds: xr.Dataset, simulate: str | os.PathLike[str]) -> None:
+    """Refuse a FieldMap to scan whose obstacles (its ``obstacle_vertices``, ``obstacle_faces``)
+    are not the plan's: the measured map marks the cells the plan's obstacles hide, so the
+    telescope scanned must have those in its beam."""
+    mesh = plan.obstacle_mesh
+    has = "obstacle_vertices" in ds.data_vars and "obstacle_faces" in ds.data_vars
+    theirs = str(ds.attrs.get("obstacles", "triangles"))
+    if mesh is None and not has:
+        return
+    if mesh is None:
+        raise PlanError(f"{simulate} has obstacles in the beam ({theirs}), the plan none: give "
+                        "the plan the scene's [[obstacle]] tables")
+    if not has:
+        raise PlanError(f"{simulate} has no obstacles in the beam, the plan has "
+                        f"{mesh.description}: simulate the scene with the plan's [[obstacle]] tables")
+    same = (ds["obstacle_vertices"].shape == mesh.vertices.shape
+            and ds["obstacle_faces"].shape == mesh.faces.shape
+            and np.allclose(ds["obstacle_vertices"].values, mesh.vertices, rtol=0.0, atol=1e-9)
+            and np.array_equal(ds["obstacle_faces"].values, mesh.faces))
+    if not same:
+        raise PlanError(f"{simulate} has other obstacles in the beam ({theirs}) than the plan "
+                        f"({mesh.description}): give both the same [[obstacle]] tables")

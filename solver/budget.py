@@ -33,6 +33,12 @@ ring. The RMS over the disk is sqrt(E ||delta||^2 / (pi a^2)), the inversion's R
   n_phi / 2. With the gain estimated its phi-constant part (m = 0) is a scale error and goes
   with the gain; a ``smooth`` correction (line fits over several references) averages the
   references and is counted here as ``linear``, an upper bound.
+- Cells that carry no data (``used`` false: the cells obstacles hide, which the inversion
+  fills from the rest of their row): a row with n_used of its n_phi cells measured has its
+  variance scaled by n_phi / n_used, the variance of a mean over the cells that remain (the
+  fill along phi spreads their noise over the row); a row with none (a feed cabin's) adds
+  nothing, to the readings' part or to the references': the map is not reported there
+  (solver.central). An approximation, not checked by Monte Carlo.
 
 Checked against the scatter of the inversion itself over noisy scans in tests/solver.
 """
@@ -191,6 +197,7 @@ class NoiseResponse:
     total: float
     along_delta_c: float
     reference: tuple[tuple[int, int, float], ...] = ()
+    unused_cells: int = 0   # usable cells that carry no data (blocked), counted as such
 
     def reference_share(self, gain_known: bool) -> float:
         """Mean square (m^2) per unit reference variance; m = 0 goes with an estimated gain."""
@@ -264,11 +271,31 @@ def _mode_rows(ring: Rings, a: float, kernel: NDArray[np.float64]):
         m += 1
 
 
+def row_factors(used: NDArray[np.bool_] | None, n_rows: int) -> tuple[NDArray[np.float64], int]:
+    """Per usable row, the factor on its noise variance when only the ``used`` cells
+    (n_theta, n_phi) carry data: n_phi / n_used, 0 for a row with none (see the module); and
+    the usable cells without data."""
+    if used is None:
+        return np.ones(n_rows), 0
+    rows = np.asarray(used, dtype=bool)[:n_rows]
+    n_used = rows.sum(axis=1)
+    factors = np.divide(rows.shape[1], n_used, out=np.zeros(n_rows), where=n_used > 0)
+    return factors, int(rows.size - n_used.sum())
+
+
 def noise_response(sphere: SphereGrid, F: float, D: float, delta_c: str = "refocus",
-                   reference_every: int | None = None) -> NoiseResponse:
+                   reference_every: int | None = None,
+                   used: NDArray[np.bool_] | None = None) -> NoiseResponse:
     """The :class:`NoiseResponse` of a scan on ``sphere`` of a dish (F, D in m), with drift
-    references every ``reference_every`` phi lines (None: not drift-corrected); see the module."""
+    references every ``reference_every`` phi lines (None: not drift-corrected); see the module.
+
+    ``used`` (n_theta, n_phi) bool: the cells that carry data (None: all of them); a scan with
+    obstacles passes the cells they leave (not ``blocked``)."""
     ring = rings(sphere, F, D)
+    if used is not None and np.shape(used) != (sphere.n_theta, sphere.n_phi):
+        raise SolverError(f"the used-cell mask {np.shape(used)} is not the scan's grid "
+                          f"({sphere.n_theta}, {sphere.n_phi})")
+    factors, unused = row_factors(used, ring.basis[0].shape[0])
     a = 0.5 * D
     area = math.pi * a * a
     H = None if reference_every is None else reference_weights(ring.n_phi, reference_every)
@@ -282,30 +309,31 @@ def noise_response(sphere: SphereGrid, F: float, D: float, delta_c: str = "refoc
         cells = ring.n_phi if m == 0 else ring.n_phi / 2.0           # sum of cos^2 over a ring
         phases = 1 if m == 0 else 2
         scale = norm2 / (zeros / a) ** 4 / area
-        var = phases * spline * cells * scale * np.sum(rows**2, axis=1)
+        var = phases * spline * cells * scale * np.sum(rows**2 * factors, axis=1)
         shares += [(m, n + 1, float(v)) for n, v in enumerate(var)]
         if H is not None:
             # one error per line, the same in every row: the rows' weights add first
             lines = float(np.sum((H.T @ np.cos(m * phi)) ** 2)
                           + (np.sum((H.T @ np.sin(m * phi)) ** 2) if m else 0.0))
-            ref = spline * lines * scale * np.sum(rows, axis=1) ** 2
+            ref = spline * lines * scale * np.sum(rows * (factors > 0), axis=1) ** 2
             references += [(m, n + 1, float(v)) for n, v in enumerate(ref)]
     s = np.linspace(0.0, a, 4001)
     shape = delta_c_shape(s, F, sphere.radius, delta_c)
     unit = shape / math.sqrt(float(trapezoid(2.0 * math.pi * s * shape**2, s)))
     psi = np.interp(ring.r, s, _radial_inverse(s, unit))
-    along = float(ring.n_phi * ring.dphi**2 * np.sum(((psi * kernel) @ ring.basis[0].T) ** 2))
+    along = float(ring.n_phi * ring.dphi**2
+                  * np.sum(((psi * kernel) @ ring.basis[0].T) ** 2 * factors))
     return NoiseResponse(tuple(shares), sum(v for *_, v in shares), along / area,
-                         tuple(references))
+                         tuple(references), unused)
 
 
 def noise_budget(sphere: SphereGrid, F: float, D: float, noise_db: float, readings: int = 1,
                  gain_known: bool = False, rim_targets: int = 0, target_std: float = 0.0,
                  delta_c: str = "refocus", n_modes: int = 6, reference_every: int | None = None,
-                 reference_samples: int = 0) -> Budget:
+                 reference_samples: int = 0, used: NDArray[np.bool_] | None = None) -> Budget:
     """The budget of a scan on ``sphere`` of a dish (F, D in m), drift references every
     ``reference_every`` lines of ``reference_samples`` readings (None: no drift correction);
     see the module docstring."""
-    response = noise_response(sphere, F, D, delta_c, reference_every)
+    response = noise_response(sphere, F, D, delta_c, reference_every, used)
     return response.budget(noise_db, readings, gain_known, rim_targets, target_std, n_modes,
                            reference_samples)

@@ -45,6 +45,11 @@ def _obstacle_scene(table: str) -> str:
 LEGS = 'type = "legs"\ncount = 4\nwidth_m = 0.3\nfoot_radius_m = 7.0\n'
 
 
+def _obstacle_plan(table: str, noisy: bool = False) -> str:
+    plan = PLAN.replace("time_scale = 0.0", "time_scale = 0.0\nnoise_db = 0.01") if noisy else PLAN
+    return plan + "[[obstacle]]\n" + table + "\n"
+
+
 def _map_scene(name: str) -> str:
     return SCENE + f'[[deformation]]\ntype = "map"\nfile = "{name}"\n'
 
@@ -210,6 +215,14 @@ def workspace(tmp_path_factory):
         "rig_probe.toml": RIG + "[probe]\npolarization_deg = 0.0\n",
         "plan_probe_q.toml": PLAN.replace('rig = "rig.toml"', 'rig = "rig_probe_q.toml"'),
         "plan_probe.toml": PLAN.replace('rig = "rig.toml"', 'rig = "rig_probe.toml"'),
+        "plan_obst.toml": _obstacle_plan(LEGS),
+        "plan_obst_kind.toml": _obstacle_plan('type = "tower"'),
+        "plan_obst_typo.toml": _obstacle_plan(LEGS + "rotation = 45.0\n"),
+        "plan_obst_width.toml": _obstacle_plan(LEGS.replace("width_m = 0.3", "width_m = -0.3")),
+        "plan_obst_foot.toml": _obstacle_plan(LEGS.replace("foot_radius_m = 7.0", "foot_radius_m = 12.0")),
+        "plan_obst_disk.toml": _obstacle_plan('type = "disk"\nradius_m = 10.0'),
+        "plan_obst_nofile.toml": _obstacle_plan('type = "mesh"\nfile = "cabin.stl"'),
+        "plan_obst_noisy.toml": _obstacle_plan(LEGS, noisy=True),
     }
     for name, text in files.items():
         (ws / name).write_text(text)
@@ -412,6 +425,13 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
           "--resource", "motion=TCPIP::127.0.0.1::{silent}::SOCKET"], "is silent"),
         (["scan", "plan.toml", "-o", "o.nc", "--simulate", "negative.nc"], "holds negative values"),
         (["scan", "plan_probe_q.toml", "-o", "o.nc", "--simulate", "f.nc"], "pattern's q must be"),
+        (["scan", "plan_obst_kind.toml", "-o", "o.nc", "--simulate", "f.nc"],
+         "'obstacle[0].type' must be one of disk, legs, mesh"),
+        (["scan", "plan_obst_typo.toml", "-o", "o.nc", "--simulate", "f.nc"], "did you mean 'rotation_deg'?"),
+        (["scan", "plan_obst_foot.toml", "-o", "o.nc", "--simulate", "f.nc"], "is beyond the rim"),
+        (["scan", "plan_obst_nofile.toml", "-o", "o.nc", "--simulate", "f.nc"],
+         "'obstacle[0].file': no such file"),
+        (["scan", "plan_obst.toml", "-o", "o.nc", "--simulate", "f.nc"], "has no obstacles in the beam"),
         (["scan", "plan_probe.toml", "-o", "o.nc", "--simulate", "f.nc"],
          "was simulated with the probe 'ideal |E|^2 power meter', the rig has 'polarised at 0 deg"),
     ],
@@ -427,12 +447,17 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["budget", "plan.toml", "--target-um", "0"], "--target-um must lie in (0, 10000] um"),
         (["budget", "plan.toml", "--gain", "maybe"], "unknown gain 'maybe'"),
         (["budget", "plan.toml", "--refine", "-2"], "--refine must be an integer in 0..50"),
+        (["budget", "plan_obst_width.toml"], "'obstacle[0].width_m' must be > 0"),
+        (["budget", "plan_obst_disk.toml"], "covers the whole dish"),
     ],
     "campaign": [
         (["campaign", "missing.toml", "plan_noisy.toml", "-o", "c"], "no such scene file"),
         (["campaign", "scene.toml", "missing.toml", "-o", "c"], "no such scan plan file"),
         (["campaign", "scene.toml", "plan.toml", "-o", "c"], "noise_db must be above 0"),
         (["campaign", "scene.toml", "plan_other_dish.toml", "-o", "c"], "is not the scene's dish"),
+        (["campaign", "scene.toml", "plan_obst_typo.toml", "-o", "c"], "did you mean 'rotation_deg'?"),
+        (["campaign", "scene.toml", "plan_obst_noisy.toml", "-o", "c"],
+         "the plan's obstacles (4 legs 0.3 m wide"),
         (["campaign", "scene.toml", "plan_noisy.toml", "-o", "c", "--readings", "2",
           "--target-um", "20"], "not both"),
         (["campaign", "scene.toml", "plan_noisy.toml", "-o", "notes.txt"], "is not a folder"),

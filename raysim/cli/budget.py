@@ -48,6 +48,9 @@ def budget_command(
     out.print(table)
     for line in mode_lines(rows):
         say(line)
+    if rows and rows[0].blocked_cells:
+        say(f"{rows[0].blocked_cells} cells inside the rim image are hidden by the plan's "
+            "obstacles and counted as carrying no data")
     say("predicted from the inversion's linear operator (solver.budget); delta_c is the shape an "
         "unknown gain makes, removed when the gain is estimated")
     if any(row.budget.reference for row in rows):

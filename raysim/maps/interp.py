@@ -113,6 +113,10 @@ class SphereField:
     inverted map by tens of um (the constant-FA shape delta_c is 2.5 m at the centre per unit FA on
     the paper's dish, solver.gainmode).
 
+    A map of a scene with obstacles (a ``blocked_share`` variable, :mod:`raysim.optics.blockage`)
+    holds blocked intensities: the exact ideal is then blocked too, times (1 - the blocked
+    share) interpolated, so a probe in a shadow reads the shadow (a wholly hidden cell reads 0).
+
     Parameters
     ----------
     ratio : sampler of intensity / intensity_ideal (NaN where the ideal is 0), or with
@@ -120,15 +124,17 @@ class SphereField:
     F, D : focal length and diameter of the reflector (m).
     weight : the probe's reading of the ideal paraboloid per unit intensity at (theta, phi),
         None for the ideal meter (the ratio form).
+    blocked : sampler of the map's blocked share (0..1), None without obstacles.
     """
 
     def __init__(self, ratio: FieldSampler, F: float, D: float,
-                 weight: Callable[[ArrayLike, ArrayLike], NDArray[np.float64]] | None = None
-                 ) -> None:
+                 weight: Callable[[ArrayLike, ArrayLike], NDArray[np.float64]] | None = None,
+                 blocked: FieldSampler | None = None) -> None:
         self.ratio = ratio
         self.F = F
         self.D = D
         self.weight = weight
+        self.blocked = blocked
 
     @classmethod
     def from_fieldmap(cls, ds: xr.Dataset) -> SphereField:
@@ -136,17 +142,21 @@ class SphereField:
         ideal = ds["intensity_ideal"].values
         F, D = float(ds.attrs["focal_length"]), float(ds.attrs["diameter"])
         probe = probe_of(ds)
+        blocked = None
+        if "blocked_share" in ds.data_vars:
+            blocked = FieldSampler(np.clip(ds["blocked_share"].values, 0.0, 1.0), grid_of(ds))
         if not probe.ideal:
             difference = np.where(ideal > 0, ds["intensity"].values - ideal, 0.0)
             polarization = float(ds.attrs.get("polarization", 0.0))
             return cls(FieldSampler(difference, grid_of(ds)), F, D,
-                       lambda theta, phi: ideal_weight(probe, theta, phi, F, polarization))
+                       lambda theta, phi: ideal_weight(probe, theta, phi, F, polarization),
+                       blocked)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(ideal > 0, ds["intensity"].values / ideal, np.nan)
         for i in range(1, ratio.shape[0]):
             dark = ideal[i] <= 0
             ratio[i, dark] = ratio[i - 1, dark]
-        return cls(FieldSampler(ratio, grid_of(ds)), F, D)
+        return cls(FieldSampler(ratio, grid_of(ds)), F, D, None, blocked)
 
     @property
     def radius(self) -> float:
@@ -162,12 +172,15 @@ class SphereField:
         """:meth:`__call__` at many points at once (rad, rad, m; broadcast together)."""
         theta, phi, r = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (theta, phi, r)))
         ideal = ideal_go_intensity(theta, self.F, self.radius, self.D)
+        lit = ideal > 0.0
+        if self.blocked is not None:
+            ideal = ideal * (1.0 - self.blocked(theta, phi))
         if self.weight is None:
             value = self.ratio(theta, phi) * ideal
         else:
             value = ideal * self.weight(theta, phi) + self.ratio(theta, phi)
         value = value * (self.radius / r) ** 2
-        return np.where((ideal > 0.0) & np.isfinite(value), value, 0.0)
+        return np.where(lit & np.isfinite(value), value, 0.0)
 
 
 def _snap(index: NDArray[np.float64]) -> NDArray[np.float64]:

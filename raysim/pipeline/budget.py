@@ -5,7 +5,9 @@ prediction is :func:`solver.budget.noise_budget` (the linear operator, no Monte 
 plan's sphere grid and dish, with the drift references' noise when the plan corrects for drift
 (``drift_correction`` other than ``none``; ``smooth`` counted as ``linear``, an upper bound);
 the scan time is :meth:`hardware.plan.ScanPlan.duration` at the readings per point asked for.
-``raysim budget`` prints :func:`budget_rows`.
+A plan with obstacles passes the cells they leave (:attr:`hardware.plan.ScanPlan.blocked_share`
+at the FieldMap's threshold): blocked cells carry no data. ``raysim budget`` prints
+:func:`budget_rows`.
 """
 
 from __future__ import annotations
@@ -14,7 +16,11 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+from numpy.typing import NDArray
+
 from hardware.plan import ScanPlan, load_plan
+from raysim.optics.blockage import BLOCKED_SHARE
 from solver.budget import Budget, noise_response
 from solver.errors import SolverError
 
@@ -32,6 +38,7 @@ class BudgetRow:
     target: float | None            # m
     readings_needed: int | None     # None: the target is out of reach (rim targets' part)
     hours_needed: float | None
+    blocked_cells: int = 0          # usable cells the plan's obstacles hide (no data)
 
 
 def parse_levels(text: str) -> list[float]:
@@ -67,7 +74,7 @@ def budget_rows(plan: ScanPlan | str | Path, levels: list[float], readings: int 
     corrected = plan.drift_correction != "none"
     response = noise_response(plan.grid, plan.focal_length, plan.diameter,
                               "refocus" if refine else "linear",
-                              plan.reference_every if corrected else None)
+                              plan.reference_every if corrected else None, used_cells(plan))
     options = dict(gain_known=gain_known, rim_targets=rim, target_std=rim_std,
                    reference_samples=plan.reference_samples if corrected else 0)
     rows = []
@@ -76,8 +83,15 @@ def budget_rows(plan: ScanPlan | str | Path, levels: list[float], readings: int 
         needed = None if target is None else response.readings_for(target, level, **options)
         rows.append(BudgetRow(level, k, budget, plan.duration(k) / 3600.0, target, needed,
                               None if needed is None or needed > MAX_READINGS
-                              else plan.duration(needed) / 3600.0))
+                              else plan.duration(needed) / 3600.0, response.unused_cells))
     return rows
+
+
+def used_cells(plan: ScanPlan) -> NDArray[np.bool_] | None:
+    """(n_theta, n_phi): the plan's cells that carry data, those its obstacles do not hide
+    (the measured FieldMap's ``blocked`` rule); None without obstacles."""
+    share = plan.blocked_share
+    return None if share is None else ~(share > BLOCKED_SHARE)
 
 
 def table_rows(rows: list[BudgetRow]) -> list[list[str]]:

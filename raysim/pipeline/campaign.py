@@ -6,7 +6,9 @@ Units: lengths in m (the summary's figures in um), noise in dB per reading, time
 
 1. the budget (:mod:`raysim.pipeline.budget`) picks the readings per point a target RMS needs
    at the plan's noise (or the plan's own ``samples_per_point``);
-2. the scene (the telescope as it is: deformation, obstacles, probe) is simulated in GO;
+2. the scene (the telescope as it is: deformation, obstacles, probe) is simulated in GO; the
+   plan must carry the scene's obstacles (its ``[[obstacle]]`` tables), whose shadows the
+   measured map then marks and the budget counts as cells without data;
 3. the plan is scanned through the simulated rig on loopback sockets (the PyVISA drivers, the
    plan's noise, drift and unknown gain ``[simulator] gain_db``), at the budget's averaging;
 4. rim targets, as a laser tracker or photogrammetry would give them: the scene's deformation
@@ -26,15 +28,16 @@ from pathlib import Path
 
 import numpy as np
 
-from hardware.plan import load_plan
+from hardware.plan import ScanPlan, load_plan
 from hardware.session import scan
 from raysim.maps import fieldmap as fieldmaps
 from raysim.maps import surfacemap as surfacemaps
 from raysim.pipeline.budget import budget_rows
 from raysim.pipeline.report import output_folder, staging
 from raysim.progress import Progress
-from raysim.scene.scene import load_scene
+from raysim.scene.scene import Scene, load_scene
 from raysim.simulate import simulate
+from raysim.surface.obstacles import ObstacleMesh, obstacle_mesh
 from solver.boundary import RimTargets, write_rim_csv
 from solver.errors import SolverError
 from solver.invert import invert
@@ -88,6 +91,7 @@ def run_campaign(scene_path: str | os.PathLike[str], plan_path: str | os.PathLik
         raise SolverError(f"the plan's reflector (F {plan.focal_length:g} m, D {plan.diameter:g} m) "
                           f"is not the scene's dish (F {scene.dish.focal_length:g} m, "
                           f"D {scene.dish.diameter:g} m)")
+    check_obstacles(scene, plan)
     folder = output_folder(out_dir, [("scene", scene_path), *plan.inputs()], FILES,
                            "a raysim campaign")
     noise = plan.simulator.noise_db
@@ -126,6 +130,21 @@ def run_campaign(scene_path: str | os.PathLike[str], plan_path: str | os.PathLik
         (tmp / "campaign.txt").write_text("\n".join(lines) + "\n", encoding="utf-8")
     report("done", 1.0)
     return replace(result, lines=tuple(lines))
+
+
+def check_obstacles(scene: Scene, plan: ScanPlan) -> None:
+    """Refuse a plan whose ``[[obstacle]]`` tables do not put the scene's obstacles in the beam
+    (compared as triangles on the dish): the measured map marks the cells the plan's hide."""
+    ours = obstacle_mesh(scene.obstacles, plan.focal_length)
+    theirs = plan.obstacle_mesh
+    if ours == theirs:
+        return
+
+    def words(mesh: ObstacleMesh | None) -> str:
+        return "none" if mesh is None else f"({mesh.description})"
+
+    raise SolverError(f"the plan's obstacles {words(theirs)} are not the scene's {words(ours)}: "
+                      "give the plan the scene's [[obstacle]] tables")
 
 
 def summary_lines(result: CampaignResult, noise_db: float, rim: int, rim_std: float,

@@ -16,6 +16,7 @@ from raysim.maps.sphere import SphereGrid
 from solver.aperture import ApertureGrid
 from solver.boundary import RimTargets, fit_harmonic
 from solver.budget import harmonic_rms, noise_budget, relative_std
+from solver.errors import SolverError
 from solver.invert import invert
 from tests.reference_go import cell_mean_intensity
 from tests.solver.conftest import D, F, R
@@ -100,3 +101,21 @@ def test_the_budget_predicts_what_noisy_drift_references_add(gain):
                              delta_c="linear", reference_every=3, reference_samples=16)
     assert predicted.noise < 1e-3 * predicted.reference
     assert predicted.reference == pytest.approx(np.sqrt(np.mean(squares)), rel=0.15)
+
+
+def test_cells_without_data_raise_the_noise_of_their_rows():
+    """Blocked cells (``used`` false) scale their row's variance by n_phi / n_used; a row with
+    none adds nothing; all cells used is the plain budget (solver.budget's module doc)."""
+    sphere = SphereGrid(R, 45, 180)
+    plain = noise_budget(sphere, F, D, 0.01)
+    used = np.ones((45, 180), dtype=bool)
+    assert noise_budget(sphere, F, D, 0.01, used=used).noise == pytest.approx(plain.noise, rel=1e-12)
+    legs = used.copy()
+    legs[:, ::10] = False                         # a tenth of every row hidden
+    assert noise_budget(sphere, F, D, 0.01, used=legs).total == pytest.approx(
+        plain.total * np.sqrt(10 / 9), rel=1e-9)
+    cabin = used.copy()
+    cabin[:2] = False                             # the first rows wholly hidden
+    assert noise_budget(sphere, F, D, 0.01, used=cabin).total < plain.total
+    with pytest.raises(SolverError, match="is not the scan's grid"):
+        noise_budget(sphere, F, D, 0.01, used=used[:, :90])

@@ -6,8 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from raysim.maps import surfacemap
+from raysim.maps import fieldmap, surfacemap
 from raysim.pipeline.campaign import run_campaign
+from solver.errors import SolverError
 from tests.cli import run_cli
 from tests.hardware.conftest import write_plan
 
@@ -60,3 +61,35 @@ def test_the_command_prints_the_summary(inputs, tmp_path):
                   "--grid", "64", "--refine", "0", cwd=tmp_path)
     assert out.code == 0, out.stderr
     assert "predicted RMS (raysim budget)" in out.stdout and "achieved RMS" in out.stdout
+
+
+OBSTACLES = """
+[[obstacle]]
+type = "disk"
+radius_m = 2.5
+[[obstacle]]
+type = "legs"
+count = 4
+width_m = 0.8
+foot_radius_m = 40.0
+apex_radius_m = 2.5
+rotation_deg = 45.0
+"""
+
+
+def test_a_campaign_with_a_cabin_and_a_quadripod_masks_their_cells(inputs, tmp_path):
+    scene, plan = inputs
+    scene.write_text(scene.read_text() + OBSTACLES)
+    plan.write_text(plan.read_text() + OBSTACLES)
+    result = run_campaign(scene, plan, tmp_path / "c", rim=32, N=64, refine=1)
+    measured = fieldmap.load(result.folder / "scan.nc")
+    blocked = measured["blocked"].values.astype(bool)
+    assert blocked[0].all() and 0.05 < blocked.mean() < 0.4   # the cabin's rows, the legs
+    surface = surfacemap.load(result.folder / "surface.nc")
+    assert surface.attrs["samples_blocked"] > 0 and surface.attrs["central_hole_radius_m"] > 2.5
+    assert result.gain_estimated == pytest.approx(result.gain_injected, rel=2e-3)
+    assert np.isfinite(result.achieved) and result.predicted > 0
+    # a plan without the scene's obstacles is refused before any work
+    plan.write_text(plan.read_text().replace(OBSTACLES, ""))
+    with pytest.raises(SolverError, match="the plan's obstacles none are not the scene's"):
+        run_campaign(scene, plan, tmp_path / "d", rim=32, N=64, refine=1)
