@@ -120,6 +120,28 @@ def ray_lattice(reflector: Reflector, subdivisions: int = 1) -> RayLattice:
     return RayLattice(points, panel, normals, tubes.astype(np.int32))
 
 
+def wedge_table(grid: SphereGrid, device: str) -> tuple[int, object]:
+    """(j_first, Warp vec4d array) of the edge normals of the wedges a tube can cut
+    (:func:`raysim.optics.kernels.go.wedge_sides`), made once per grid.
+
+    A full circle's tubes span phi from -2 pi to 2 pi before wrapping (the first corner's
+    atan2 plus a turn of at most pi either way), so its table holds those wedges; another
+    grid's tubes are clipped to its own wedges 0 .. n_phi - 1 only.
+    """
+    wp = runtime.init()
+    from raysim.optics.kernels import go as K
+
+    if grid.full_circle:
+        j_first = int(np.floor((-2.0 * np.pi - grid.phi_min) / grid.dphi)) - 1
+        j_last = int(np.floor((2.0 * np.pi - grid.phi_min) / grid.dphi)) + 1
+    else:
+        j_first, j_last = 0, grid.n_phi - 1
+    sides = wp.zeros(j_last - j_first + 1, dtype=wp.vec4d, device=device)
+    runtime.launch(K.wedge_sides, sides.shape[0],
+                   [float(grid.phi_min), float(grid.dphi), j_first, sides], device)
+    return j_first, sides
+
+
 def tube_power(lattice: RayLattice, k_hat: NDArray) -> NDArray[np.float64]:
     """Power of each tube: its cross-section normal to the incident wave (m^2, I0 = 1)."""
     p = lattice.points[lattice.tubes]
@@ -207,6 +229,7 @@ class Tracer:
         self._bvh_of: Reflector = template  # the reflector whose vertices the BVH holds
         self._tubes = wp.array(lattice.tubes, dtype=wp.vec3i, device=dev)
         self._rho_edges = wp.array(2.0 * np.sin(0.5 * grid.theta_edges), dtype=wp.float64, device=dev)
+        self._j_first, self._sides = wedge_table(grid, dev)
         self._lattice = lattice  # the template's
         self._axial = bool(self.k_hat[0] == 0.0 and self.k_hat[1] == 0.0)
         self._power = tube_power(lattice, self.k_hat) if self._axial else None
@@ -350,13 +373,16 @@ class Tracer:
         from raysim.optics.kernels import go as K
 
         grid, dev = self.grid, self.device
+        polar = wp.zeros(chart.shape[0], dtype=wp.vec3d, device=dev)
+        runtime.launch(K.chart_polar, chart.shape[0], [chart, ok, polar], dev)
         power = wp.zeros((grid.n_theta, grid.n_phi), dtype=wp.float64, device=dev)
         runtime.launch(
             K.deposit_tubes, len(power_t),
-            [chart, ok, tubes, wp.array(power_t, dtype=wp.float64, device=dev), self._rho_edges,
+            [chart, ok, tubes, wp.array(power_t, dtype=wp.float64, device=dev), polar,
+             self._rho_edges, self._sides, self._j_first,
              float(grid.theta_min), float(grid.dtheta), grid.n_theta,
              float(grid.phi_min), float(grid.dphi), grid.n_phi, int(grid.full_circle), power],
-            dev, private=(12,), min_chunk=2048)
+            dev, private=(15,), min_chunk=2048)
         return power.numpy()
 
     def _blocked(self, hits: NDArray, lit: NDArray[np.bool_], reached: NDArray[np.bool_],
