@@ -266,19 +266,20 @@ class Tracer:
         self.bvh.refit(reflector)
         self._bvh_of = reflector
 
-    def _all_lit(self, reflector: Reflector) -> bool:
-        """Whether the footprint shortcut decides that every ray of ``reflector`` is lit."""
-        return self._clear and self._same_xy(reflector)
+    def _all_lit(self, same_xy: bool) -> bool:
+        """Whether the footprint shortcut decides that every ray of a reflector is lit
+        (``same_xy``: whether its vertices' (x, y) are the template's, :meth:`_same_xy`)."""
+        return self._clear and same_xy
 
     def _same_xy(self, reflector: Reflector) -> bool:
         t = self.template.vertices
         return reflector is self.template or np.array_equal(reflector.vertices[:, :2], t[:, :2])
 
-    def _tube_power(self, reflector: Reflector, lattice: RayLattice) -> NDArray[np.float64]:
+    def _tube_power(self, same_xy: bool, lattice: RayLattice) -> NDArray[np.float64]:
         """Power of each tube: the template's where only z moved under an axial wave."""
         if self._power is None:
             return tube_power(lattice, self.k_hat)
-        return self._power if self._same_xy(reflector) else tube_power(lattice, self.k_hat)
+        return self._power if same_xy else tube_power(lattice, self.k_hat)
 
     def trace(self, reflector: Reflector, progress: Progress | None = None,
               probe: Probe | None = None, e_hat=None) -> GOResult:
@@ -305,7 +306,8 @@ class Tracer:
         n_rays = len(lattice.points)
 
         report("bvh", 0.1)
-        if self._all_lit(reflector):
+        same_xy = self._same_xy(reflector)  # one comparison of the (x, y) for the whole trace
+        if self._all_lit(same_xy):
             report("visibility", 0.2)
             lit_np = np.ones(n_rays, dtype=bool)
         else:
@@ -325,8 +327,11 @@ class Tracer:
                              wp.vec3d(*k_hat), wp.vec3d(*focus), float(grid.radius), ok, chart], dev)
         ok_np = ok.numpy().astype(bool)
 
-        power_t = self._tube_power(reflector, lattice)
-        tube_lit = lit_np[lattice.tubes].all(axis=1)
+        power_t = self._tube_power(same_xy, lattice)
+        # every tube is lit when every ray is (the footprint shortcut's usual case): no need
+        # to gather the rays' flags per tube
+        tube_lit = np.ones(len(lattice.tubes), dtype=bool) if lit_np.all() \
+            else lit_np[lattice.tubes].all(axis=1)
         power_read = None
         if probe is not None and not probe.ideal:
             from raysim.optics.goprobe import tube_weights
