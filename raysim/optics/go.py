@@ -120,6 +120,28 @@ def ray_lattice(reflector: Reflector, subdivisions: int = 1) -> RayLattice:
     return RayLattice(points, panel, normals, tubes.astype(np.int32))
 
 
+def wedge_table(grid: SphereGrid, device: str) -> tuple[int, object]:
+    """(j_first, Warp vec4d array) of the edge normals of the wedges a tube can cut
+    (:func:`raysim.optics.kernels.go.wedge_sides`), made once per grid.
+
+    A full circle's tubes span phi from -2 pi to 2 pi before wrapping (the first corner's
+    atan2 plus a turn of at most pi either way), so its table holds those wedges; another
+    grid's tubes are clipped to its own wedges 0 .. n_phi - 1 only.
+    """
+    wp = runtime.init()
+    from raysim.optics.kernels import go as K
+
+    if grid.full_circle:
+        j_first = int(np.floor((-2.0 * np.pi - grid.phi_min) / grid.dphi)) - 1
+        j_last = int(np.floor((2.0 * np.pi - grid.phi_min) / grid.dphi)) + 1
+    else:
+        j_first, j_last = 0, grid.n_phi - 1
+    sides = wp.zeros(j_last - j_first + 1, dtype=wp.vec4d, device=device)
+    runtime.launch(K.wedge_sides, sides.shape[0],
+                   [float(grid.phi_min), float(grid.dphi), j_first, sides], device)
+    return j_first, sides
+
+
 def tube_power(lattice: RayLattice, k_hat: NDArray) -> NDArray[np.float64]:
     """Power of each tube: its cross-section normal to the incident wave (m^2, I0 = 1)."""
     p = lattice.points[lattice.tubes]
@@ -207,6 +229,7 @@ class Tracer:
         self._bvh_of: Reflector = template  # the reflector whose vertices the BVH holds
         self._tubes = wp.array(lattice.tubes, dtype=wp.vec3i, device=dev)
         self._rho_edges = wp.array(2.0 * np.sin(0.5 * grid.theta_edges), dtype=wp.float64, device=dev)
+        self._j_first, self._sides = wedge_table(grid, dev)
         self._lattice = lattice  # the template's
         self._axial = bool(self.k_hat[0] == 0.0 and self.k_hat[1] == 0.0)
         self._power = tube_power(lattice, self.k_hat) if self._axial else None
@@ -243,19 +266,20 @@ class Tracer:
         self.bvh.refit(reflector)
         self._bvh_of = reflector
 
-    def _all_lit(self, reflector: Reflector) -> bool:
-        """Whether the footprint shortcut decides that every ray of ``reflector`` is lit."""
-        return self._clear and self._same_xy(reflector)
+    def _all_lit(self, same_xy: bool) -> bool:
+        """Whether the footprint shortcut decides that every ray of a reflector is lit
+        (``same_xy``: whether its vertices' (x, y) are the template's, :meth:`_same_xy`)."""
+        return self._clear and same_xy
 
     def _same_xy(self, reflector: Reflector) -> bool:
         t = self.template.vertices
         return reflector is self.template or np.array_equal(reflector.vertices[:, :2], t[:, :2])
 
-    def _tube_power(self, reflector: Reflector, lattice: RayLattice) -> NDArray[np.float64]:
+    def _tube_power(self, same_xy: bool, lattice: RayLattice) -> NDArray[np.float64]:
         """Power of each tube: the template's where only z moved under an axial wave."""
         if self._power is None:
             return tube_power(lattice, self.k_hat)
-        return self._power if self._same_xy(reflector) else tube_power(lattice, self.k_hat)
+        return self._power if same_xy else tube_power(lattice, self.k_hat)
 
     def trace(self, reflector: Reflector, progress: Progress | None = None,
               probe: Probe | None = None, e_hat=None) -> GOResult:
@@ -282,7 +306,8 @@ class Tracer:
         n_rays = len(lattice.points)
 
         report("bvh", 0.1)
-        if self._all_lit(reflector):
+        same_xy = self._same_xy(reflector)  # one comparison of the (x, y) for the whole trace
+        if self._all_lit(same_xy):
             report("visibility", 0.2)
             lit_np = np.ones(n_rays, dtype=bool)
         else:
@@ -302,8 +327,11 @@ class Tracer:
                              wp.vec3d(*k_hat), wp.vec3d(*focus), float(grid.radius), ok, chart], dev)
         ok_np = ok.numpy().astype(bool)
 
-        power_t = self._tube_power(reflector, lattice)
-        tube_lit = lit_np[lattice.tubes].all(axis=1)
+        power_t = self._tube_power(same_xy, lattice)
+        # every tube is lit when every ray is (the footprint shortcut's usual case): no need
+        # to gather the rays' flags per tube
+        tube_lit = np.ones(len(lattice.tubes), dtype=bool) if lit_np.all() \
+            else lit_np[lattice.tubes].all(axis=1)
         power_read = None
         if probe is not None and not probe.ideal:
             from raysim.optics.goprobe import tube_weights
@@ -350,13 +378,16 @@ class Tracer:
         from raysim.optics.kernels import go as K
 
         grid, dev = self.grid, self.device
+        polar = wp.zeros(chart.shape[0], dtype=wp.vec3d, device=dev)
+        runtime.launch(K.chart_polar, chart.shape[0], [chart, ok, polar], dev)
         power = wp.zeros((grid.n_theta, grid.n_phi), dtype=wp.float64, device=dev)
         runtime.launch(
             K.deposit_tubes, len(power_t),
-            [chart, ok, tubes, wp.array(power_t, dtype=wp.float64, device=dev), self._rho_edges,
+            [chart, ok, tubes, wp.array(power_t, dtype=wp.float64, device=dev), polar,
+             self._rho_edges, self._sides, self._j_first,
              float(grid.theta_min), float(grid.dtheta), grid.n_theta,
              float(grid.phi_min), float(grid.dphi), grid.n_phi, int(grid.full_circle), power],
-            dev, private=(12,), min_chunk=2048)
+            dev, private=(15,), min_chunk=2048)
         return power.numpy()
 
     def _blocked(self, hits: NDArray, lit: NDArray[np.bool_], reached: NDArray[np.bool_],

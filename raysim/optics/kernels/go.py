@@ -5,7 +5,10 @@ that takes a trailing ``offset`` so it can be split across CPU threads: ``reflec
 (float64 reflection at the recomputed hit and intersection with the probe sphere, mapped to
 the Lambert equal-area chart of the sphere) and ``deposit_tubes`` (each ray tube's power
 spread over the (theta, phi) cells in proportion to the exact area of its overlap with each
-cell in that chart).
+cell in that chart). Before the deposit, ``chart_polar`` takes each ray's chart radius, theta
+and phi once (a ray is a corner of about six tubes), and ``wedge_sides`` makes a grid's table
+of the phi wedges' side normals once per tracer; the deposit reads them where it computed them
+itself, the same numbers, so the cells receive the same power bit for bit.
 
 The Lambert azimuthal equal-area chart about the sphere's pole -z maps the unit direction u
 to X = sqrt(2 / (1 - u_z)) (u_x, u_y): |X| = 2 sin(theta / 2) and areas are sphere areas
@@ -22,6 +25,7 @@ from raysim.optics.kernels.f64 import F64_HALF, F64_ONE, F64_TWO, F64_ZERO
 wp.set_module_options({"enable_backward": False})
 
 vec8d = wp.types.vector(length=8, dtype=wp.float64)
+vec8i = wp.types.vector(length=8, dtype=wp.int32)
 
 
 
@@ -86,8 +90,11 @@ def signed_angle(a: wp.vec2d, b: wp.vec2d) -> wp.float64:
 
 
 @wp.func
-def edge_disk_area(a: wp.vec2d, b: wp.vec2d, rho: wp.float64) -> wp.float64:
-    """Signed area of (triangle origin, a, b) inside the disk |X| <= rho.
+def edge_disk_part(a: wp.vec2d, b: wp.vec2d, rho: wp.float64) -> wp.vec2d:
+    """Signed area of (triangle origin, a, b) inside the disk |X| <= rho, as (area, 0), or
+    (0, 1) where it is the circular sector of the edge's whole angle, 0.5 rho^2
+    ``signed_angle(a, b)``: that angle does not depend on rho, so the caller takes it once per
+    edge for all the ring radii it meets.
 
     Inside the disk the triangle counts; outside it the circular sector of the same angle.
     Summed over a polygon's edges this is the area of polygon and disk in common.
@@ -95,18 +102,18 @@ def edge_disk_area(a: wp.vec2d, b: wp.vec2d, rho: wp.float64) -> wp.float64:
     d = b - a
     A = wp.dot(d, d)
     if A <= F64_ZERO:
-        return F64_ZERO
+        return wp.vec2d(F64_ZERO, F64_ZERO)
     B = wp.dot(a, d)
     C = wp.dot(a, a) - rho * rho
     disc = B * B - A * C
     r2 = F64_HALF * rho * rho
     if disc <= F64_ZERO:
-        return r2 * signed_angle(a, b)
+        return wp.vec2d(F64_ZERO, F64_ONE)
     s = wp.sqrt(disc)
     t1 = (-B - s) / A
     t2 = (-B + s) / A
     if t2 <= F64_ZERO or t1 >= F64_ONE:
-        return r2 * signed_angle(a, b)
+        return wp.vec2d(F64_ZERO, F64_ONE)
     # a..p1 and p2..b lie outside the disk (sectors), p1..p2 inside (triangle); an end inside
     # the disk has no sector, and its angle is never taken: near the origin it is meaningless
     area = F64_ZERO
@@ -118,16 +125,7 @@ def edge_disk_area(a: wp.vec2d, b: wp.vec2d, rho: wp.float64) -> wp.float64:
     if t2 < F64_ONE:
         p2 = a + t2 * d
         area += r2 * signed_angle(p2, b)
-    return area + F64_HALF * cross2(p1, p2)
-
-
-@wp.func
-def polygon_disk_area(px: vec8d, py: vec8d, n: int, rho: wp.float64) -> wp.float64:
-    total = F64_ZERO
-    for k in range(n):
-        k1 = (k + 1) % n
-        total += edge_disk_area(wp.vec2d(px[k], py[k]), wp.vec2d(px[k1], py[k1]), rho)
-    return total
+    return wp.vec2d(area + F64_HALF * cross2(p1, p2), F64_ZERO)
 
 
 @wp.func
@@ -157,13 +155,46 @@ def wrap_angle(x: wp.float64) -> wp.float64:
     return x - two_pi * wp.floor((x + wp.float64(3.141592653589793)) / two_pi)
 
 
+@wp.func
+def wedge_normals(phi_min: wp.float64, dphi: wp.float64, j: int) -> wp.vec4d:
+    """Inward normals (x, y of the side at alpha, x, y of the side at beta) of the wedge
+    alpha = phi_min + j dphi .. beta = alpha + dphi."""
+    alpha = phi_min + wp.float64(j) * dphi
+    beta = alpha + dphi
+    return wp.vec4d(-wp.sin(alpha), wp.cos(alpha), wp.sin(beta), -wp.cos(beta))
+
+
+@wp.kernel
+def wedge_sides(phi_min: wp.float64, dphi: wp.float64, j_first: int,
+                sides: wp.array(dtype=wp.vec4d), offset: int):
+    """sides[k]: :func:`wedge_normals` of wedge j = j_first + k (a grid's table, made once)."""
+    k = wp.tid() + offset
+    sides[k] = wedge_normals(phi_min, dphi, j_first + k)
+
+
+@wp.kernel
+def chart_polar(chart: wp.array(dtype=wp.vec2d), ok: wp.array(dtype=wp.int32),
+                polar: wp.array(dtype=wp.vec3d), offset: int):
+    """polar[i] = (|X|, theta = 2 asin(min(|X| / 2, 1)), phi = atan2(X_y, X_x)) of each ray
+    that reached the sphere (chart X, Lambert radius; rad), for :func:`deposit_tubes`."""
+    i = wp.tid() + offset
+    if ok[i] == 0:
+        return
+    x = chart[i]
+    r = wp.length(x)
+    polar[i] = wp.vec3d(r, F64_TWO * wp.asin(wp.min(r * F64_HALF, F64_ONE)), wp.atan2(x[1], x[0]))
+
+
 @wp.kernel
 def deposit_tubes(
     chart: wp.array(dtype=wp.vec2d),
     ok: wp.array(dtype=wp.int32),
     tubes: wp.array(dtype=wp.vec3i),
     tube_power: wp.array(dtype=wp.float64),
+    polar: wp.array(dtype=wp.vec3d),
     rho_edges: wp.array(dtype=wp.float64),
+    sides: wp.array(dtype=wp.vec4d),
+    j_first: int,
     theta_min: wp.float64,
     dtheta: wp.float64,
     n_theta: int,
@@ -179,6 +210,13 @@ def deposit_tubes(
     A tube is the triangle of three rays' chart points; folds (reversed triangles) count with
     their absolute area. Cells outside the grid receive nothing; tubes with a ray that was
     shadowed or missed the sphere carry no power here.
+
+    ``polar`` holds each ray's (|X|, theta, phi) from :func:`chart_polar` and ``sides`` the
+    wedges' edge normals from :func:`wedge_sides` (wedge j at ``sides[j - j_first]``; a wedge
+    outside the table computes its own): each ray is a corner of about six tubes and each
+    wedge is cut by thousands, so their sines, arctangents and square roots are taken once.
+    They are the very values this kernel would compute in their place, so the deposit is the
+    same bit for bit.
     """
     t = wp.tid() + offset
     tri = tubes[t]
@@ -187,11 +225,17 @@ def deposit_tubes(
     a = chart[tri[0]]
     b = chart[tri[1]]
     c = chart[tri[2]]
+    qa = polar[tri[0]]
+    qb = polar[tri[1]]
+    qc = polar[tri[2]]
     area2 = cross2(b - a, c - a)
     if area2 < F64_ZERO:
         tmp = b
         b = c
         c = tmp
+        qtmp = qb
+        qb = qc
+        qc = qtmp
         area2 = -area2
     P = tube_power[t]
     area = F64_HALF * area2
@@ -209,16 +253,21 @@ def deposit_tubes(
         return
 
     # radial (theta) extent of the triangle
-    ra = wp.length(a)
-    rb = wp.length(b)
-    rc = wp.length(c)
+    ra = qa[0]
+    rb = qb[0]
+    rc = qc[0]
     r_hi = wp.max(ra, wp.max(rb, rc))
     inside = cross2(a, b) >= F64_ZERO and cross2(b, c) >= F64_ZERO and cross2(c, a) >= F64_ZERO
     r_lo = F64_ZERO
     if not inside:
         r_lo = wp.min(segment_distance(a, b), wp.min(segment_distance(b, c), segment_distance(c, a)))
     th_lo = F64_TWO * wp.asin(wp.min(r_lo * F64_HALF, F64_ONE))
-    th_hi = F64_TWO * wp.asin(wp.min(r_hi * F64_HALF, F64_ONE))
+    # theta of the farthest corner: 2 asin(min(r_hi / 2, 1)) as chart_polar took it
+    th_hi = qa[1]
+    if r_hi == rb:
+        th_hi = qb[1]
+    if r_hi == rc:
+        th_hi = qc[1]
     i_lo = int(wp.floor((th_lo - theta_min) / dtheta))
     i_hi = int(wp.floor((th_hi - theta_min) / dtheta))
     if i_hi < 0 or i_lo >= n_theta:
@@ -230,9 +279,9 @@ def deposit_tubes(
     j_lo = int(0)
     j_hi = n_phi - 1
     if not inside:
-        pa = wp.atan2(a[1], a[0])
-        pb = pa + wrap_angle(wp.atan2(b[1], b[0]) - pa)
-        pc = pa + wrap_angle(wp.atan2(c[1], c[0]) - pa)
+        pa = qa[2]
+        pb = pa + wrap_angle(qb[2] - pa)
+        pc = pa + wrap_angle(qc[2] - pa)
         p_lo = wp.min(pa, wp.min(pb, pc))
         p_hi = wp.max(pa, wp.max(pb, pc))
         j_lo = int(wp.floor((p_lo - phi_min) / dphi))
@@ -264,14 +313,18 @@ def deposit_tubes(
         py[2] = c[1]
         n = int(3)
         if n_phi > 1:
-            alpha = phi_min + wp.float64(j) * dphi
-            beta = alpha + dphi
+            k_side = j - j_first
+            edge = wp.vec4d()
+            if k_side >= 0 and k_side < sides.shape[0]:
+                edge = sides[k_side]
+            else:
+                edge = wedge_normals(phi_min, dphi, j)
             for side in range(2):
-                nx = -wp.sin(alpha)
-                ny = wp.cos(alpha)
+                nx = edge[0]
+                ny = edge[1]
                 if side == 1:
-                    nx = wp.sin(beta)
-                    ny = -wp.cos(beta)
+                    nx = edge[2]
+                    ny = edge[3]
                 qx = vec8d()
                 qy = vec8d()
                 m = int(0)
@@ -295,10 +348,30 @@ def deposit_tubes(
             continue
         if polygon_area(px, py, n) <= F64_ZERO:
             continue
-        below = polygon_disk_area(px, py, n, rho_edges[i_lo])
-        for i in range(i_lo, i_hi + 1):
-            upto = polygon_disk_area(px, py, n, rho_edges[i + 1])
-            share = upto - below
+        # the clipped polygon's area inside the disks of the ring radii rho_edges[i_lo ..
+        # i_hi + 1]; cell i gets the difference of radii i + 1 and i. Each edge's whole angle
+        # is taken on its first need and kept for the other radii.
+        angle = vec8d()
+        have = vec8i()
+        below = F64_ZERO
+        for step in range(i_hi - i_lo + 2):
+            rho = rho_edges[i_lo + step]
+            r2 = F64_HALF * rho * rho
+            upto = F64_ZERO
+            for k in range(n):
+                k1 = (k + 1) % n
+                e0 = wp.vec2d(px[k], py[k])
+                e1 = wp.vec2d(px[k1], py[k1])
+                part = edge_disk_part(e0, e1, rho)
+                term = part[0]
+                if part[1] > F64_ZERO:
+                    if have[k] == 0:
+                        angle[k] = signed_angle(e0, e1)
+                        have[k] = 1
+                    term = r2 * angle[k]
+                upto += term
+            if step > 0:
+                share = upto - below
+                if share > F64_ZERO:
+                    wp.atomic_add(power, i_lo + step - 1, jj, P * share / area)
             below = upto
-            if share > F64_ZERO:
-                wp.atomic_add(power, i, jj, P * share / area)

@@ -182,16 +182,56 @@ def test_tube_deposition_matches_exact_overlap_areas():
     centres = np.where(np.arange(n)[:, None] % 2 == 0, rng.normal(0, 0.04, (n, 2)), rng.normal(0, 0.5, (n, 2)))
     tris = centres[:, None, :] + rng.normal(0, 0.06, (n, 3, 2))
     for tri in tris:
-        power = wp.zeros((grid.n_theta, grid.n_phi), dtype=wp.float64)
-        wp.launch(K.deposit_tubes, dim=1, inputs=[
-            wp.array(tri, dtype=wp.vec2d), wp.array(np.ones(3, np.int32), dtype=wp.int32),
-            wp.array(np.array([[0, 1, 2]], np.int32), dtype=wp.vec3i), wp.array([1.0], dtype=wp.float64),
-            wp.array(2 * np.sin(te / 2), dtype=wp.float64), grid.theta_min, grid.dtheta, grid.n_theta,
-            grid.phi_min, grid.dphi, grid.n_phi, 1, power, 0])
+        power = deposit(wp, K, grid, tri, np.array([[0, 1, 2]], np.int32), np.ones(1))
         T = shapely.Polygon(tri)
         expected = np.array([[T.intersection(c).area for c in row] for row in cells]) / T.area
         # the cells' arcs are polygons of 400 chords: 3e-6 of a cell's radial extent
-        assert np.abs(power.numpy() - expected).max() < 1e-4
+        assert np.abs(power - expected).max() < 1e-4
+
+
+def deposit(wp, K, grid: SphereGrid, chart: np.ndarray, tubes: np.ndarray, power_t: np.ndarray,
+            table: bool = True) -> np.ndarray:
+    """``deposit_tubes`` alone (one thread): chart points (n, 2), tubes (m, 3), tube powers
+    (m,); with ``table`` False its wedge table lies out of reach, so every wedge computes its
+    own sides."""
+    dev = "cpu"
+    ch = wp.array(chart, dtype=wp.vec2d, device=dev)
+    ok = wp.array(np.ones(len(chart), np.int32), dtype=wp.int32, device=dev)
+    polar = wp.zeros(len(chart), dtype=wp.vec3d, device=dev)
+    wp.launch(K.chart_polar, dim=len(chart), inputs=[ch, ok, polar, 0], device=dev)
+    j_first, sides = go.wedge_table(grid, dev)
+    if not table:
+        j_first = 1 << 30
+    power = wp.zeros((grid.n_theta, grid.n_phi), dtype=wp.float64, device=dev)
+    wp.launch(K.deposit_tubes, dim=len(tubes), inputs=[
+        ch, ok, wp.array(tubes, dtype=wp.vec3i, device=dev), wp.array(power_t, dtype=wp.float64, device=dev),
+        polar, wp.array(2 * np.sin(grid.theta_edges / 2), dtype=wp.float64, device=dev), sides, j_first,
+        grid.theta_min, grid.dtheta, grid.n_theta, grid.phi_min, grid.dphi, grid.n_phi,
+        int(grid.full_circle), power, 0], device=dev)
+    return power.numpy()
+
+
+@pytest.mark.parametrize("grid", [SphereGrid(R, 30, 72), SphereGrid(R, 30, 72, phi_min=-np.pi, phi_max=np.pi),
+                                  SphereGrid(R, 12, 16, phi_min=-0.4, phi_max=0.9)],
+                         ids=["full circle", "full circle from -pi", "sector"])
+def test_tube_deposition_is_the_same_with_and_without_the_wedge_table(grid):
+    # the kernel takes the wedges' sides from a table made once per grid: the very numbers it
+    # would compute itself, so the deposit is the same bit for bit (tubes across the pole,
+    # across phi = +-pi and across many rings and wedges included)
+    from raysim.optics import runtime as warp_runtime
+    from raysim.optics.kernels import go as K
+
+    wp = warp_runtime.init()
+    rng = np.random.default_rng(3)
+    n = 3000
+    centres = rng.normal(0, 0.6, (n, 2))
+    chart = (centres[:, None, :] + rng.normal(0, 0.05, (n, 3, 2)) * rng.uniform(0.1, 4, (n, 1, 1)))
+    chart = chart.reshape(-1, 2)
+    tubes = np.arange(3 * n, dtype=np.int32).reshape(n, 3)
+    power_t = rng.uniform(0.5, 2.0, n)
+    tabled = deposit(wp, K, grid, chart, tubes, power_t)
+    assert tabled.sum() > 0.1 * power_t.sum()  # a fair share lands on the grid
+    assert np.array_equal(tabled, deposit(wp, K, grid, chart, tubes, power_t, table=False))
 
 
 def test_paper_case_ratio_matches_an_independent_trace(paper_scene, paper_reflectors):

@@ -11,7 +11,7 @@ from shapely.geometry import LineString, Point
 
 from raysim.errors import MeshError
 from raysim.surface.deformation import GaussianBumps, PanelRigid
-from raysim.surface.mesh import fit_paraboloid, load_reflector, paraboloid
+from raysim.surface.mesh import fit_paraboloid, load_reflector, paraboloid, unit_normals
 from raysim.surface.panels import PanelLayout
 
 D, F = 110.0, 33.0
@@ -106,6 +106,23 @@ def test_normals_are_smooth_within_a_panel_and_jump_across_a_gap():
     expect = np.column_stack([-(x / (2 * F) + tilt.tilt_x[k]), -(y / (2 * F) + tilt.tilt_y[k]), np.ones_like(x)])
     expect /= np.linalg.norm(expect, axis=1, keepdims=True)
     assert np.abs(bent.vertex_normals - expect).max() < 1e-14
+
+
+def test_unit_normals_are_the_normalised_stack_bit_for_bit():
+    # the component-wise normals are what n / |n| of the stacked (-gx, -gy, 1) gives, to the
+    # bit: random slopes of every scale, signed zeros, infinities, NaNs, huge and tiny values
+    rng = np.random.default_rng(5)
+    special = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, -np.nan, 1e300, -1e-300, 1e154])
+    sx, sy = np.meshgrid(special, special)
+    gx = np.concatenate([sx.ravel(), *(rng.normal(0, s, 100_000) for s in (1e-7, 1e-3, 0.5, 40.0))])
+    gy = np.concatenate([sy.ravel(), *(rng.normal(0, s, 100_000) for s in (1e-7, 1e-3, 0.5, 40.0))])
+    with np.errstate(invalid="ignore", over="ignore"):
+        n = np.stack([-gx, -gy, np.ones_like(gx)], axis=-1)
+        expected = n / np.linalg.norm(n, axis=-1, keepdims=True)
+        got = unit_normals(gx, gy)
+        assert got.tobytes() == expected.tobytes()
+        assert unit_normals(gx[:12].reshape(3, 4), gy[:12].reshape(3, 4)).tobytes() == expected[:12].tobytes()
+    assert unit_normals(0.3, -0.2).shape == (3,)
 
 
 def test_deformed_mesh_moves_vertices_by_delta():
