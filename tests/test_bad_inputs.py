@@ -194,6 +194,10 @@ def workspace(tmp_path_factory):
         "rig_no_track.toml": "[limits]\nslider_min_deg = -95.0\n",
         "plan.toml": PLAN,
         "plan_noisy.toml": PLAN.replace("time_scale = 0.0", "time_scale = 0.0\nnoise_db = 0.01"),
+        "plan_drift_noisy.toml": PLAN.replace("time_scale = 0.0", "time_scale = 0.0\nnoise_db = 0.01")
+        .replace("reference_samples = 1", 'reference_samples = 1\ndrift_correction = "linear"')
+        .replace("theta_step_deg = 20.0", "theta_step_deg = 5.0")
+        .replace("phi_step_deg = 90.0", "phi_step_deg = 10.0"),
         "plan_other_dish.toml": PLAN.replace("focal_length_m = 8.0", "focal_length_m = 9.0"),
         "plan_setle.toml": PLAN.replace("samples_per_point = 1", "samples_per_point = 1\nsetle = 1.0"),
         "plan_reach.toml": PLAN.replace('rig = "rig.toml"', 'rig = "rig_short.toml"'),
@@ -465,6 +469,8 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
          "must be an integer in 16..4096"),
         (["campaign", "scene.toml", "plan_noisy.toml", "-o", "c", "--rim", "3"],
          "at least 8 targets"),
+        (["campaign", "scene.toml", "plan_drift_noisy.toml", "-o", "c", "--rim", "0",
+          "--target-um", "0.001"], "out of reach at any readings per point"),
     ],
     "rig park": [
         (["rig", "park", "missing.toml", "--simulate"], "no such rig file"),

@@ -22,6 +22,7 @@ The folder gets ``field.nc``, ``scan.nc`` (and its journal), ``rim.csv``, ``surf
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -100,8 +101,10 @@ def run_campaign(scene_path: str | os.PathLike[str], plan_path: str | os.PathLik
     row = budget_rows(plan, [noise], readings, rim, rim_std, refine=refine > 0, target=target)[0]
     k = row.readings if target is None else row.readings_needed
     if k is None:
-        raise SolverError(f"the rim targets alone leave {row.budget.harmonic * 1e6:.1f} um: the "
-                          f"target {target * 1e6:g} um is out of reach")
+        fixed = math.hypot(row.budget.harmonic or 0.0, row.budget.reference)
+        raise SolverError(f"the rim targets and the drift references alone leave {fixed * 1e6:.1f} "
+                          f"um: the target {target * 1e6:g} um is out of reach at any readings "
+                          "per point")
     if target is not None:
         row = budget_rows(plan, [noise], k, rim, rim_std, refine=refine > 0)[0]
     # the rig's time comes from the budget row (with the plan's settling); the simulated
