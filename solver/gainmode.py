@@ -132,14 +132,3 @@ def refocus_mode(grid: ApertureGrid, F: float, R: float) -> NDArray[np.float64]:
     """delta_c of a model-based answer (m per unit FA offset): (a^2 - r^2) / kappa, NaN outside."""
     kappa = 2.0 * (4.0 * F * F + grid.a ** 2) / R - 8.0 * F
     return grid.masked((grid.a ** 2 - grid.r ** 2) / kappa)
-
-
-def remove_mode(grid: ApertureGrid, delta: NDArray[np.float64],
-                mode: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
-    """``delta`` minus its least-squares multiple b of ``mode`` inside the aperture, and b."""
-    use = grid.mask & np.isfinite(delta) & np.isfinite(mode)
-    norm = float(np.sum(mode[use] ** 2))
-    if not norm > 0:
-        return delta, 0.0
-    b = float(np.sum(delta[use] * mode[use])) / norm
-    return delta - b * np.where(np.isfinite(mode), mode, 0.0), b

@@ -33,14 +33,19 @@ class Unobservable:
     shapes: tuple[NDArray[np.float64], ...]
     region: NDArray[np.bool_]
 
+    def _support(self, grid: ApertureGrid) -> NDArray[np.bool_]:
+        """Where the fit looks: the region, inside the aperture, where every shape is finite."""
+        use = self.region & grid.mask
+        for shape in self.shapes:
+            use &= np.isfinite(shape)
+        return use
+
     def remove(self, grid: ApertureGrid, delta: NDArray[np.float64]
                ) -> tuple[NDArray[np.float64], dict[str, float]]:
         """``delta`` (m) minus its joint least-squares fit by the shapes over the region, and
         each shape's coefficient. Shapes that vanish on the region get coefficient 0."""
         stack = np.stack([np.where(np.isfinite(s), s, 0.0) for s in self.shapes])
-        use = self.region & grid.mask & np.isfinite(delta)
-        for shape in self.shapes:
-            use &= np.isfinite(shape)
+        use = self._support(grid) & np.isfinite(delta)
         design = stack[:, use].T
         if not use.any() or not np.any(design):
             return delta, dict.fromkeys(self.names, 0.0)
@@ -51,9 +56,7 @@ class Unobservable:
     def correlation(self, grid: ApertureGrid) -> float:
         """The largest |cosine| between two of the shapes over the region (0 for one shape):
         near 1, the coefficients trade against each other and only their sum is meaningful."""
-        use = self.region & grid.mask
-        for shape in self.shapes:
-            use &= np.isfinite(shape)
+        use = self._support(grid)
         vectors = [s[use] / np.linalg.norm(s[use]) for s in self.shapes if np.any(s[use])]
         cosines = [abs(float(np.dot(u, v))) for k, u in enumerate(vectors) for v in vectors[k + 1:]]
         return max(cosines, default=0.0)
