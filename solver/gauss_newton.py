@@ -38,9 +38,12 @@ import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
 from raysim.progress import Progress
+from solver.errors import SolverError
 from solver.forward import ForwardModel, WaveForward, active_runner
 
 STALL = 0.995      # a step that lowers the misfit by less than 0.5 % ends the loop
+MAX_STEPS = 50     # outer Gauss-Newton steps a run may ask for
+MAX_INNER = 1000   # LSQR iterations per step a run may ask for
 
 
 @dataclass(frozen=True)
@@ -48,10 +51,20 @@ class GaussNewtonOptions:
     """Settings: outer steps, LSQR iterations per step, the discrepancy principle's tolerance
     (chi-square standard deviations above the noise's expectation), backtracking halvings."""
 
-    iterations: int = 4
-    inner: int = 12
+    iterations: int = 3
+    inner: int = 60
     sigmas: float = 2.0
     backtrack: int = 2
+
+    def __post_init__(self) -> None:
+        for name, value, lo, hi in (("steps", self.iterations, 1, MAX_STEPS),
+                                    ("LSQR iterations per step", self.inner, 1, MAX_INNER),
+                                    ("backtracking halvings", self.backtrack, 0, 10)):
+            if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+                raise SolverError(f"Gauss-Newton {name} must be an integer in {lo}..{hi}, "
+                                  f"got {value!r}")
+        if not (isinstance(self.sigmas, (int, float)) and 0.0 <= self.sigmas <= 100.0):
+            raise SolverError(f"Gauss-Newton sigmas must be a number in 0..100, got {self.sigmas!r}")
 
 
 @dataclass
@@ -258,8 +271,6 @@ def choose_method(name: str, model: ForwardModel | None, scan, iterations: int) 
     AUTO_MAX_PAIRS element-point pairs (each step costs two radiations per LSQR iteration:
     about a minute per iteration on two cores at that size), else the defect correction alone.
     """
-    from solver.errors import SolverError
-
     if name not in REFINE_METHODS:
         raise SolverError(f"unknown refine method {name!r}: choose one of "
                           f"{', '.join(REFINE_METHODS)}")

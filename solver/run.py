@@ -18,6 +18,7 @@ from raysim.maps.fieldmap import load as load_fieldmap
 from raysim.progress import Progress
 from solver import boundary, surface
 from solver.fit import panel_adjustments, write_panel_csv
+from solver.gauss_newton import GaussNewtonOptions
 from solver.invert import DEFAULT_N, DEFAULT_REFINE, DEFAULT_SOLVER, invert
 
 
@@ -36,14 +37,16 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
                device: str | None = "cpu",
                panels_csv: str | os.PathLike[str] | None = None, model: str | None = None,
                progress: Progress | None = None, refine_method: str = "defect",
+               gauss_newton: GaussNewtonOptions | None = None,
                log: Callable[[str], None] | None = None) -> xr.Dataset:
     """Invert the FieldMap at ``field_path`` and write the SurfaceMap to ``output``.
 
     Options as :func:`solver.invert.invert`; ``rim_csv`` is a CSV ``x,y,dz`` (m) of rim
     targets; ``panels_csv`` receives the per-panel adjustment table (needs a FieldMap whose
     scene has panels); ``model`` names the refinement's forward model (None: from the data's
-    method); ``progress(stage, fraction)`` follows the refinement; ``refine_method`` and
-    ``log(line)`` (each Gauss-Newton step) as :func:`solver.invert.invert`. Nothing is
+    method); ``progress(stage, fraction)`` follows the refinement; ``refine_method``,
+    ``gauss_newton`` (its steps and LSQR iterations) and ``log(line)`` (each Gauss-Newton step)
+    as :func:`solver.invert.invert`. Nothing is
     written when an input is bad.
     """
     field = load_fieldmap(field_path)
@@ -56,7 +59,8 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
                               "--panels-csv needs one")
     result = invert(field, solver=solver, N=N, rim=rim, remove=remove,
                     refine_iterations=refine, gain=gain, iterations=iterations, device=device,
-                    model=model, progress=progress, refine_method=refine_method, log=log)
+                    model=model, progress=progress, refine_method=refine_method,
+                    gauss_newton=gauss_newton, log=log)
     result.attrs["source_fieldmap"] = str(field_path)
     surface.save(result, output)
     if layout is not None:

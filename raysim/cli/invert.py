@@ -34,6 +34,14 @@ def invert_command(
              "per LSQR iteration) or auto (gauss-newton for a po or po+ptd model where a PO "
              "radiation is at most 1e9 element-point pairs, about 0.1 GHz on the paper's grid, "
              "and without --scheduler / --workers)."),
+    gn_steps: int | None = typer.Option(
+        None, "--gn-steps",
+        help="gauss-newton: outer steps, 1 to 50 (default 3; each relinearises the model; the "
+             "loop also stops at the noise level or when the misfit stalls)."),
+    gn_lsqr: int | None = typer.Option(
+        None, "--gn-lsqr",
+        help="gauss-newton: LSQR iterations per step, 1 to 1000 (default 60; each two PO "
+             "radiations; LSQR stops earlier when the misfit reaches the noise level)."),
     panels_csv: Path | None = typer.Option(None, help="Write the per-panel adjustment table."),
     gain: str = typer.Option(
         "auto", help="auto (known for simulated data, estimated for a measured scan), known "
@@ -50,9 +58,12 @@ def invert_command(
                                 "processes (started when the model first runs)."),
 ) -> None:
     """Recover the surface deformation from an intensity scan (FieldMap -> SurfaceMap)."""
+    from solver.gauss_newton import GaussNewtonOptions
     from solver.options import check_options
     from solver.run import run_invert, summary
 
+    given = {"iterations": gn_steps, "inner": gn_lsqr}
+    gauss_newton = GaussNewtonOptions(**{k: v for k, v in given.items() if v is not None})
     check_options(solver=solver, N=grid, refine=refine, gain=gain, iterations=iterations,
                   remove=remove, model=model, refine_method=refine_method,
                   blocks=bool(scheduler) or workers is not None)
@@ -70,7 +81,8 @@ def invert_command(
             result = run_invert(field, output, solver=solver, N=grid, rim_csv=rim, remove=remove,
                                 refine=refine, gain=gain, iterations=iterations, device=device,
                                 panels_csv=panels_csv, model=model, progress=report,
-                                refine_method=refine_method, log=note)
+                                refine_method=refine_method, gauss_newton=gauss_newton,
+                                log=note)
     for line in summary(result):
         say(line)
     say(f"wrote {output}")

@@ -207,3 +207,27 @@ def test_cli_refuses_in_one_line(monkeypatch, capsys, tmp_path, small_field, ext
     err = capsys.readouterr().err
     assert exit_info.value.code == 2 and message in err
     assert len(err.strip().splitlines()) == 1 and not (tmp_path / "s.nc").exists()
+
+
+def test_cli_steps_and_lsqr_iterations_reach_the_refinement(monkeypatch, tmp_path, small_field):
+    import xarray as xr
+
+    path = save(small_field, tmp_path / "f.nc")
+    out = tmp_path / "s.nc"
+    monkeypatch.setattr(sys, "argv", ["raysim", "invert", str(path), "-o", str(out), "--grid",
+                                      "32", "--refine", "1", "--refine-method", "gauss-newton",
+                                      "--gn-steps", "1", "--gn-lsqr", "2"])
+    with pytest.raises(SystemExit) as exit_info:
+        main()
+    assert exit_info.value.code in (0, None)
+    with xr.open_dataset(out) as surface:
+        a = dict(surface.attrs)
+    assert a["gn_used"] and int(a["gn_lsqr_iterations"]) <= 2
+    assert len(a["gn_misfit_rms"].split(",")) <= 2   # the start and at most one step
+
+
+def test_gauss_newton_options_refuse_out_of_range_settings():
+    for bad in ({"iterations": 0}, {"inner": 0}, {"inner": 1001}, {"backtrack": -1},
+                {"iterations": 2.5}, {"sigmas": -1.0}):
+        with pytest.raises(SolverError, match="Gauss-Newton"):
+            GaussNewtonOptions(**bad)
