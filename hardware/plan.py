@@ -166,7 +166,7 @@ class ScanPlan:
     @property
     def obstacle_mesh(self) -> ObstacleMesh | None:
         """The obstacles' triangles on this plan's dish (m, reflector frame), None without."""
-        return _obstacle_mesh(self.obstacles, self.focal_length)
+        return _obstacle_mesh(self.obstacles, self.focal_length, _file_stamps(self.obstacles))
 
     @property
     def blocked_share(self) -> NDArray[np.float64] | None:
@@ -179,7 +179,8 @@ class ScanPlan:
             return None
         probe = self.rig.probe_response
         return _blocked_share(self.grid, self.focal_length, self.diameter, self.obstacles,
-                              None if probe.ideal else probe, self.polarization)
+                              None if probe.ideal else probe, self.polarization,
+                              _file_stamps(self.obstacles))
 
     def check_reach(self) -> None:
         """Raise :class:`PlanError` if a step lies outside the rig's reach."""
@@ -187,20 +188,36 @@ class ScanPlan:
             self.rig.axes(step.theta, step.phi)
 
 
+def _file_stamps(obstacles: tuple[Obstacle, ...]) -> tuple:
+    """(path, size, mtime in ns) of each mesh obstacle's file: part of the caches' keys, so a
+    file edited while the process runs is read again."""
+    stamps = []
+    for obstacle in obstacles:
+        path = getattr(obstacle, "path", None)
+        if path is not None and Path(path).is_file():
+            stat = Path(path).stat()
+            stamps.append((str(path), stat.st_size, stat.st_mtime_ns))
+    return tuple(stamps)
+
+
 @lru_cache(maxsize=4)
-def _obstacle_mesh(obstacles: tuple[Obstacle, ...], F: float) -> ObstacleMesh | None:
-    """:func:`raysim.surface.obstacles.obstacle_mesh`, kept for the last few plans."""
+def _obstacle_mesh(obstacles: tuple[Obstacle, ...], F: float,
+                   stamps: tuple = ()) -> ObstacleMesh | None:
+    """:func:`raysim.surface.obstacles.obstacle_mesh`, kept for the last few plans (``stamps``:
+    :func:`_file_stamps` of the obstacles, keying the cache only)."""
     return obstacle_mesh(obstacles, F)
 
 
 @lru_cache(maxsize=4)
 def _blocked_share(grid: SphereGrid, F: float, D: float, obstacles: tuple[Obstacle, ...],
-                   probe: Probe | None, polarization: float) -> NDArray[np.float64]:
+                   probe: Probe | None, polarization: float,
+                   stamps: tuple = ()) -> NDArray[np.float64]:
     """:func:`raysim.optics.blockage.paraboloid_blocked_share` of one plan geometry, kept
-    (read-only) for the last few: the trace takes seconds on a large dish."""
+    (read-only) for the last few: the trace takes seconds on a large dish (``stamps`` as
+    :func:`_obstacle_mesh`)."""
     from raysim.optics.blockage import paraboloid_blocked_share
 
-    mesh = _obstacle_mesh(obstacles, F)
+    mesh = _obstacle_mesh(obstacles, F, stamps)
     if mesh is None:
         raise PlanError("no obstacles to trace")
     share = paraboloid_blocked_share(grid, F, D, mesh, probe, polarization)

@@ -196,3 +196,24 @@ def test_a_scan_refuses_a_map_whose_obstacles_are_not_the_plans(folder, tmp_path
 def test_obstacles_leave_the_journal_fingerprint_alone(folder):
     assert load_plan(folder / "plan.toml").fingerprint() == \
         load_plan(folder / "plan_clear.toml").fingerprint()
+
+
+def test_an_obstacle_mesh_edited_between_two_reads_is_read_again(tmp_path):
+    import os
+
+    import trimesh
+
+    def write_cabin(radius):
+        trimesh.creation.cylinder(radius=radius, height=0.2).apply_translation(
+            (0.0, 0.0, F)).export(tmp_path / "cabin.stl")
+
+    write_cabin(1.0)
+    (tmp_path / "plan.toml").write_text(PLAN + '\n[[obstacle]]\ntype = "mesh"\nfile = "cabin.stl"\n')
+    first = load_plan(tmp_path / "plan.toml").obstacle_mesh
+    write_cabin(2.0)
+    stat = (tmp_path / "cabin.stl").stat()
+    # an edit within the file system's time resolution still changes the stamp's size or time
+    os.utime(tmp_path / "cabin.stl", ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000))
+    second = load_plan(tmp_path / "plan.toml").obstacle_mesh
+    reach = [float(np.max(np.hypot(m.vertices[:, 0], m.vertices[:, 1]))) for m in (first, second)]
+    assert reach[0] == pytest.approx(1.0, rel=1e-6) and reach[1] == pytest.approx(2.0, rel=1e-6)
