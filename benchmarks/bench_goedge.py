@@ -2,7 +2,8 @@
 Table 3 with the go+edge refinement, the panel gaps.
 
 Run: ``.venv/bin/python benchmarks/bench_goedge.py [--compare [CASE ...]] [--cost] [--table3]
-[--panels] [--threads N]`` (default: all four). The PO + PTD references are the cached FieldMaps
+[--panels] [--threads N] [--fresnel]`` (default: all four; ``--fresnel`` runs go+edge with its
+Fresnel-zone correction, :mod:`raysim.optics.fresnel`). The PO + PTD references are the cached FieldMaps
 of ``benchmarks/goedge_cases.py`` (``out/goedge_ref/``; a missing one is simulated first, which
 takes hours for the large cases: run that script alone, with ``nice``, beforehand).
 
@@ -47,12 +48,15 @@ def measures(ds, ref) -> tuple[float, float]:
     return ideal, float(np.sqrt(np.mean((fa - fa_ref) ** 2) / np.mean(fa_ref**2)))
 
 
+FRESNEL = False  # --fresnel: go+edge with its Fresnel-zone correction (raysim.optics.fresnel)
+
+
 def go_edge(case: Case, cpu: list | None = None):
     """The go+edge FieldMap of ``case`` and its wall time (s); ``cpu`` collects CPU seconds."""
     from raysim.simulate import simulate
 
     start, start_cpu = time.perf_counter(), time.process_time()
-    ds = simulate(case.scene(), method="go+edge")
+    ds = simulate(case.scene(), method="go+edge", fresnel=FRESNEL)
     if cpu is not None:
         cpu.append(time.process_time() - start_cpu)
     return ds, time.perf_counter() - start
@@ -159,7 +163,11 @@ def main() -> None:
     parser.add_argument("--table3", action="store_true")
     parser.add_argument("--panels", action="store_true")
     parser.add_argument("--threads", type=int, default=None)
+    parser.add_argument("--fresnel", action="store_true",
+                        help="--compare / --cost: go+edge with its Fresnel-zone correction")
     args = parser.parse_args()
+    global FRESNEL
+    FRESNEL = args.fresnel
     if args.threads:
         os.environ["RAYSIM_THREADS"] = str(args.threads)
     everything = args.compare is None and not (args.cost or args.table3 or args.panels)

@@ -85,6 +85,7 @@ CASES = {c.name: c for c in (
     # the field's mirror symmetries in x and y (axisymmetric dish and shape, E along x): the
     # quadrant phi 0..90 deg at the full grid's 1 deg cells holds the whole sphere's map
     Case("dish25_10GHz", DISH25, 10e9, 90, 90, phi_max_deg=90.0),
+    Case("paper_1GHz_quadrant", PAPER, 1e9, 90, 90, phi_max_deg=90.0),
 )}
 
 

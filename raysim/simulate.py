@@ -52,6 +52,7 @@ class Options:
     save_field: bool = False
     samples_per_wavelength: float | None = None
     edges: str | None = None
+    fresnel: bool = False
 
 
 @dataclass
@@ -87,7 +88,8 @@ def scene_attrs(scene: Scene, deformed: Reflector) -> dict:
 
 def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu",
              progress: Progress | None = None, *, total: bool = False, save_field: bool = False,
-             samples_per_wavelength: float | None = None, edges: str | None = None) -> xr.Dataset:
+             samples_per_wavelength: float | None = None, edges: str | None = None,
+             fresnel: bool = False) -> xr.Dataset:
     """Simulate ``scene`` and return its FieldMap (an ``xarray.Dataset``; see raysim.maps.fieldmap).
 
     Parameters
@@ -107,8 +109,11 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
         edges (default :data:`raysim.optics.po.DEFAULT_SAMPLES_PER_WAVELENGTH`).
     edges : ``po+ptd`` only: ``rim`` (the outer rim, the paper's PTD; the default) or ``all``
         (the rim and every panel edge beside a gap).
+    fresnel : ``go+edge`` only: add the deformed geometric wave's Fresnel-zone correction
+        (:mod:`raysim.optics.fresnel`), for deformations with structure finer than the Fresnel
+        zone (on the paper's dish, below about 3 GHz).
     """
-    options = Options(total, save_field, samples_per_wavelength, edges)
+    options = Options(total, save_field, samples_per_wavelength, edges, fresnel)
     method = check_method(scene, method, options, device)
     report = progress or (lambda stage, fraction: None)
     start = time.perf_counter()
@@ -149,11 +154,12 @@ def check_method(scene: Scene, method: str | None, options: Options,
 
 def check_options(scene: Scene, *, method: str | None = None, device: str | None = "cpu",
                   total: bool = False, save_field: bool = False,
-                  samples_per_wavelength: float | None = None, edges: str | None = None) -> str:
+                  samples_per_wavelength: float | None = None, edges: str | None = None,
+                  fresnel: bool = False) -> str:
     """Refuse what :func:`simulate` cannot honour, before any work (the keywords of
     :func:`simulate`); return the method that would run."""
-    return check_method(scene, method, Options(total, save_field, samples_per_wavelength, edges),
-                        device)
+    return check_method(scene, method,
+                        Options(total, save_field, samples_per_wavelength, edges, fresnel), device)
 
 
 def fieldmap_of(scene: Scene, method: str, run: Run, F: float, D: float, attrs: dict) -> xr.Dataset:
@@ -192,6 +198,8 @@ def _check_options(method: str, options: Options) -> None:
     if method not in WAVE_METHODS and wave_only:
         raise RaysimError("--total, --save-field and --samples-per-wavelength apply to --method po "
                           "and po+ptd only")
+    if options.fresnel and method != "go+edge":
+        raise RaysimError("--fresnel applies to --method go+edge only")
     if method == "go+edge" and options.samples_per_wavelength is not None:
         raise RaysimError("--samples-per-wavelength applies to --method po and po+ptd only")
     spw = options.samples_per_wavelength
@@ -407,8 +415,10 @@ def probe_power(scene: Scene, E: NDArray[np.complex128]) -> NDArray[np.float64]:
 def _run_go_edge(scene: Scene, ideal: Reflector, deformed: Reflector, options: Options,
                  device: str | None, report: Progress) -> Run:
     """Method ``go+edge`` (:mod:`raysim.optics.goedge`): the geometric wave of ray tubes plus
-    the diffraction of every free edge, on both reflectors; intensities at the cell centres."""
-    from raysim.optics import goedge, po
+    the diffraction of every free edge, on both reflectors, and (``options.fresnel``) the
+    deformed geometric wave's Fresnel-zone correction (:mod:`raysim.optics.fresnel`);
+    intensities at the cell centres."""
+    from raysim.optics import fresnel, goedge, po
     from raysim.optics.bvh import ReflectorBVH
 
     wave = po.Illumination.plane_wave(scene.source.frequency_hz, scene.source.direction,
@@ -422,7 +432,12 @@ def _run_go_edge(scene: Scene, ideal: Reflector, deformed: Reflector, options: O
         results[name] = goedge.sphere_field(reflector, scene.sphere, wave, None, scene.subdivisions,
                                             device=device, bvh=bvh)
     r_def, r_ideal = results["deformed"], results["ideal"]
-    fields = {"E": r_def.E, "E_ideal": r_ideal.E}
+    fix = None
+    if options.fresnel:
+        report("deformed: Fresnel-zone correction", 0.95)
+        fix = fresnel.correction(ideal, deformed, scene.sphere, wave, r_ideal.E_geo,
+                                 r_def.subdivisions, device)
+    fields = {"E": r_def.E if fix is None else r_def.E + fix.dE, "E_ideal": r_ideal.E}
     attrs = {
         "field": "total" if options.total else "scattered",
         "edges": "all",
@@ -435,6 +450,8 @@ def _run_go_edge(scene: Scene, ideal: Reflector, deformed: Reflector, options: O
         "tubes": int(r_def.n_tubes),
         "seconds_trace": r_def.seconds_trace + r_ideal.seconds_trace,
         "seconds_edges": r_def.seconds_edges + r_ideal.seconds_edges,
+        **(fix.attrs() if fix is not None else {"fresnel_correction": (
+            f"none: {fresnel.applies(deformed, wave)}" if options.fresnel else "off")}),
     }
     if options.total:
         E_inc = po.incident_field(scene.sphere.points(deformed.F), wave.k, wave.k_hat, wave.e_hat)
@@ -444,6 +461,8 @@ def _run_go_edge(scene: Scene, ideal: Reflector, deformed: Reflector, options: O
     if options.save_field:
         fields.update({"E_geo": r_def.E_geo, "E_geo_ideal": r_ideal.E_geo, "E_edges": r_def.E_edge,
                        "E_edges_ideal": r_ideal.E_edge})
+        if fix is not None:
+            fields["E_fresnel"] = fix.dE
         run.extra = field_variables(fields, attrs["field"])
         run.coords = {"component": ("component", ["x", "y", "z"])}
     return run

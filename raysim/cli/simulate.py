@@ -37,6 +37,11 @@ def simulate(
     edges: str | None = typer.Option(
         None, "--edges",
         help="po+ptd: rim (the outer rim, default) or all (also every panel edge beside a gap)."),
+    fresnel: bool = typer.Option(
+        False, "--fresnel",
+        help="go+edge: add the Fresnel-zone correction of the deformed geometric wave (wave "
+             "optics' smoothing of features finer than the Fresnel zone; on the paper's dish "
+             "it helps below about 3 GHz)."),
     scheduler: str | None = typer.Option(
         None, "--scheduler",
         help="po, po+ptd: compute the sphere's points in blocks on the Dask scheduler at "
@@ -68,9 +73,15 @@ def simulate(
     loaded = load_scene(scene).with_overrides(frequency, n_theta, n_phi)
     method = method or loaded.method
     check_options(loaded, method=method, device=device, total=total, save_field=save_field,
-                  samples_per_wavelength=samples_per_wavelength, edges=edges)
+                  samples_per_wavelength=samples_per_wavelength, edges=edges, fresnel=fresnel)
+    blocks = scheduler or workers or resume or block_size or threads
+    if blocks and fresnel:
+        from raysim.errors import RaysimError
+
+        raise RaysimError("--fresnel runs in this process: drop --scheduler, --workers, --resume, "
+                          "--block-size and --threads")
     output_path(output, loaded.inputs())
-    if scheduler or workers or resume or block_size or threads:
+    if blocks:
         _simulate_blocks(loaded, output, method, device, total=total, save_field=save_field,
                          samples_per_wavelength=samples_per_wavelength, edges=edges,
                          scheduler=scheduler, workers=workers, threads=threads or 1, resume=resume,
@@ -83,7 +94,8 @@ def simulate(
             bar.update(task, completed=fraction, description=f"{method} {loaded.name}: {stage}")
 
         ds = run(loaded, method=method, device=device, progress=report, total=total,
-                 save_field=save_field, samples_per_wavelength=samples_per_wavelength, edges=edges)
+                 save_field=save_field, samples_per_wavelength=samples_per_wavelength, edges=edges,
+                 fresnel=fresnel)
     save(ds, output)
     say(f"{output}: {summary(ds)}")
 

@@ -68,7 +68,8 @@ order that the leading-order form leaves out (a correction derived for the flat 
 the plate but not the dish, so it is not used). The geometric wave answers to a deformation's
 fine structure as GO does, without the Fresnel smoothing wave optics applies to features
 smaller than sqrt(lambda z) (z the reflected wave's path to its focus): on the paper's dish the
-FA difference from PO + PTD is 21 % of FA's RMS at 1 GHz and 4.7 % at 3 GHz. Shadow boundaries
+FA difference from PO + PTD is 21 % of FA's RMS at 1 GHz and 4.7 % at 3 GHz
+(:mod:`raysim.optics.fresnel` adds that smoothing on request: 1.9 % at 1 GHz). Shadow boundaries
 inside a surface (self-shadowing at oblique incidence) carry no edge term, and the shadow
 test of the -E_inc wave follows the mesh's facets; a gap's two edges are isolated half-planes
 (as in PTD). Obstacles in the beam (:mod:`raysim.optics.blockage`) block the geometric

@@ -76,6 +76,24 @@ class Sum(Deformation):
 
 
 @dataclass(frozen=True)
+class Scaled(Deformation):
+    """``factor`` times ``deformation`` (a first-order probe of an engine's answer, say)."""
+
+    deformation: Deformation
+    factor: float
+
+    def __call__(self, x, y, panel=None):
+        return self.factor * self.deformation(x, y, panel)
+
+    def gradient(self, x, y, panel=None):
+        gx, gy = self.deformation.gradient(x, y, panel)
+        return self.factor * gx, self.factor * gy
+
+    def describe(self) -> str:
+        return f"{self.factor:g} x ({self.deformation.describe()})"
+
+
+@dataclass(frozen=True)
 class PaperDeformation(Deformation):
     """The paper's Eq. 8 (peak-to-peak 1.2 mm, RMS 327.65 um over the aperture at scale 1):
 

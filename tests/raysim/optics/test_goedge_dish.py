@@ -103,14 +103,19 @@ radius_m = {R}
 n_theta = 12
 n_phi = 8
 """)
-    ds = simulate(scene, save_field=True)
+    ds = simulate(scene, save_field=True, fresnel=True)
     assert ds.attrs["method"] == "go+edge" and ds.attrs["sampling"] == "centre"
     assert ds.attrs["edge_points"] > 0 and ds.attrs["rays"] > 0
     E = ds["E_re"].values + 1j * ds["E_im"].values
     assert np.allclose(intensity(E), ds["intensity"].values)
     geo = ds["E_geo_re"].values + 1j * ds["E_geo_im"].values
     edge = ds["E_edges_re"].values + 1j * ds["E_edges_im"].values
-    assert np.allclose(geo + edge, E)
+    fresnel = ds["E_fresnel_re"].values + 1j * ds["E_fresnel_im"].values
+    assert np.allclose(geo + edge + fresnel, E)
+    assert ds.attrs["fresnel_correction"].startswith("first-order Fresnel-zone window")
+    plain = simulate(scene)   # the correction is asked for, not the default
+    assert plain.attrs["fresnel_correction"] == "off"
+    assert np.allclose(plain["intensity_ideal"].values, ds["intensity_ideal"].values)
     path = tmp_path / "small.nc"
     save(ds, path)
     assert load(path).attrs["method"] == "go+edge"
