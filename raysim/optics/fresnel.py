@@ -6,7 +6,7 @@ Int F exp(-j k psi) dA with psi = k_i . r + |P - r|).
 
 Why. The geometric wave (:mod:`raysim.optics.geowave`) answers to a surface deformation delta
 as geometrical optics does: a phase 2 k delta along each ray and an amplitude change from the
-curvature of delta (the transport of intensity behind the paper's Eq. 7). Wave optics smooths
+curvature of delta (the transport of intensity behind the deformation-intensity equation). Wave optics smooths
 every feature of delta smaller than the first Fresnel zone seen from the probe, radius
 u_F = sqrt(lambda rho d / R) in the aperture (rho = F + z the ray's path from the surface to
 the focus, d = rho - R its path to the sphere; 4.8 m at the vertex of the paper's dish at
@@ -53,8 +53,8 @@ Fresnel zone (on the paper's dish below about 3 GHz).
 
 Cost. The window is summed on a lattice whose step keeps the chirp exp(-j k psi) under
 :data:`PHASE_STEP` rad per step at the window's edge; sigma and the step both scale as u_F,
-so a window holds the same number of points at any frequency (about 1e5 for the defaults):
-the cost grows with the sphere's points, not with f (about 20 s for 8100 points on two cores,
+so a window holds the same number of points at any frequency (about 4e4 for the defaults):
+the cost grows with the sphere's points, not with f (about 10 s for 8100 points on two cores,
 besides one more trace).
 
 Limits. The specular points are those of the on-axis plane wave on the ideal paraboloid (the
