@@ -6,13 +6,13 @@ Int F exp(-j k psi) dA with psi = k_i . r + |P - r|).
 
 Why. The geometric wave (:mod:`raysim.optics.geowave`) answers to a surface deformation delta
 as geometrical optics does: a phase 2 k delta along each ray and an amplitude change from the
-curvature of delta (the transport of intensity behind the deformation-intensity equation).
-Wave optics smooths every feature of delta smaller than the first Fresnel zone seen from the
-probe, radius u_F = sqrt(lambda rho d / R) in the aperture (rho = F + z the ray's path from the surface to
-the focus, d = rho - R its path to the sphere; 4.8 m at the vertex of the paper's dish at
-1 GHz), and its answer to a ripple of period Lambda has the opposite sign once Lambda is below
-about u_F. On the paper's dish at 1 GHz, where Eq. 8's 1.7 m roll-off is such a feature, the
-go+edge FA differs from PO's by 21 % of FA's RMS.
+curvature of delta (the transport of intensity behind the deformation-intensity equation). Wave
+optics smooths every feature of delta smaller than the first Fresnel zone seen from the probe,
+radius u_F = sqrt(lambda rho d / R) in the aperture (rho = F + z the ray's path from the
+surface to the focus, d = rho - R its path to the sphere; 4.8 m at the vertex of the paper's
+dish at 1 GHz), and its answer to a ripple of period Lambda has the opposite sign once Lambda
+is below about u_F. On the paper's dish at 1 GHz, where Eq. 8's 1.7 m roll-off is such a
+feature, the go+edge FA differs from PO's by 21 % of FA's RMS.
 
 Method (derived for this engine from PO's integral, first order in delta). Moving the surface
 by delta along z changes psi by q delta, q = d psi / dz, so to first order PO's field at P
