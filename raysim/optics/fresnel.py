@@ -177,6 +177,13 @@ def window_response(deformed: Reflector, points: NDArray, wave: Illumination,
     return -1j * k * (nu[:, 0] + 1j * nu[:, 1]) / (de[:, 0] + 1j * de[:, 1]), h
 
 
+def carries_wave(E_geo: NDArray[np.complex128]) -> NDArray[np.bool_]:
+    """(n_theta, n_phi): the cells where the geometric wave E_geo (n_theta, n_phi, 3) is not
+    (nearly) zero: inside the rim's image and not blocked."""
+    power = np.sum(np.abs(E_geo) ** 2, axis=-1)
+    return power > 1e-9 * power.max()
+
+
 def linear_response(ideal: Reflector, deformation: Deformation, grid: SphereGrid,
                     wave: Illumination, E_geo_ideal: NDArray[np.complex128], subdivisions: int,
                     device: str | None = "cpu") -> NDArray[np.complex128]:
@@ -198,7 +205,7 @@ def linear_response(ideal: Reflector, deformation: Deformation, grid: SphereGrid
     E_eps = trace_wave(small, focus, grid.radius, wave, subdivisions, device).field(
         grid.points(ideal.F).reshape(-1, 3)).reshape(E_geo_ideal.shape)
     power = np.sum(np.abs(E_geo_ideal) ** 2, axis=-1)
-    ok = power > 1e-9 * power.max()
+    ok = carries_wave(E_geo_ideal)
     rho = np.zeros(power.shape, dtype=np.complex128)
     rho[ok] = np.sum(np.conj(E_geo_ideal) * (E_eps - E_geo_ideal), axis=-1)[ok] / (power[ok] * eps)
     return rho
@@ -217,8 +224,7 @@ def correction(ideal: Reflector, deformed: Reflector, grid: SphereGrid, wave: Il
     start = time.perf_counter()
     rho_go = linear_response(ideal, deformed.surface.deformation, grid, wave, E_geo_ideal,
                              subdivisions, device)
-    power = np.sum(np.abs(E_geo_ideal) ** 2, axis=-1)
-    lit = power > 1e-9 * power.max()
+    lit = carries_wave(E_geo_ideal)
     points = grid.points(ideal.F)[lit]
     rho_wave = np.zeros(lit.shape, dtype=np.complex128)
     rho_wave[lit], h = window_response(deformed, points, wave, device, sigma)
