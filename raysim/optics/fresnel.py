@@ -138,19 +138,18 @@ def continued(deformation: Deformation, a: float, X: NDArray, Y: NDArray) -> NDA
     return np.asarray(deformation(X * shrink, Y * shrink), dtype=np.float64)
 
 
-def window_response(deformed: Reflector, points: NDArray, wave: Illumination,
+def window_response(deformed: Reflector, points: NDArray, R: float, wave: Illumination,
                     device: str | None = "cpu", sigma: float = WINDOW_SIGMA
                     ) -> tuple[NDArray[np.complex128], float]:
-    """rho[delta] (n,) at ``points`` (n, 3) on the sphere of radius R about the focus, for the
-    window of ``sigma`` Fresnel radii, and the lattice step (m). ``deformed``: a paraboloid
-    with a smooth deformed surface (:func:`applies`)."""
+    """rho[delta] (n,) at ``points`` (n, 3) (m, dish frame) on the sphere of radius ``R`` (m)
+    about the focus, for the window of ``sigma`` Fresnel radii, and the lattice step (m).
+    ``deformed``: a paraboloid with a smooth deformed surface (:func:`applies`)."""
     from raysim.optics.kernels import fresnel as K
 
     wp = runtime.init()
     dev = runtime.resolve_device(device)
     F, a, k = float(deformed.F), 0.5 * float(deformed.D), float(wave.k)
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-    R = float(np.median(np.linalg.norm(pts - np.array([0.0, 0.0, F]), axis=1)))
     s, theta = specular_points(F, pts)
     uF = fresnel_radius(F, R, wave.wavelength, theta)
     sig = sigma * uF
@@ -227,6 +226,6 @@ def correction(ideal: Reflector, deformed: Reflector, grid: SphereGrid, wave: Il
     lit = carries_wave(E_geo_ideal)
     points = grid.points(ideal.F)[lit]
     rho_wave = np.zeros(lit.shape, dtype=np.complex128)
-    rho_wave[lit], h = window_response(deformed, points, wave, device, sigma)
+    rho_wave[lit], h = window_response(deformed, points, grid.radius, wave, device, sigma)
     dE = E_geo_ideal * np.where(lit, rho_wave - rho_go, 0.0)[..., None]
     return FresnelCorrection(dE, float(sigma), h, int(lit.sum()), time.perf_counter() - start)

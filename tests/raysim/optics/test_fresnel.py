@@ -64,7 +64,7 @@ def test_the_window_gives_the_rays_answer_for_a_deformation_smooth_on_the_fresne
     deformed = dish.deformed(bump)
     ideal = goedge.sphere_field(dish, grid, wave)
     rho_go = fresnel.linear_response(dish, bump, grid, wave, ideal.E_geo, ideal.subdivisions)
-    rho_wave, _ = fresnel.window_response(deformed, grid.points(F).reshape(-1, 3), wave)
+    rho_wave, _ = fresnel.window_response(deformed, grid.points(F).reshape(-1, 3), grid.radius, wave)
     rho_wave = rho_wave.reshape(rho_go.shape)
     scale = np.sqrt(np.mean(np.abs(rho_go) ** 2))
     assert np.sqrt(np.mean(np.abs(rho_wave - rho_go) ** 2)) < 0.01 * scale
