@@ -113,17 +113,25 @@ def ideal_intensity(spec: DatasetSpec, f_index: int, device: str = "cpu") -> np.
 
 
 def wave_intensity(scene, reflector: Reflector, method: str, device: str = "cpu") -> np.ndarray:
-    """|E|^2 of ``reflector`` on the scene's sphere by PO (``po``) or PO plus the rim's fringe
-    field (``po+ptd``), the scattered field at the cell centres as ``raysim.simulate`` gives it
-    (what the scene's probe reads of it, :func:`raysim.simulate.probe_power`)."""
-    from raysim.optics import po, ptd
+    """|E|^2 of ``reflector`` on the scene's sphere by PO (``po``), PO plus the rim's fringe
+    field (``po+ptd``) or the geometric wave plus every free edge's diffraction (``go+edge``),
+    the scattered field at the cell centres as ``raysim.simulate`` gives it (what the scene's
+    probe reads of it, :func:`raysim.simulate.probe_power`)."""
+    from raysim.optics import goedge, po, ptd
     from raysim.simulate import probe_power
 
     source = scene.source
     wave = po.Illumination.plane_wave(source.frequency_hz, source.direction, source.e_hat)
-    E = po.sphere_field(reflector, scene.sphere, wave, po.DEFAULT_SAMPLES_PER_WAVELENGTH, device).E
-    if method == "po+ptd":
-        E = E + ptd.sphere_edge_field(reflector, scene.sphere, wave, "rim", device=device).E
+    if method == "go+edge":
+        E = goedge.sphere_field(reflector, scene.sphere, wave, None, scene.subdivisions,
+                                device=device).E
+    elif method in ("po", "po+ptd"):
+        E = po.sphere_field(reflector, scene.sphere, wave, po.DEFAULT_SAMPLES_PER_WAVELENGTH,
+                            device).E
+        if method == "po+ptd":
+            E = E + ptd.sphere_edge_field(reflector, scene.sphere, wave, "rim", device=device).E
+    else:  # a method added to raysim.methods needs its branch here
+        raise ValueError(f"no wave engine for method {method!r}")
     return probe_power(scene, E)
 
 
