@@ -39,6 +39,7 @@ from raysim.errors import RaysimError
 from raysim.files import find_input
 from raysim.methods import METHODS
 from raysim.scene.scene import Scene, check_frequency, parse_scene
+from raysim.simulate import Options, check_method
 from raysim.tomlschema import Table, parse_toml, read_text
 
 DTYPES = ("float64", "float32")
@@ -137,6 +138,8 @@ def _build(top: Table, text: str, source: str, base: Path) -> DatasetSpec:
     for f in freqs:
         try:
             check_frequency(float(f), "'frequencies_hz'")
+            # the engine's own limits (PO's source samples per reflector), as simulate has them
+            check_method(scene.with_overrides(frequency_hz=float(f)), method, Options())
         except RaysimError as exc:
             raise top.fail(str(exc)) from exc
     if len(set(freqs)) != len(freqs):

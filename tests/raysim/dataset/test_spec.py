@@ -89,6 +89,8 @@ def test_fingerprint_ignores_comments_but_not_content():
     (('type = "zernike"', 'type = "panel_rigid"'), "needs a [scene.panels] layout"),
     (("seed = 7", "seed = 7\nfrequencies_hz = [0.3]"), "in Hz, not GHz"),
     (("seed = 7", 'seed = 7\nmethod = "ray"'), "'method' must be one of"),
+    (("seed = 7", 'seed = 7\nmethod = "po"\nfrequencies_hz = [1e9, 2e11]'),
+     "source samples per reflector"),
     (("seed = 7", 'seed = 7\ndtype = "int8"'), "'dtype' must be one of"),
     (("n_phi = 16", "n_phi = -1"), "[scene]"),
 ])
