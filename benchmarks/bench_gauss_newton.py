@@ -55,7 +55,8 @@ def run_case(frequency_hz: float, name: str, noise_db: float, N: int,
                "gn_lsqr": str(a.get("gn_lsqr_iterations", "")), "gn_misfit": str(a.get("gn_misfit_rms", "")),
                "gn_stopped": str(a.get("gn_stopped", "")), "gn_noise": float(a.get("gn_noise_rms", 0.0)),
                "rim_targets": 0 if rim is None else len(rim), "sphere": f"{sphere[0]}x{sphere[1]}",
-               "gn_jvp_calls": int(a.get("gn_jvp_calls", 0)), "gn_vjp_calls": int(a.get("gn_vjp_calls", 0))}
+               "gn_jvp_calls": int(a.get("gn_jvp_calls", 0)), "gn_vjp_calls": int(a.get("gn_vjp_calls", 0)),
+               "gn_coarse_steps": int(a.get("gn_coarse_steps", 0))}
         rows.append(row)
         print(json.dumps(row), flush=True)
         with open(gn_data.OUT / "results.jsonl", "a") as fh:
@@ -73,8 +74,10 @@ def main() -> None:
     ap.add_argument("--sphere", default="90x360", help="n_theta x n_phi of the scan")
     ap.add_argument("--steps", type=int, default=GaussNewtonOptions.iterations)
     ap.add_argument("--inner", type=int, default=GaussNewtonOptions.inner)
+    ap.add_argument("--coarse", type=int, default=GaussNewtonOptions.coarse,
+                    help="first steps whose LSQR runs on one cell in eight")
     args = ap.parse_args()
-    options = GaussNewtonOptions(iterations=args.steps, inner=args.inner)
+    options = GaussNewtonOptions(iterations=args.steps, inner=args.inner, coarse=args.coarse)
     for f in (float(v) for v in args.frequencies.split(",")):
         for noise in (float(v) for v in args.noise.split(",")):
             run_case(f, args.deformation, noise, args.grid, options,

@@ -155,6 +155,18 @@ class WaveJacobian:
                                                  device=model.device)
             self.edge_samples = GridToSamples(grid, self.edges.x, self.edges.y)
         self.calls = {"jvp": 0, "vjp": 0}
+        self.cells: NDArray[np.bool_] | None = None
+
+    def restrict(self, cells: NDArray[np.bool_] | None) -> None:
+        """Evaluate :meth:`jvp` and :meth:`vjp` on the sphere cells ``cells`` only
+        ((n_theta, n_phi) boolean; None: all): each product then costs that fraction of a
+        radiation. The JVP is zero on the other cells and the VJP ignores their weights, so
+        the pair stays each other's transpose (the Jacobian's rows on ``cells``)."""
+        self.cells = None if cells is None else np.asarray(cells, dtype=bool).reshape(-1)
+
+    def _at(self, a: NDArray | None) -> NDArray | None:
+        """The rows of a per-point array on the evaluated cells."""
+        return a if a is None or self.cells is None else a[self.cells]
 
     @property
     def intensity(self) -> NDArray[np.float64]:
@@ -165,44 +177,53 @@ class WaveJacobian:
         return (np.abs(np.sum(self.v * self.E, axis=-1)) ** 2).reshape(self.shape)
 
     def _reading(self) -> NDArray[np.complex128]:
-        """The vector c (n_points, 3) with dI = 2 Re(conj(c) . dE): g0 E, or (v . E) v."""
-        if self.v is None:
-            return self.g0 * self.E
-        return np.sum(self.v * self.E, axis=-1, keepdims=True) * self.v
+        """The vector c (evaluated points, 3) with dI = 2 Re(conj(c) . dE): g0 E, or
+        (v . E) v."""
+        E, v = self._at(self.E), self._at(self.v)
+        if v is None:
+            return E if self.g0 == 1.0 else self.g0 * E
+        return np.sum(v * E, axis=-1, keepdims=True) * v
 
     def field_jvp(self, v_in: NDArray[np.float64]) -> NDArray[np.complex128]:
-        """dE (n_points, 3) for grid values ``v_in`` (m) inside the aperture."""
+        """dE (evaluated points, 3) for grid values ``v_in`` (m) inside the aperture."""
         from raysim.optics import po_jacobian
 
+        points = self._at(self.points)
         dz, hx, hy = self.samples.apply(v_in)
-        dE = po_jacobian.jvp(self.elements, self.points, dz, hx, hy, self.model.device)
+        dE = po_jacobian.jvp(self.elements, points, dz, hx, hy, self.model.device)
         if self.edges is not None:
             from raysim.optics import ptd_jacobian
 
-            dE = dE + ptd_jacobian.jvp(self.edges, self.wave, self.points,
+            dE = dE + ptd_jacobian.jvp(self.edges, self.wave, points,
                                        *self.edge_samples.apply(v_in), device=self.model.device)
         return dE
 
     def jvp(self, v_in: NDArray[np.float64]) -> NDArray[np.float64]:
         """dI (n_theta, n_phi) = 2 Re(conj(E) . dE) (with a probe: of its reading, module
-        docstring) for grid values ``v_in`` (m)."""
+        docstring) for grid values ``v_in`` (m); zero off the evaluated cells."""
         self.calls["jvp"] += 1
         dE = self.field_jvp(v_in)
-        E = self.E if self.v is None and self.g0 == 1.0 else self._reading()
-        return 2.0 * np.real(np.sum(np.conj(E) * dE, axis=-1)).reshape(self.shape)
+        dI = 2.0 * np.real(np.sum(np.conj(self._reading()) * dE, axis=-1))
+        if self.cells is None:
+            return dI.reshape(self.shape)
+        out = np.zeros(self.cells.shape)
+        out[self.cells] = dI
+        return out.reshape(self.shape)
 
     def vjp(self, y: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The transpose: weights ``y`` (n_theta, n_phi) on dI -> gradient on the grid values."""
+        """The transpose: weights ``y`` (n_theta, n_phi) on dI -> gradient on the grid values
+        (the weights off the evaluated cells are not read)."""
         from raysim.optics import po_jacobian
 
         self.calls["vjp"] += 1
-        E = self.E if self.v is None and self.g0 == 1.0 else self._reading()
-        c = 2.0 * np.asarray(y, dtype=np.float64).reshape(-1, 1) * E
-        g = po_jacobian.vjp(self.elements, self.points, c, self.model.device)
+        weights = self._at(np.asarray(y, dtype=np.float64).reshape(-1))
+        c = 2.0 * weights[:, None] * self._reading()
+        points = self._at(self.points)
+        g = po_jacobian.vjp(self.elements, points, c, self.model.device)
         out = self.samples.transpose(*g)
         if self.edges is not None:
             from raysim.optics import ptd_jacobian
 
-            g = ptd_jacobian.vjp(self.edges, self.wave, self.points, c, self.model.device)
+            g = ptd_jacobian.vjp(self.edges, self.wave, points, c, self.model.device)
             out = out + self.edge_samples.transpose(*g)
         return out

@@ -42,6 +42,12 @@ def invert_command(
         None, "--gn-lsqr",
         help="gauss-newton: LSQR iterations per step, 1 to 1000 (default 60; each two PO "
              "radiations; LSQR stops earlier when the misfit reaches the noise level)."),
+    gn_coarse: int | None = typer.Option(
+        None, "--gn-coarse",
+        help="gauss-newton: how many of the first steps solve their LSQR problem on one sphere "
+             "cell in eight (every 2nd theta ring, every 4th phi column; each iteration eight "
+             "times cheaper), their step still judged on all cells (default 0; fewer than "
+             "--gn-steps)."),
     panels_csv: Path | None = typer.Option(None, help="Write the per-panel adjustment table."),
     gain: str = typer.Option(
         "auto", help="auto (known for simulated data, estimated for a measured scan), known "
@@ -62,7 +68,7 @@ def invert_command(
     from solver.options import check_options
     from solver.run import run_invert, summary
 
-    given = {"iterations": gn_steps, "inner": gn_lsqr}
+    given = {"iterations": gn_steps, "inner": gn_lsqr, "coarse": gn_coarse}
     gauss_newton = GaussNewtonOptions(**{k: v for k, v in given.items() if v is not None})
     check_options(solver=solver, N=grid, refine=refine, gain=gain, iterations=iterations,
                   remove=remove, model=model, refine_method=refine_method,

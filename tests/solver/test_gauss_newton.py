@@ -9,6 +9,7 @@ quadrature of the moved surface. Gauss-Newton runs on a small dish of the paper'
 data made by a finer quadrature than its model.
 """
 
+import itertools
 import sys
 
 import numpy as np
@@ -79,6 +80,28 @@ def test_vjp_is_the_transpose_of_the_jvp():
     y = rng.standard_normal((5, 6))
     lhs, rhs = float(np.sum(y * jac.jvp(v))), float(jac.vjp(y) @ v)
     assert abs(lhs - rhs) <= 1e-9 * abs(lhs)
+
+
+def test_jacobian_on_a_subset_of_cells_is_those_rows_of_the_whole():
+    # a coarse Gauss-Newton step radiates to some cells only; the products must be the full
+    # Jacobian's rows there (its field computed at all cells in one radiation)
+    grid = ApertureGrid(D, 48)
+    X, Y = grid.XY
+    jac = WaveJacobian(WaveForward(0.1e9, ptd=True), SphereGrid(R, 6, 8), F, D, grid,
+                       grid.masked(PaperDeformation(D, F)(X, Y)))
+    rng = np.random.default_rng(5)
+    v = rng.standard_normal(int(grid.mask.sum()))
+    y = rng.standard_normal((6, 8))
+    cells = np.zeros((6, 8), dtype=bool)
+    cells[::2, ::4] = True
+    whole_jvp, whole_vjp = jac.jvp(v), jac.vjp(np.where(cells, y, 0.0))
+    jac.restrict(cells)
+    part_jvp, part_vjp = jac.jvp(v), jac.vjp(y)
+    assert np.all(part_jvp[~cells] == 0.0)
+    assert np.linalg.norm(part_jvp - np.where(cells, whole_jvp, 0.0)) <= \
+        1e-12 * np.linalg.norm(whole_jvp[cells])
+    assert np.linalg.norm(part_vjp - whole_vjp) <= 1e-12 * np.linalg.norm(whole_vjp)
+    assert np.linalg.norm(whole_jvp[~cells]) > 0.1 * np.linalg.norm(whole_jvp)
 
 
 def test_grid_map_is_the_models_spline_and_its_transpose():
@@ -160,6 +183,22 @@ def test_gauss_newton_fits_the_data_and_beats_defect_correction(small_field):
                                                              abs=2e-9)
 
 
+@pytest.mark.slow
+def test_coarse_steps_prepare_the_full_step(small_field):
+    # coarse steps solve on one cell in eight; the last step, on all cells, then starts nearer
+    # the answer: after the same number of full-cell LSQR iterations the surface is closer to
+    # the truth than with the full step alone, and each coarse step lowers the all-cell misfit
+    full = invert(small_field, N=64, truth=TRUTH, refine_method="gauss-newton",
+                  gauss_newton=GaussNewtonOptions(iterations=1, inner=6))
+    coarse = invert(small_field, N=64, truth=TRUTH, refine_method="gauss-newton",
+                    gauss_newton=GaussNewtonOptions(iterations=3, inner=6, coarse=2))
+    a = coarse.attrs
+    assert a["gn_coarse_steps"] == 2 and "2 coarse" in a["gn_method"]
+    misfit = [float(v) for v in a["gn_misfit_rms"].split(",")]
+    assert len(misfit) == 4 and all(b < m for m, b in itertools.pairwise(misfit))
+    assert a["rrms"] < full.attrs["rrms"]
+
+
 def test_method_choice_refuses_what_the_jacobian_does_not_model(small_field):
     from solver.invert import Scan
 
@@ -197,6 +236,8 @@ def test_invert_refuses_gauss_newton_on_go_edge_before_any_work(small_field, mon
 @pytest.mark.parametrize("extra, message", [
     (["--refine-method", "newton"], "unknown refine method 'newton'"),
     (["--refine-method", "gauss-newton", "--workers", "2"], "not in blocks on Dask"),
+    (["--refine-method", "gauss-newton", "--gn-steps", "2", "--gn-coarse", "2"],
+     "must leave at least one step on all cells"),
 ])
 def test_cli_refuses_in_one_line(monkeypatch, capsys, tmp_path, small_field, extra, message):
     path = save(small_field, tmp_path / "f.nc")
@@ -228,6 +269,7 @@ def test_cli_steps_and_lsqr_iterations_reach_the_refinement(monkeypatch, tmp_pat
 
 def test_gauss_newton_options_refuse_out_of_range_settings():
     for bad in ({"iterations": 0}, {"inner": 0}, {"inner": 1001}, {"backtrack": -1},
-                {"iterations": 2.5}, {"sigmas": -1.0}):
+                {"iterations": 2.5}, {"sigmas": -1.0}, {"coarse": -1},
+                {"iterations": 3, "coarse": 3}):
         with pytest.raises(SolverError, match="Gauss-Newton"):
             GaussNewtonOptions(**bad)
