@@ -70,14 +70,19 @@ def _po_only_field_jvp(jac, v):
     return po_jacobian.jvp(jac.elements, jac.points, dz, hx, hy)
 
 
-def test_vjp_is_the_transpose_of_the_jvp():
+def _paper_jacobian(n_theta, n_phi, seed):
+    """The PO + PTD Jacobian at 0.1 GHz about the Eq. 8 surface (N = 48, a small sphere grid),
+    a random surface vector v and a random sample vector y."""
     grid = ApertureGrid(D, 48)
     X, Y = grid.XY
-    jac = WaveJacobian(WaveForward(0.1e9, ptd=True), SphereGrid(R, 5, 6), F, D, grid,
+    jac = WaveJacobian(WaveForward(0.1e9, ptd=True), SphereGrid(R, n_theta, n_phi), F, D, grid,
                        grid.masked(PaperDeformation(D, F)(X, Y)))
-    rng = np.random.default_rng(3)
-    v = rng.standard_normal(int(grid.mask.sum()))
-    y = rng.standard_normal((5, 6))
+    rng = np.random.default_rng(seed)
+    return jac, rng.standard_normal(int(grid.mask.sum())), rng.standard_normal((n_theta, n_phi))
+
+
+def test_vjp_is_the_transpose_of_the_jvp():
+    jac, v, y = _paper_jacobian(5, 6, seed=3)
     lhs, rhs = float(np.sum(y * jac.jvp(v))), float(jac.vjp(y) @ v)
     assert abs(lhs - rhs) <= 1e-9 * abs(lhs)
 
@@ -85,13 +90,7 @@ def test_vjp_is_the_transpose_of_the_jvp():
 def test_jacobian_on_a_subset_of_cells_is_those_rows_of_the_whole():
     # a coarse Gauss-Newton step radiates to some cells only; the products must be the full
     # Jacobian's rows there (its field computed at all cells in one radiation)
-    grid = ApertureGrid(D, 48)
-    X, Y = grid.XY
-    jac = WaveJacobian(WaveForward(0.1e9, ptd=True), SphereGrid(R, 6, 8), F, D, grid,
-                       grid.masked(PaperDeformation(D, F)(X, Y)))
-    rng = np.random.default_rng(5)
-    v = rng.standard_normal(int(grid.mask.sum()))
-    y = rng.standard_normal((6, 8))
+    jac, v, y = _paper_jacobian(6, 8, seed=5)
     cells = np.zeros((6, 8), dtype=bool)
     cells[::2, ::4] = True
     whole_jvp, whole_vjp = jac.jvp(v), jac.vjp(np.where(cells, y, 0.0))
