@@ -45,7 +45,7 @@ def invert_command(
     gn_coarse: int | None = typer.Option(
         None, "--gn-coarse",
         help="gauss-newton: how many of the first steps solve their LSQR problem on one sphere "
-             "cell in eight (every 2nd theta ring, every 4th phi column; each iteration eight "
+             "cell in eight (every 2nd theta ring, every 4th phi column; each iteration about eight "
              "times cheaper), their step still judged on all cells (default 0; fewer than "
              "--gn-steps)."),
     panels_csv: Path | None = typer.Option(None, help="Write the per-panel adjustment table."),
