@@ -173,7 +173,7 @@ class ScanPlan:
         """(n_theta, n_phi), read-only: the share of each cell's GO power the obstacles take
         from the ideal paraboloid as the rig's probe reads it, on the plan's grid (None
         without obstacles); traced as the inversion's GO model traces it
-        (:func:`raysim.optics.blockage.paraboloid_blocked_share`), once per geometry (a plan
+        (:func:`raysim.optics.blocked_cells.paraboloid_blocked_share`), once per geometry (a plan
         copied with other acquisition settings shares it)."""
         if not self.obstacles:
             return None
@@ -212,10 +212,10 @@ def _obstacle_mesh(obstacles: tuple[Obstacle, ...], F: float,
 def _blocked_share(grid: SphereGrid, F: float, D: float, obstacles: tuple[Obstacle, ...],
                    probe: Probe | None, polarization: float,
                    stamps: tuple = ()) -> NDArray[np.float64]:
-    """:func:`raysim.optics.blockage.paraboloid_blocked_share` of one plan geometry, kept
+    """:func:`raysim.optics.blocked_cells.paraboloid_blocked_share` of one plan geometry, kept
     (read-only) for the last few: the trace takes seconds on a large dish (``stamps`` as
     :func:`_obstacle_mesh`)."""
-    from raysim.optics.blockage import paraboloid_blocked_share
+    from raysim.optics.blocked_cells import paraboloid_blocked_share
 
     mesh = _obstacle_mesh(obstacles, F, stamps)
     if mesh is None:

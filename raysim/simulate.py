@@ -177,11 +177,11 @@ def with_blockage(ideal: Reflector, run: Run, grid, direction, device: str | Non
     for the wave engines (their FieldMaps mark the cells GO rays cannot reach)."""
     if ideal.obstacles is None:
         return run
-    from raysim.optics import blockage
+    from raysim.optics import blockage, blocked_cells
 
     share = run.blocked_share
     if share is None:
-        share = blockage.ideal_blocked_share(ideal, grid, direction, device)
+        share = blocked_cells.ideal_blocked_share(ideal, grid, direction, device)
     extra, attrs = blockage.fieldmap_variables(share, ideal.obstacles)
     run.extra = {**run.extra, **extra}
     run.attrs = {**run.attrs, **attrs}

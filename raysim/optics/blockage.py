@@ -32,8 +32,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from raysim.maps.probe import Probe
-from raysim.maps.sphere import SphereGrid
 from raysim.optics import runtime
 from raysim.surface.obstacles import ObstacleMesh
 
@@ -96,33 +94,6 @@ def blocked_share(kept: NDArray[np.float64], removed: NDArray[np.float64]) -> ND
     total = kept + removed
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(total > 0, removed / total, 0.0)
-
-
-def ideal_blocked_share(ideal, grid: SphereGrid, direction: ArrayLike, device: str | None = "cpu",
-                        spacing: float = BLOCKAGE_RAY_SPACING) -> NDArray[np.float64]:
-    """The blocked share (n_theta, n_phi) of the GO tubes of ``ideal`` (a Reflector with
-    obstacles), rays about ``spacing`` (m) apart: what the wave engines' FieldMaps record."""
-    from raysim.optics import go
-    from raysim.optics.goedge import ray_subdivisions
-
-    result = go.trace(ideal, grid, direction, ray_subdivisions(ideal, spacing), device)
-    return result.blocked_share
-
-
-def paraboloid_blocked_share(grid: SphereGrid, F: float, D: float, obstacles: ObstacleMesh,
-                             probe: Probe | None = None, polarization: float = 0.0,
-                             device: str | None = "cpu") -> NDArray[np.float64]:
-    """The blocked share (n_theta, n_phi) of the ideal paraboloid (F, D in m) with ``obstacles``
-    (m, reflector frame) under the on-axis wave polarised at ``polarization`` (rad from x), as
-    ``probe`` reads it (None: the ideal meter), traced as the inversion's GO model traces it
-    (:class:`raysim.optics.go.ParaboloidTracer`: its mesh and ray lattice). A measured scan,
-    which has no scene, so marks the cells a GO scene of the same dish marks (at the scene's
-    default mesh and subdivisions: the same tubes)."""
-    from raysim.optics.go import ParaboloidTracer
-
-    tracer = ParaboloidTracer(device, obstacles=obstacles).tracer(grid, F, D)
-    e_hat = (np.cos(polarization), np.sin(polarization), 0.0)
-    return tracer.trace(tracer.template, None, probe, e_hat).blocked_share
 
 
 def fieldmap_variables(share: NDArray[np.float64], obstacles: ObstacleMesh,

@@ -120,6 +120,16 @@ def ray_lattice(reflector: Reflector, subdivisions: int = 1) -> RayLattice:
     return RayLattice(points, panel, normals, tubes.astype(np.int32))
 
 
+def ray_subdivisions(reflector: Reflector, ray_spacing: float, minimum: int = 1) -> int:
+    """Lattice order m per face so that rays lie about ``ray_spacing`` (m) apart (at least
+    ``minimum``): the mesh's longest face edge over the spacing."""
+    if not ray_spacing > 0:
+        raise RaysimError(f"ray spacing must be > 0 m, got {ray_spacing:g}")
+    v = reflector.vertices[reflector.faces]
+    longest = float(np.linalg.norm(v - np.roll(v, 1, axis=1), axis=2).max()) if len(v) else 0.0
+    return max(int(minimum), int(np.ceil(longest / ray_spacing)))
+
+
 def wedge_table(grid: SphereGrid, device: str) -> tuple[int, object]:
     """(j_first, Warp vec4d array) of the edge normals of the wedges a tube can cut
     (:func:`raysim.optics.kernels.go.wedge_sides`), made once per grid.

@@ -93,6 +93,7 @@ from raysim.maps.sphere import SphereGrid
 from raysim.optics import runtime
 from raysim.optics.bvh import ReflectorBVH
 from raysim.optics.geowave import GeometricWave, trace_wave
+from raysim.optics.go import ray_subdivisions
 from raysim.optics.illumination import ETA0, Illumination, Taper, incident_field
 from raysim.optics.radiator import Radiator
 from raysim.surface.edges import Edges, SpacingRule, edge_quadrature
@@ -105,16 +106,6 @@ CURVATURE_STEP = 1e-3  # m: the finite-difference step of the surface normal at 
 EDGE_THEORY = ("PO end-point currents (Hessian-weighted line integral, exact across reflection "
                "boundaries) plus Michaeli fringe currents, integrated along every free edge "
                "(raysim.optics.goedge)")
-
-
-def ray_subdivisions(reflector: Reflector, ray_spacing: float, minimum: int = 1) -> int:
-    """Lattice order m per face so that rays lie about ``ray_spacing`` (m) apart (at least
-    ``minimum``): the mesh's longest face edge over the spacing."""
-    if not ray_spacing > 0:
-        raise RaysimError(f"ray spacing must be > 0 m, got {ray_spacing:g}")
-    v = reflector.vertices[reflector.faces]
-    longest = float(np.linalg.norm(v - np.roll(v, 1, axis=1), axis=2).max()) if len(v) else 0.0
-    return max(int(minimum), int(np.ceil(longest / ray_spacing)))
 
 
 def edge_spacing_rule(wave: Illumination, centre: ArrayLike, radius: float,
