@@ -47,13 +47,13 @@ PROBE = """<script>
       found.client_width = document.documentElement.clientWidth;
       found.title = document.title;
       var out = document.createElement("pre");
-      out.id = "%(mark)s";
+      out.id = "@MARK@";
       out.textContent = JSON.stringify(found);
       document.body.appendChild(out);
     }, 500);
   });
 })();
-</script>""" % {"mark": MARK}
+</script>""".replace("@MARK@", MARK)
 
 
 def chromium() -> str | None:
