@@ -35,7 +35,8 @@ extensions = [
 
 root_doc = "index"
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
-exclude_patterns = ["_build", "Thumbs.db", ".DS_Store"]
+# sphinx-gallery's table of run times is written (docs/sg_execution_times.rst), not published
+exclude_patterns = ["_build", "Thumbs.db", ".DS_Store", "sg_execution_times.rst"]
 myst_enable_extensions = ["dollarmath"]
 myst_heading_anchors = 4
 # links to files of the repository outside docs/ (scenes, benchmarks, the README) are plain
@@ -76,14 +77,15 @@ sphinx_gallery_conf = {
 # escaped) and the rest verbatim in a literal block, so no docstring can break the build or
 # render wrongly. Docstrings with numpydoc sections are left to napoleon, escaped inline.
 _SPECIAL = re.compile(r"([\\|*`_\[\]<>])")
+_SPECIAL_NUMPYDOC = re.compile(r"([|*])")  # roles such as :func:`x` stay live there
 _LITERAL = re.compile(r"(``.+?``)")
 _SECTION = re.compile(r"^\s*(Parameters|Returns|Yields|Raises|Attributes|Examples)\s*$")
 
 
-def _escape(line: str) -> str:
+def _escape(line: str, special: re.Pattern = _SPECIAL) -> str:
     """``line`` with reStructuredText's inline markup escaped outside ``literals``."""
     parts = _LITERAL.split(line)
-    return "".join(p if i % 2 else _SPECIAL.sub(r"\\\1", p) for i, p in enumerate(parts))
+    return "".join(p if i % 2 else special.sub(r"\\\1", p) for i, p in enumerate(parts))
 
 
 def _numpydoc(lines: list[str]) -> bool:
@@ -95,7 +97,7 @@ def plain_docstring(app, what, name, obj, options, lines: list[str]) -> None:
     if not lines:
         return
     if _numpydoc(lines):
-        lines[:] = [_escape(line) for line in lines]
+        lines[:] = [_escape(line, _SPECIAL_NUMPYDOC) for line in lines]
         return
     end = next((i for i, line in enumerate(lines) if not line.strip()), len(lines))
     summary = [_escape(line.strip()) for line in lines[:end]]
