@@ -48,7 +48,6 @@ suppress_warnings += ["ref.python"]
 
 html_theme = "furo"
 html_title = f"raysim {release}"
-html_static_path = ["_static"]
 
 autosummary_generate = True
 autosummary_imported_members = False
