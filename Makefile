@@ -31,7 +31,7 @@ export WARP_CACHE_PATH := $(CURDIR)/.cache/warp$(if $(filter lock,$(RAYSIM_DEPS)
 export MPLBACKEND := Agg
 export PYTHONUNBUFFERED := 1
 
-.PHONY: all install demo test lint bench lock clean
+.PHONY: all install demo test docs lint bench lock clean
 
 all: test
 
@@ -44,7 +44,7 @@ $(STAMP): pyproject.toml scripts/install-system-deps.sh $(CONSTRAINTS)
 	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "raysim needs Python 3.11+"'
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet $(if $(CONSTRAINTS),-c $(CONSTRAINTS),--upgrade --upgrade-strategy eager) -e '.[test]'
+	$(BIN)/python -m pip install --quiet $(if $(CONSTRAINTS),-c $(CONSTRAINTS),--upgrade --upgrade-strategy eager) -e '.[test,docs]'
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -59,6 +59,13 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest
 
+# The documentation site: Markdown pages, the API reference from the docstrings and the
+# tutorials in examples/ run on small grids; warnings are errors. Output: docs/_build/html.
+docs: $(STAMP)
+	rm -rf docs/_build docs/tutorials docs/reference/generated
+	$(BIN)/python -m sphinx -b html -W --keep-going docs docs/_build/html
+	@echo "the site: $(CURDIR)/docs/_build/html/index.html"
+
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/lint-imports
@@ -72,11 +79,11 @@ lock:
 	rm -rf .cache/lock-venv
 	$(PYTHON) -m venv .cache/lock-venv
 	.cache/lock-venv/bin/python -m pip install --quiet --upgrade pip
-	.cache/lock-venv/bin/python -m pip install --quiet '.[test]'
+	.cache/lock-venv/bin/python -m pip install --quiet '.[test,docs]'
 	{ echo "# pinned by 'make lock' from a fresh resolve of pyproject.toml; make test and make demo use it"; \
 	  .cache/lock-venv/bin/python -m pip freeze --exclude raysim; } > constraints.txt
 	rm -rf .cache/lock-venv
 	@echo "constraints.txt refreshed; run make test, then commit it"
 
 clean:
-	rm -rf out .cache .pytest_cache
+	rm -rf out .cache .pytest_cache docs/_build docs/tutorials docs/reference/generated

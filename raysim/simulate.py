@@ -21,7 +21,9 @@ arrays).
 from __future__ import annotations
 
 import math
+import sys
 import time
+import types
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
@@ -537,3 +539,16 @@ def summary(ds: xr.Dataset) -> str:
             f"{ds.attrs.get('seconds_total', float('nan')):.1f} s, power balance "
             f"{ds.attrs.get('power_balance', float('nan')):+.1e} (ideal "
             f"{ds.attrs.get('power_balance_ideal', float('nan')):+.1e})")
+
+
+class _CallableModule(types.ModuleType):
+    """This module, callable as :func:`simulate`. ``raysim.simulate`` is the package's public
+    function, but importing this module binds the module itself to that name (Python sets a
+    package's attribute to each submodule it loads), after which ``raysim.simulate(scene)``
+    would call a module. Calling the module calls :func:`simulate` (looked up at each call)."""
+
+    def __call__(self, *args: Any, **kwargs: Any) -> xr.Dataset:
+        return simulate(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

@@ -19,10 +19,11 @@ BOUND = re.compile(r"^\s*([A-Za-z0-9_.\-]+)\s*(\[[^\]]*\])?\s*>=\s*([^,;\s]+)")
 
 
 def lowest() -> list[str]:
-    """``name==lower`` for every direct dependency (runtime and test extras)."""
+    """``name==lower`` for every direct dependency (runtime, test and docs extras)."""
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     lines = []
-    for requirement in [*project["dependencies"], *project["optional-dependencies"]["test"]]:
+    for requirement in [*project["dependencies"], *project["optional-dependencies"]["test"],
+                        *project["optional-dependencies"]["docs"]]:
         match = BOUND.match(requirement)
         if match is None:
             raise SystemExit(f"no lower bound in {requirement!r}: every dependency needs one")

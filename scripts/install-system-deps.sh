@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Installs the Debian packages raysim needs beyond Python: EGL with Mesa for headless
-# rendering (pyvista/VTK off-screen). Does nothing when they are present already.
+# rendering (pyvista/VTK off-screen) and Debian's chromium for the browser tests of the HTML
+# pages. Does nothing when they are present already.
 set -euo pipefail
-packages=(libegl1 libegl-mesa0 libgl1-mesa-dri libgl1 libxrender1)
+# chromium: the headless browser the tests open the HTML pages in (report, check, the site)
+packages=(libegl1 libegl-mesa0 libgl1-mesa-dri libgl1 libxrender1 chromium)
 missing=()
 for p in "${packages[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

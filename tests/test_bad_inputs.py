@@ -493,6 +493,15 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["rig", "park", "rig.toml", "--speed", "3"], "No such option"),
         (["rig", "park", "rig_probe_order.toml", "--simulate"], "angles must increase from row to row"),
     ],
+    # issue 34: --json of the table-printing commands refuses an input, a folder or a place
+    # where nothing can be written, before any work
+    "--json (issue 34)": [
+        (["budget", "plan.toml", "--json", "plan.toml"], "is the plan"),
+        (["budget", "plan.toml", "--json", "."], "is a folder, give a file name"),
+        (["check", "scene.toml", "-o", "rep_new", "--json", "scene.toml"], "is the source"),
+        (["check", "scene.toml", "-o", "rep_new", "--json", "user_folder"], "is a folder"),
+        (["paper", "--json", "/proc/raysim.json"], "cannot write in /proc"),
+    ],
 }
 
 

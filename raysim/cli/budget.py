@@ -6,7 +6,8 @@ from pathlib import Path
 
 import typer
 
-from raysim.cli.common import app, out, say
+from raysim.cli.common import app, say
+from raysim.cli.tables import check_json_path, json_option, json_to_stdout, print_table, write_json
 
 
 @app.command("budget")
@@ -26,6 +27,7 @@ def budget_command(
     target_um: float | None = typer.Option(None, "--target-um",
                                            help="An RMS to reach (um): the readings per point "
                                                 "and the scan time it needs."),
+    json_path: str | None = json_option(),
 ) -> None:
     """Predict the deformation RMS a scan plan leaves, by mode, from the inversion's linear
     operator (no Monte Carlo), and the readings per point a target RMS needs."""
@@ -36,16 +38,16 @@ def budget_command(
         raise SolverError(f"unknown gain {gain!r}: choose estimated or known")
     if not 0 <= refine <= 50:
         raise SolverError(f"--refine must be an integer in 0..50, got {refine}")
+    check_json_path(json_path, [("plan", plan)])
     rows = budget_rows(plan, parse_levels(noise_db), readings, rim, rim_std_um * 1e-6,
                        gain == "known", refine > 0,
                        None if target_um is None else target_um * 1e-6)
-    from rich.table import Table
-
     lines = table_rows(rows)
-    table = Table(*lines[0], title=f"error budget of {plan}")
-    for line in lines[1:]:
-        table.add_row(*line)
-    out.print(table)
+    title = f"error budget of {plan}"
+    write_json(json_path, "budget", title, [_record(row) for row in rows], lines)
+    if json_to_stdout(json_path):
+        return
+    print_table(title, lines)
     for line in mode_lines(rows):
         say(line)
     if rows and rows[0].blocked_cells:
@@ -56,3 +58,14 @@ def budget_command(
     if any(row.budget.reference for row in rows):
         say("references: the drift references' own noise, carried into every line they correct "
             "(more reference_samples shrink it; more readings per point do not)")
+
+
+def _record(row) -> dict:
+    """One noise level's numbers for ``--json``: lengths in m, times in hours."""
+    b = row.budget
+    return {"noise_db": row.noise_db, "readings": row.readings, "rms_m": b.total, "noise_m": b.noise,
+            "delta_c_m": b.delta_c, "delta_c_removed": b.delta_c_removed,
+            "references_m": b.reference if b.reference else None, "rim_targets_m": b.harmonic,
+            "scan_hours": row.hours, "target_m": row.target, "readings_needed": row.readings_needed,
+            "hours_needed": row.hours_needed, "blocked_cells": row.blocked_cells,
+            "modes": [{"label": m.label, "m": m.m, "n": m.n, "rms_m": m.rms} for m in b.modes]}

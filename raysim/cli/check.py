@@ -6,7 +6,8 @@ from pathlib import Path
 
 import typer
 
-from raysim.cli.common import app, out, progress_bar, say
+from raysim.cli.common import app, progress_bar, say
+from raysim.cli.tables import check_json_path, json_option, json_to_stdout, print_table, write_json
 
 
 @app.command()
@@ -46,6 +47,7 @@ def check(
                                               help="Mesh only: F (m) instead of the fitted one."),
     resolution: float | None = typer.Option(None, "--resolution",
                                             help="Generated dish: GO triangle edge (m)."),
+    json_path: str | None = json_option(),
 ) -> None:
     """Does GO hold for this dish at these frequencies? GO against PO + PTD or go+edge.
 
@@ -56,6 +58,7 @@ def check(
     from raysim.pipeline.check import summary_rows, verdict_lines, write_check
     from raysim.pipeline.check_inputs import parse_grid
 
+    check_json_path(json_path, [("source", source)])
     with progress_bar() as bar:
         task = bar.add_task("check", total=1.0)
 
@@ -67,16 +70,19 @@ def check(
                                grid=parse_grid(sphere), N=grid, refine=refine,
                                refine_model=refine_model, device=device, sphere_radius=sphere_radius,
                                focal_length=focal_length, resolution=resolution, progress=report)
-    _table(summary_rows(ds))
+    rows, title = summary_rows(ds), "GO against the wave engine"
+    write_json(json_path, "check", title, _records(ds), rows, verdict=verdict_lines(ds),
+               page=str(page))
+    if json_to_stdout(json_path):
+        return
+    print_table(title, rows)
     for line in verdict_lines(ds):
         say(line)
     say(f"{page}")
 
 
-def _table(rows: list[list[str]]) -> None:
-    from rich.table import Table
-
-    table = Table(*rows[0], title="GO against the wave engine")
-    for row in rows[1:]:
-        table.add_row(*row)
-    out.print(table)
+def _records(ds) -> list[dict]:
+    """Per frequency, every per-frequency number of check.nc (SI units: m, s, fractions)."""
+    names = [k for k in ds.data_vars if ds[k].dims == ("frequency",)]
+    return [{"frequency_hz": float(f), **{k: ds[k].values[i].item() for k in names}}
+            for i, f in enumerate(ds["frequency"].values)]

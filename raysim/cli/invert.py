@@ -9,6 +9,7 @@ from pathlib import Path
 import typer
 
 from raysim.cli.common import app, note, output_path, progress_bar, say
+from raysim.cli.tables import check_json_path, json_option, json_to_stdout, write_json
 
 
 @app.command("invert")
@@ -127,11 +128,15 @@ def paper_command(
     wave_max_ghz: float = typer.Option(0.3, "--wave-max-ghz",
                                        help="--po: highest frequency (GHz) of the PO + PTD model "
                                             "refinement row (about 5 min at 0.3 GHz, grows as f^2)."),
+    json_path: str | None = json_option(),
 ) -> None:
     """The paper's tables beside raysim's: the GO case (Table 2), or with --po the PO & PTD
     frequency sweep (Table 3)."""
+    from dataclasses import asdict
+
     from raysim.pipeline import paper
 
+    check_json_path(json_path)
     if po:
         options = paper.sweep_options(frequencies, coarse_3ghz, N=grid, refine=refine,
                                       wave_max_ghz=wave_max_ghz)
@@ -141,5 +146,9 @@ def paper_command(
     else:
         rows = paper.compare(scale=scale, N=grid, refine=refine, device=device)
         lines = paper.compare_lines(rows, scale=scale, N=grid)
+    write_json(json_path, "paper --po" if po else "paper", lines[0], [asdict(row) for row in rows],
+               lines=lines, grid=grid, refine=refine)
+    if json_to_stdout(json_path):
+        return
     for line in lines:
         say(line)

@@ -42,10 +42,11 @@ PAPER_GO = ("paper, GO data: FDM (Gauss-Seidel, N = 256, 1000 iterations) RRMS 4
 
 REPORT_FILES = ("report.html", "field.nc", "surface.nc", "figures")
 PAGE_STYLE = """<style>
-body { font-family: sans-serif; max-width: 1500px; margin: 2em auto; color: #222; }
+body { font-family: sans-serif; max-width: 1500px; margin: 2em auto; padding: 0 1em; color: #222; }
 table { border-collapse: collapse; margin: 1em 0; }
 th, td { text-align: left; padding: 0.25em 1em; border-bottom: 1px solid #ddd; vertical-align: top; }
-figure { margin: 2em 0; } img { max-width: 100%; border: 1px solid #ccc; }
+figure { margin: 2em 0; }
+img { max-width: 100%; height: auto; box-sizing: border-box; border: 1px solid #ccc; }
 figcaption { font-size: 0.95em; margin-top: 0.4em; }
 pre { background: #f5f5f5; padding: 1em; overflow-x: auto; }
 </style>"""
