@@ -92,7 +92,7 @@ def _merge(points: list[tuple[int, float, float, float, float]], layout, prefix:
     xy: list[tuple[float, float]] = []
     index: dict[tuple[int, int], int] = {}
     supports: list[list[tuple[int, float, float]]] = [[] for _ in range(layout.n_panels)]
-    for panel, u, v, x, y in points:
+    for panel, _u, _v, x, y in points:
         key = (round(x / tol), round(y / tol))
         if key not in index:
             index[key] = len(xy)

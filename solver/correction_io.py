@@ -26,6 +26,7 @@ from solver.correction import Correction, correct, ruze, zernike_fit
 from solver.errors import SolverError
 from solver.fit import parse_terms
 
+OUTPUTS = ("commands.csv", "commands.toml", "zernike.csv", "summary.txt", "residual.nc")
 UNITS = {"um": 1e-6, "mm": 1e-3, "mil": 25.4e-6}
 SIGN = ("a positive command moves the surface at the actuator along +z (away from the vertex, "
         "toward the focus) by that many {unit}; the actuator moves by minus the measured error")
@@ -90,6 +91,11 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
     if any(not f > 0 for f in freqs):
         raise SolverError("--frequency must be > 0 Hz")
     terms = parse_terms(remove)
+    out = Path(outdir)
+    inputs = {Path(p).resolve() for p in (surface_path, scene, actuators) if p is not None}
+    for name in OUTPUTS:
+        if (out / name).resolve() in inputs:
+            raise SolverError(f"{out / name}: is an input; write the correction to another folder")
     smap = surface.load(surface_path)
     layout = layout_for(smap, scene, str(surface_path))
     acts = actuators_for(layout, layout_kind, actuators, screws)
@@ -104,7 +110,6 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
     run = CorrectionRun(corr, acts, unit, freqs, ruze(corr.rms_before, freqs),
                         ruze(corr.rms_after, freqs), zernike_fit(grid, corr.before, zernike_order),
                         zernike_fit(grid, corr.after, zernike_order), [])
-    out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     header = header_lines(run, terms)
     _write(out / "commands.csv", commands_csv(run, header))
@@ -117,8 +122,7 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
                  removed_terms=",".join(terms) or "none")
     residual = surface.surfacemap(grid, np.nan_to_num(corr.after), attrs)
     surface.save(residual, out / "residual.nc")
-    run.files = [out / n for n in ("commands.csv", "commands.toml", "zernike.csv", "summary.txt",
-                                   "residual.nc")]
+    run.files = [out / n for n in OUTPUTS]
     return run
 
 

@@ -19,6 +19,7 @@ from raysim.cli import (  # noqa: F401  (register commands)
     budget,
     campaign,
     check,
+    correct,
     dataset,
     invert,
     render,
