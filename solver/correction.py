@@ -183,3 +183,17 @@ def zernike_fit(grid, delta: NDArray[np.float64], order: int) -> list[tuple[int,
             for (n, m), (R, ang, _, _) in zip(nm, z.factors(X[use], Y[use], False), strict=True)]
     coef, *_ = np.linalg.lstsq(np.stack(cols, axis=-1), delta[use], rcond=None)
     return [(j + 1, n, m, float(c)) for j, ((n, m), c) in enumerate(zip(nm, coef, strict=True))]
+
+
+def displacement(layout, actuators: ActuatorLayout, commands: NDArray[np.float64], x, y) -> NDArray:
+    """Surface displacement (m) along z at aperture points (x, y) (m) when the actuators move by
+    ``commands`` (m): each panel takes its support points' shape; 0 in gaps and off the dish."""
+    xs, ys = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64))
+    out = np.zeros(xs.shape)
+    ids = layout.panel_at(xs, ys)
+    for panel in np.unique(ids[ids >= 0]):
+        on = ids == panel
+        sup = actuators.supports[panel]
+        W = shape_functions(layout, int(panel), sup, xs[on], ys[on])
+        out[on] = W @ np.asarray(commands)[[a for a, _, _ in sup]]
+    return out
