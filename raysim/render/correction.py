@@ -98,8 +98,9 @@ def correction_figure(x: np.ndarray, layout, actuators, correction, blocked: np.
 
 def command_table_html(actuators, correction, frequencies=(), efficiency=None) -> str:
     """An HTML table of the commands (µm) in a collapsible block, with the RMS figures."""
+    shape = html.escape(actuators.shape_description())
     head = (f"<p>Commands from the recovered map: a positive command moves the surface along +z "
-            f"(toward the focus) by that many µm. Panels moved as {html.escape(actuators.shape_description())}; "
+            f"(toward the focus) by that many µm. Panels moved as {shape}; "
             f"RMS over the panels {correction.rms_before * UM:.2f} µm before, "
             f"{correction.rms_after * UM:.2f} µm predicted after (rigid-panel floor "
             f"{correction.within_panel_rms * UM:.2f} µm).</p>")

@@ -51,7 +51,7 @@ def test_no_panels_no_section(tmp_path):
 
 def test_blocked_sphere_cells_mask_their_aperture_image():
     field, _ = _field(panels=True)
-    theta, phi = np.meshgrid(field["theta"].values, field["phi"].values, indexing="ij")
+    _, phi = np.meshgrid(field["theta"].values, field["phi"].values, indexing="ij")
     # a leg's shadow: phi within 5 degrees of 90 degrees
     blocked = np.abs(phi - np.pi / 2) < np.radians(5)
     field["blocked"] = (("theta", "phi"), blocked.astype(np.uint8))
