@@ -229,3 +229,25 @@ def test_an_actuator_file_round_trips_the_generated_layout(tmp_path):
     delta = _rng_map()
     np.testing.assert_allclose(correct(GRID, delta, LAYOUT, read).commands,
                                correct(GRID, delta, LAYOUT, acts).commands, atol=1e-12)
+
+
+def test_budget_command_error_matches_monte_carlo_maps_drawn_from_the_budget():
+    from solver.correction_budget import budget_shapes, command_std_from_budget, dirichlet_mode
+
+    grid = ApertureGrid(D, 64)
+    # a Dirichlet mode has unit norm over the disk (cells of h^2)
+    assert np.sum(dirichlet_mode(grid, 3, 2, 1) ** 2) * grid.h**2 == pytest.approx(1.0, rel=0.03)
+    modes = [(0, 1, (20e-6) ** 2), (2, 1, (15e-6) ** 2), (1, 2, (10e-6) ** 2), (5, 3, (5e-6) ** 2)]
+    shapes = list(budget_shapes(grid, modes, rim_targets=16, target_std=10e-6))
+    acts = corners_layout(LAYOUT)
+    terms = ("piston", "tilt")
+    predicted = command_std_from_budget(grid, LAYOUT, acts, terms, shapes)
+    rng = np.random.default_rng(11)
+    draws = []
+    for _ in range(300):
+        delta = sum(rng.normal(0.0, np.sqrt(v)) * f for f, v in shapes)
+        draws.append(correct(grid, grid.masked(delta), LAYOUT, acts, terms).commands)
+    spread = np.std(draws, axis=0)
+    held = predicted > 0.1 * predicted.max()
+    np.testing.assert_allclose(spread[held], predicted[held], rtol=0.25)
+    assert np.sqrt(np.mean((spread - predicted) ** 2)) < 0.08 * np.sqrt(np.mean(predicted**2))
