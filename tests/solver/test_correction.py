@@ -251,3 +251,30 @@ def test_budget_command_error_matches_monte_carlo_maps_drawn_from_the_budget():
     held = predicted > 0.1 * predicted.max()
     np.testing.assert_allclose(spread[held], predicted[held], rtol=0.25)
     assert np.sqrt(np.mean((spread - predicted) ** 2)) < 0.08 * np.sqrt(np.mean(predicted**2))
+
+
+def test_the_command_writes_every_file_and_prints_the_summary(tmp_path):
+    from tests.cli import run_cli
+
+    scene = tmp_path / "scene.toml"
+    scene.write_text(SCENE)
+    path = _surface_file(tmp_path, _rng_map())
+    acts = tmp_path / "acts.toml"
+    layout = screws_layout(LAYOUT)
+    acts.write_text("".join(
+        f'[[actuator]]\nid = "s{a}"\nx_m = {float(layout.xy[a, 0])!r}\ny_m = {float(layout.xy[a, 1])!r}\n'
+        f"panels = {layout.panels_of(a)}\nmin_m = -20e-6\nmax_m = 20e-6\n" for a in range(layout.n_actuators)))
+    out = run_cli("correct", str(path), "-o", str(tmp_path / "out"), "--scene", str(scene),
+                  "--actuators", str(acts), "--unit", "mil", "--frequency", "43e9",
+                  "--zernike-order", "3", cwd=tmp_path)
+    assert out.code == 0, out.stderr
+    assert "predicted after" in out.stdout and "Ruze efficiency at 43 GHz" in out.stdout
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
+        "commands.csv", "commands.toml", "residual.nc", "summary.txt", "zernike.csv"]
+    rows = [line for line in (tmp_path / "out" / "zernike.csv").read_text().splitlines()
+            if line[:1].isdigit()]
+    assert len(rows) == 10   # Noll terms of radial order <= 3
+    text = (tmp_path / "out" / "commands.csv").read_text()
+    values = [float(line.rsplit(",", 1)[1]) for line in text.splitlines()[1:]
+              if line and not line.startswith(("#", "id"))]
+    assert max(abs(v) for v in values) <= 20e-6 / 25.4e-6 + 1e-4   # the range, in mil
