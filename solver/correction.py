@@ -105,8 +105,7 @@ def correct(grid, delta: NDArray[np.float64], layout, actuators: ActuatorLayout,
         lo, hi = actuators.ranges[held, 0], actuators.ranges[held, 1]
         if np.any(lo > 0) or np.any(hi < 0):
             raise ActuatorError("an actuator's range excludes 0 (min_m > 0 or max_m < 0)")
-        res = lsq_linear(Ah.toarray(), -d, bounds=(lo, hi), method="bvls", tol=1e-14)
-        sol = res.x
+        sol = _bounded(Ah, d, lo, hi)
         clipped = int(np.sum((sol <= lo + 1e-15) & np.isfinite(lo)) + np.sum((sol >= hi - 1e-15)
                                                                                 & np.isfinite(hi)))
     commands[held] = sol
@@ -121,6 +120,19 @@ def correct(grid, delta: NDArray[np.float64], layout, actuators: ActuatorLayout,
     on_panels = np.where(ids >= 0, before, np.nan)
     return Correction(commands, before, after, rms(on_panels), rms(after), removed,
                       within_panel_rms(grid, before, ids), std, clipped, notes)
+
+
+def _bounded(A: sp.csr_matrix, d: NDArray[np.float64], lo, hi) -> NDArray[np.float64]:
+    """argmin ||A c + d|| with lo <= c <= hi (BVLS). With A^T A = L L^T (Cholesky) the problem
+    is the small one ||L^T c + L^-1 A^T d|| (the same objective less a constant); the dense
+    (points x actuators) problem only when A^T A is singular."""
+    N = (A.T @ A).toarray()
+    try:
+        L = np.linalg.cholesky(N)
+    except np.linalg.LinAlgError:
+        return lsq_linear(A.toarray(), -d, bounds=(lo, hi), method="bvls", tol=1e-14).x
+    rhs = np.linalg.solve(L, A.T @ d)
+    return lsq_linear(L.T, -rhs, bounds=(lo, hi), method="bvls", tol=1e-14).x
 
 
 def command_std(A: sp.csr_matrix, point_std: NDArray[np.float64]) -> NDArray[np.float64]:

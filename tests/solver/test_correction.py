@@ -33,6 +33,13 @@ def _rng_map(seed=1):
 
 
 def _dense_reference(delta, layout, acts):
+    """The dense fit's commands (see :func:`_dense_system`)."""
+    M, target = _dense_system(delta, layout, acts)
+    sol, *_ = np.linalg.lstsq(M, -target, rcond=None)
+    return sol
+
+
+def _dense_system(delta, layout, acts):
     """An independent dense fit: per panel, the shape through its support points built from the
     local-frame monomials by a Vandermonde solve, assembled point by point into a dense matrix
     and solved with numpy's lstsq (no code shared with solver.correction's sparse assembly)."""
@@ -59,8 +66,7 @@ def _dense_reference(delta, layout, acts):
             row[a] += wk
         rows.append(row)
         target.append(delta[iy, ix])
-    sol, *_ = np.linalg.lstsq(np.array(rows), -np.array(target), rcond=None)
-    return sol
+    return np.array(rows), np.array(target)
 
 
 @pytest.mark.parametrize("kind", ["corners", "screws"])
@@ -115,6 +121,12 @@ def test_ranges_bound_the_commands():
                            np.tile([-limit, limit], (acts.n_actuators, 1)), LAYOUT)
     result = correct(GRID, _rng_map(), LAYOUT, bounded)
     assert np.max(np.abs(result.commands)) <= limit * (1 + 1e-9)
+    # against bounded least squares on the dense system (points x actuators)
+    from scipy.optimize import lsq_linear
+
+    M, target = _dense_system(result.before, LAYOUT, acts)
+    dense = lsq_linear(M, -target, bounds=(-limit, limit), method="bvls", tol=1e-14).x
+    assert np.max(np.abs(result.commands - dense)) < 1e-6 * limit
     assert result.clipped > 0
     assert free.rms_after <= result.rms_after < result.rms_before
 
