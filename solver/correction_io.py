@@ -115,11 +115,11 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
     _write(out / "commands.csv", commands_csv(run, header))
     _write(out / "commands.toml", commands_toml(run, header))
     _write(out / "zernike.csv", zernike_csv(run, header))
-    _write(out / "summary.txt", "\n".join(summary_lines(run)) + "\n")
+    _write(out / "summary.txt", "\n".join([SIGN.format(unit=unit), *summary_lines(run)]) + "\n")
     attrs = {k: v for k, v in smap.attrs.items() if k not in ("rms_m", "rrms")}
     attrs.update(correction="predicted surface after the actuator commands",
                  correction_rms_before_m=corr.rms_before, correction_rms_after_m=corr.rms_after,
-                 removed_terms=",".join(terms) or "none")
+                 removed_terms=",".join(terms) or "none", command_sign=SIGN.format(unit=unit))
     residual = surface.surfacemap(grid, np.nan_to_num(corr.after), attrs)
     surface.save(residual, out / "residual.nc")
     run.files = [out / n for n in OUTPUTS]

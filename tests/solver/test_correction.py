@@ -201,7 +201,10 @@ def test_files_state_sign_unit_and_rms_and_carry_the_command_error(tmp_path):
     np.testing.assert_allclose(got, run.correction.commands, atol=1e-7)
     toml = tomllib.loads((tmp_path / "out" / "commands.toml").read_text())
     assert toml["unit"] == "mm" and len(toml["actuator"]) == run.actuators.n_actuators
+    for name in ("commands.toml", "zernike.csv", "summary.txt"):
+        assert "a positive command moves the surface" in (tmp_path / "out" / name).read_text()
     residual = surface.load(tmp_path / "out" / "residual.nc")
+    assert "a positive command moves the surface" in residual.attrs["command_sign"]
     assert np.nanstd(residual["deformation"].values) < np.nanstd(delta)
     # independent errors of 2 um per point: each command inherits a fraction of it, averaged
     # over its panels' points (many points per panel: far below 2 um, above 0)
