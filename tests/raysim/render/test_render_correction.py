@@ -62,3 +62,13 @@ def test_blocked_sphere_cells_mask_their_aperture_image():
     assert mask[(np.abs(angle - 90) < 3) & (np.hypot(X, Y) > 5)].all()
     assert not mask[np.abs(angle - 90) > 8].any()
     assert blocked_on_aperture(_field(panels=False)[0], x) is None
+
+
+def test_the_report_page_carries_the_section(tmp_path, monkeypatch):
+    field, truth = _field(panels=True)
+    surface = surfacemap(truth, D, N=48, truth=truth, F=F, attrs={"solver": "example",
+                                                                  "boundary": "test"})
+    monkeypatch.setattr(report_module, "_figures", lambda field, surface: [])
+    page = report_module.write_report(field, surface, tmp_path).read_text()
+    assert "<h2>Correction</h2>" in page and page.index("<h2>Correction</h2>") < page.index("<h2>Scene</h2>")
+    assert (tmp_path / "figures" / "correction.png").is_file()
