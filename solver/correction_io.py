@@ -196,7 +196,8 @@ def summary_lines(run: CorrectionRun) -> list[str]:
     lines = [f"{run.actuators.n_actuators} actuators ({run.actuators.kind}); "
              f"{run.actuators.shape_description()}",
              f"RMS {c.rms_before / 1e-6:.2f} um before, {c.rms_after / 1e-6:.2f} um predicted after "
-             f"(rigid-panel floor {c.within_panel_rms / 1e-6:.2f} um)",
+             f"({100 * c.rms_after / c.rms_before:.1f} % left; rigid-panel floor, out of reach of "
+             f"rigid panel motions: {c.within_panel_rms / 1e-6:.2f} um)",
              f"commands: max |c| {np.max(np.abs(c.commands)) / UNITS[run.unit]:.3f} {run.unit}"
              + (f", {c.clipped} at their range limit" if c.clipped else "")]
     if c.command_std is not None:
