@@ -134,7 +134,7 @@ def header_lines(run: CorrectionRun, terms) -> list[str]:
              f"surface RMS before {c.rms_before / 1e-6:.3f} um, predicted after {c.rms_after / 1e-6:.3f} um",
              f"out of reach within the panels (rigid-panel floor) {c.within_panel_rms / 1e-6:.3f} um"]
     for f, b, a in zip(run.frequencies, run.efficiency_before, run.efficiency_after, strict=True):
-        lines.append(f"Ruze efficiency at {f / 1e9:g} GHz: {b:.4f} before, {a:.4f} after")
+        lines.append(f"Ruze efficiency at {f / 1e9:g} GHz: {b:.5f} before, {a:.5f} after")
     return lines
 
 
