@@ -227,6 +227,12 @@ def workspace(tmp_path_factory):
         "plan_obst_disk.toml": _obstacle_plan('type = "disk"\nradius_m = 10.0'),
         "plan_obst_nofile.toml": _obstacle_plan('type = "mesh"\nfile = "cabin.stl"'),
         "plan_obst_noisy.toml": _obstacle_plan(LEGS, noisy=True),
+        # issue 33: raysim correct
+        "panel_scene.toml": _scene(PANELS.format(edges="[0.0, 5.0, 10.0]").replace(
+            "panels_per_ring = [1]", "panels_per_ring = [6, 12]")),
+        "panel_one.toml": _scene(PANELS.format(edges="[0.0, 10.0]")),
+        "acts_outside.csv": "id,x_m,y_m,panels\na1,12.0,0.0,0\n",
+        "acts_lonely.csv": "id,x_m,y_m,panels\na1,2.0,0.5,0\n",
     }
     for name, text in files.items():
         (ws / name).write_text(text)
@@ -477,6 +483,26 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
          "at least 8 targets"),
         (["campaign", "scene.toml", "plan_drift_noisy.toml", "-o", "c", "--rim", "0",
           "--target-um", "0.001"], "out of reach at any readings per point"),
+    ],
+    # issue 33: raysim correct
+    "correct": [
+        (["correct", "missing.nc", "-o", "corr", "--scene", "panel_scene.toml"], "missing.nc"),
+        (["correct", "s.nc", "-o", "corr"], "no panel layout"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "scene.toml"], "no panel layout"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--actuators",
+          "acts_outside.csv"], "lies outside the dish"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--actuators",
+          "acts_lonely.csv"], "panel 1 is held by no actuator"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "panel_one.toml"], "has no corners"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--layout", "hexes"],
+         "unknown --layout 'hexes'"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--unit", "inch"],
+         "unknown --unit 'inch'"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--frequency", "-1"],
+         "--frequency must be > 0 Hz"),
+        (["correct", "s.nc", "-o", "notes.txt", "--scene", "panel_scene.toml"], "give a folder"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--remove", "coma"],
+         "unknown term 'coma'"),
     ],
     "rig park": [
         (["rig", "park", "missing.toml", "--simulate"], "no such rig file"),

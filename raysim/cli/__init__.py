@@ -1,8 +1,9 @@
 """The ``raysim`` command: a thin typer layer over the Python API, one module per command.
 
 - ``common``: the app, the consoles, the progress bar, output-path checks.
-- ``simulate``, ``invert`` (and ``paper``), ``render`` (and ``report``), ``check``, ``scan`` (and
-  ``rig park``), ``dataset``, ``scenes``: the commands, each a wrapper of one API call.
+- ``simulate``, ``invert`` (and ``paper``), ``correct``, ``render`` (and ``report``), ``check``,
+  ``scan`` (and ``rig park``), ``dataset``, ``scenes``: the commands, each a wrapper of one API
+  call.
 
 Units at this edge: lengths in metres, frequencies in Hz, angles in degrees where an option
 name ends in ``-deg``. Every error a user can cause (a bad option value, an unknown option, a
@@ -19,6 +20,7 @@ from raysim.cli import (  # noqa: F401  (register commands)
     budget,
     campaign,
     check,
+    correct,
     dataset,
     invert,
     render,

@@ -16,8 +16,14 @@ Units: lengths in m (the summary's figures in um), noise in dB per reading, time
 5. the measured scan is inverted as any measured scan is (gain estimated, delta_c removed,
    the rim targets fixing the harmonic part) and compared with the truth.
 
-The folder gets ``field.nc``, ``scan.nc`` (and its journal), ``rim.csv``, ``surface.nc`` and
-``campaign.txt`` (the summary: the budget's prediction beside the RMS reached).
+6. when the scene has panels, the correction (docs/correction.md): the corner actuators'
+   commands from the measured map, with the command error each actuator inherits from the
+   budget's map error (:mod:`solver.correction_budget`), beside the error the commands really
+   have (against the commands the true surface asks for).
+
+The folder gets ``field.nc``, ``scan.nc`` (and its journal), ``rim.csv``, ``surface.nc``,
+``commands.csv`` (with panels) and ``campaign.txt`` (the summary: the budget's prediction beside
+the RMS reached).
 """
 
 from __future__ import annotations
@@ -43,7 +49,8 @@ from solver.boundary import RimTargets, write_rim_csv
 from solver.errors import SolverError
 from solver.invert import invert
 
-FILES = ("field.nc", "scan.nc", "scan.nc.journal", "rim.csv", "surface.nc", "campaign.txt")
+FILES = ("field.nc", "scan.nc", "scan.nc.journal", "rim.csv", "surface.nc", "campaign.txt",
+         "commands.csv")
 
 
 @dataclass(frozen=True)
@@ -130,6 +137,9 @@ def run_campaign(scene_path: str | os.PathLike[str], plan_path: str | os.PathLik
                                 row.hours, 10 ** (plan.simulator.gain_db / 10),
                                 float(surface.attrs["gain"]), ())
         lines = summary_lines(result, noise, rim, rim_std, surface.attrs)
+        if scene.panels is not None:
+            lines += correction_lines(scene, plan, surface, tmp / "commands.csv", noise, k, rim,
+                                      rim_std, refine)
         (tmp / "campaign.txt").write_text("\n".join(lines) + "\n", encoding="utf-8")
     report("done", 1.0)
     return replace(result, lines=tuple(lines))
@@ -162,4 +172,46 @@ def summary_lines(result: CampaignResult, noise_db: float, rim: int, rim_std: fl
         f"({1e6 * attrs.get('removed_delta_c_centre_m', 0.0):.1f} um at the centre)",
         f"predicted RMS (raysim budget): {result.predicted * 1e6:.1f} um",
         f"achieved RMS against the truth: {result.achieved * 1e6:.1f} um",
+    ]
+
+
+def correction_lines(scene: Scene, plan: ScanPlan, surface, path: Path, noise_db: float,
+                     readings: int, rim: int, rim_std: float, refine: int) -> list[str]:
+    """Correct the measured map with the corner actuators (piston and tilt left to pointing),
+    write the commands with the error each inherits from the budget (``command_std_um``), and
+    say what they leave and how far they are from the commands the true surface asks for."""
+    from raysim.pipeline.budget import used_cells
+    from solver.actuators import corners_layout
+    from solver.budget import noise_response, relative_std
+    from solver.correction import correct
+    from solver.correction_budget import budget_shapes, command_std_from_budget
+    from solver.correction_io import CorrectionRun, commands_csv, header_lines
+
+    layout = scene.panels
+    acts = corners_layout(layout)
+    grid = surfacemaps.grid_of(surface)
+    terms = ("piston", "tilt")
+    corr = correct(grid, surface["deformation"].values, layout, acts, terms)
+    ideal = correct(grid, surface["truth"].values, layout, acts, terms)
+    corrected = plan.drift_correction != "none"
+    response = noise_response(plan.grid, plan.focal_length, plan.diameter,
+                              "refocus" if refine > 0 else "linear",
+                              plan.reference_every if corrected else None, used_cells(plan))
+    v = relative_std(noise_db, readings) ** 2
+    modes = [(m, n, v * ms) for m, n, ms in response.modes]
+    if corrected and plan.reference_samples > 0:
+        v_ref = relative_std(noise_db, plan.reference_samples) ** 2
+        modes += [(m, n, v_ref * ms) for m, n, ms in response.reference if m > 0]
+    corr.command_std = command_std_from_budget(grid, layout, acts, terms,
+                                               budget_shapes(grid, modes, rim, rim_std))
+    run = CorrectionRun(corr, acts, "um", (), np.array([]), np.array([]), [], [], [])
+    path.write_text(commands_csv(run, header_lines(run, terms)), encoding="utf-8")
+    predicted = float(np.sqrt(np.mean(corr.command_std**2)))
+    actual = float(np.sqrt(np.mean((corr.commands - ideal.commands) ** 2)))
+    return [
+        f"correction: {acts.n_actuators} corner actuators, RMS {corr.rms_before * 1e6:.1f} um -> "
+        f"{corr.rms_after * 1e6:.1f} um predicted (commands in commands.csv; + toward the focus)",
+        f"command error from the budget: RMS {predicted * 1e6:.1f} um over the actuators "
+        f"(max {np.max(corr.command_std) * 1e6:.1f} um); against the true surface's commands: "
+        f"{actual * 1e6:.1f} um",
     ]

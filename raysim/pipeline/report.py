@@ -200,6 +200,7 @@ def write_report(field: xr.Dataset, surface: xr.Dataset | None, out_dir: str | o
         png = png_bytes(image)
         (out / "figures" / f"{name}.png").write_bytes(png)
         blocks.append(figure_html(name, caption, png))
+    blocks += correction_section(field, surface, out)
     times = {**(timings or {}), "draw": seconds_draw}
     page = _page(field, surface, blocks, times)
     path = out / "report.html"
@@ -250,6 +251,40 @@ def _figures(field: xr.Dataset, surface: xr.Dataset | None) -> list[tuple[str, s
                       "exaggeration.", np.array(backend.screenshot(pl, None))))
         pl.close()
     return items
+
+
+def correction_section(field: xr.Dataset, surface: xr.Dataset | None, out: Path) -> list[str]:
+    """The correction (docs/correction.md) of the recovered map when the scene has panels: the
+    corner actuators' commands (piston and tilt left to pointing), before / after maps with the
+    panel outlines and the actuators, the obstacle-blocked cells masked, and the command table;
+    [] without a map or without panels."""
+    from raysim.scene.scene import scene_of
+
+    scene = scene_of(field)
+    if surface is None or scene is None or scene.panels is None:
+        return []
+    from raysim.render.correction import blocked_on_aperture, command_table_html, correction_figure
+    from solver.actuators import ActuatorError, corners_layout
+    from solver.correction import correct
+    from solver.surface import grid_of
+
+    layout = scene.panels
+    try:
+        acts = corners_layout(layout)
+    except ActuatorError as exc:
+        return [f"<h2>Correction</h2><p>Not drawn: {html.escape(str(exc))}</p>"]
+    grid = grid_of(surface)
+    corr = correct(grid, surface["deformation"].values, layout, acts, ("piston", "tilt"))
+    x = surface["x"].values
+    blocked = blocked_on_aperture(field, x)
+    caption = ("Correction: the recovered map (piston and tilt removed), the surface the corner "
+               "actuators' commands leave, and the commands (µm, + toward the focus); panel outlines "
+               "and actuators drawn" + ("; cells hidden by obstacles masked grey." if blocked is not None
+                                        else "."))
+    png = png_bytes(backend.figure_image(correction_figure(x, layout, acts, corr, blocked)))
+    (out / "figures" / "correction.png").write_bytes(png)
+    return ["<h2>Correction</h2>", figure_html("correction", caption, png),
+            command_table_html(acts, corr)]
 
 
 def png_bytes(image: np.ndarray) -> bytes:

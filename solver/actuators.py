@@ -1,0 +1,222 @@
+"""Actuator layouts: where the actuators under the panels sit and which panels each one moves.
+
+Frame: the aperture plane (x, y) of docs/physics.md (m), displacements along z (m). Sign
+convention, stated once here and in every file :mod:`solver.correction_io` writes: a positive
+command moves the surface at that actuator along +z, away from the vertex and toward the focus.
+
+A layout is a table of actuators (id, x, y, optional stroke range) and, for every panel of a
+:class:`raysim.surface.panels.PanelLayout`, its *support points*: (actuator index, x, y), the
+aperture point (m) where that actuator holds the panel. A panel takes the shape that
+interpolates the commands at its k support points with the first k of the monomials 1, s, t,
+s t, s^2, t^2 in the panel's own Cartesian frame (s along the panel's mid radius, t across it,
+both from the panel centroid and in units of the square root of its area): a piston for one,
+a plane for three (the rigid body: the ``screws`` layout with its three screws, a wedge held
+at its apex and two outer corners), the bilinear shape through the four corners of a panel in
+the ``corners`` layout. An actuator shared by neighbouring panels (a corner common to up to
+four panels) moves every panel it holds, with the same stroke.
+"""
+
+from __future__ import annotations
+
+import csv
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from solver.errors import SolverError
+
+#: monomials in the panel frame (s, t) a panel's shape is built from, in the order they are taken
+MONOMIALS = ((0, 0), (1, 0), (0, 1), (1, 1), (2, 0), (0, 2))
+#: default screw positions (u, v) of the ``screws`` layout: three screws, a rigid body
+DEFAULT_SCREWS = ((0.2, 0.2), (0.2, 0.8), (0.8, 0.5))
+
+
+class ActuatorError(SolverError):
+    """An actuator layout is unusable (outside the dish, a panel nothing holds, a bad file)."""
+
+
+@dataclass(frozen=True)
+class ActuatorLayout:
+    """Actuators (``ids``, positions ``xy`` (n, 2) m, stroke ``ranges`` (n, 2) m or None) and per
+    panel the support points ``supports[p]`` = ((actuator index, x, y), ...)."""
+
+    ids: tuple[str, ...]
+    xy: NDArray[np.float64]
+    supports: tuple[tuple[tuple[int, float, float], ...], ...]
+    ranges: NDArray[np.float64] | None = None
+    kind: str = "file"
+
+    @property
+    def n_actuators(self) -> int:
+        return len(self.ids)
+
+    def panels_of(self, actuator: int) -> list[int]:
+        """Panel ids ``actuator`` (an index) moves."""
+        return [p for p, sup in enumerate(self.supports) if any(a == actuator for a, _, _ in sup)]
+
+    def shape_description(self) -> str:
+        counts = sorted({len(s) for s in self.supports})
+        names = {1: "piston", 2: "piston + radial slope", 3: "rigid body (a plane through 3 points)",
+                 4: "bilinear (1, s, t, s t) through 4 points"}
+        return "; ".join(f"{c} per panel: {names.get(c, f'{c}-point polynomial')}" for c in counts)
+
+
+def local_st(layout, panel: int, x, y) -> tuple[NDArray, NDArray]:
+    """The panel's own Cartesian coordinates (s, t) of aperture points (x, y) (m): from the
+    panel centroid, s along its mid radius and t across it, in units of sqrt(panel area)."""
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    phi_a, phi_b = layout.angular_limits(panel)
+    mid = 0.5 * (phi_a + phi_b)
+    cx, cy = layout.centres()[panel]
+    scale = np.sqrt(max(layout.panel_area(panel), 1e-12))
+    dx, dy = x - cx, y - cy
+    return (dx * np.cos(mid) + dy * np.sin(mid)) / scale, (-dx * np.sin(mid) + dy * np.cos(mid)) / scale
+
+
+def _xy(layout, panel: int, u: float, v: float) -> tuple[float, float]:
+    ring = int(layout.ring(panel))
+    r_in, r_out = layout.ring_edges[ring], layout.ring_edges[ring + 1]
+    phi_a, phi_b = layout.angular_limits(panel)
+    r, phi = r_in + u * (r_out - r_in), phi_a + v * (phi_b - phi_a)
+    return r * np.cos(phi), r * np.sin(phi)
+
+
+def _merge(points: list[tuple[int, float, float, float, float]], layout, prefix: str,
+           tol: float = 1e-6) -> ActuatorLayout:
+    """Actuators from (panel, u, v, x, y) points; points within ``tol`` (m) are one actuator,
+    held once per panel."""
+    xy: list[tuple[float, float]] = []
+    index: dict[tuple[int, int], int] = {}
+    supports: list[list[tuple[int, float, float]]] = [[] for _ in range(layout.n_panels)]
+    for panel, _u, _v, x, y in points:
+        key = (round(x / tol), round(y / tol))
+        if key not in index:
+            index[key] = len(xy)
+            xy.append((x, y))
+        if all(a != index[key] for a, _, _ in supports[panel]):
+            supports[panel].append((index[key], x, y))
+    ids = tuple(f"{prefix}{i:04d}" for i in range(len(xy)))
+    return ActuatorLayout(ids, np.array(xy, dtype=np.float64).reshape(-1, 2),
+                          tuple(tuple(s) for s in supports), kind=prefix.rstrip("-"))
+
+
+def corners_layout(layout) -> ActuatorLayout:
+    """One actuator at every panel corner, shared by the panels that meet there (gaps ignored:
+    the corner is where the cut lines cross). Every ring must be cut into >= 2 panels."""
+    points = []
+    for panel in range(layout.n_panels):
+        if layout.panels_per_ring[int(layout.ring(panel))] < 2:
+            raise ActuatorError(f"panel {panel} fills its whole ring: it has no corners, so the "
+                                "corners layout holds it nowhere (give --actuators)")
+        for u in (0.0, 1.0):
+            for v in (0.0, 1.0):
+                x, y = _xy(layout, panel, u, v)
+                points.append((panel, u, v, x, y))
+    return _merge(points, layout, "corner-")
+
+
+def screws_layout(layout, positions=DEFAULT_SCREWS) -> ActuatorLayout:
+    """Screws at (u, v) on every panel, one panel each: u = (r - r_in) / (r_out - r_in) across
+    the ring, v = (phi - phi_a) / (phi_b - phi_a) along it, each in [0, 1]."""
+    points = []
+    for panel in range(layout.n_panels):
+        for u, v in positions:
+            if not (0.0 <= u <= 1.0 and 0.0 <= v <= 1.0):
+                raise ActuatorError(f"screw position (u={u:g}, v={v:g}) lies outside its panel")
+            x, y = _xy(layout, panel, u, v)
+            points.append((panel, u, v, x, y))
+    # screws are never shared: a distinct tolerance key per panel
+    acts = ActuatorLayout(tuple(f"screw-{p:04d}-{k}" for p in range(layout.n_panels)
+                                for k in range(len(positions))),
+                          np.array([(x, y) for _, _, _, x, y in points]).reshape(-1, 2),
+                          tuple(tuple((p * len(positions) + k, *_xy(layout, p, u, v))
+                                      for k, (u, v) in enumerate(positions))
+                                for p in range(layout.n_panels)), kind="screws")
+    return acts
+
+
+def read_actuators(path: str | Path, layout) -> ActuatorLayout:
+    """Read actuators from a CSV (columns id, x_m, y_m, panels, and optional min_m, max_m;
+    ``panels`` the panel ids separated by spaces or ';') or a TOML file (``[[actuator]]`` tables
+    with the same keys, ``panels`` a list). Positions in metres in the aperture plane."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ActuatorError(f"{path}: {exc.strerror}") from exc
+    try:
+        if path.suffix.lower() == ".toml":
+            rows = tomllib.loads(text).get("actuator", [])
+        else:
+            rows = list(csv.DictReader(line for line in text.splitlines()
+                                       if not line.lstrip().startswith("#")))
+    except (tomllib.TOMLDecodeError, csv.Error) as exc:
+        raise ActuatorError(f"{path}: unreadable actuator file ({exc})") from exc
+    if not rows:
+        raise ActuatorError(f"{path}: no actuators (CSV columns id,x_m,y_m,panels or TOML "
+                            "[[actuator]] tables)")
+    ids, xy, ranges, members = [], [], [], []
+    for k, row in enumerate(rows):
+        try:
+            ids.append(str(row["id"]))
+            xy.append((float(row["x_m"]), float(row["y_m"])))
+            panels = row["panels"]
+            if isinstance(panels, str):
+                panels = panels.replace(";", " ").split()
+            members.append([int(p) for p in panels])
+            lo, hi = row.get("min_m"), row.get("max_m")
+            ranges.append((-np.inf if lo in (None, "") else float(lo),
+                           np.inf if hi in (None, "") else float(hi)))
+        except (KeyError, ValueError, TypeError) as exc:
+            raise ActuatorError(f"{path}: actuator row {k + 1} needs id, x_m, y_m, panels "
+                                f"(numbers; panels as ids): {exc}") from exc
+    return build_layout(ids, np.array(xy), members, np.array(ranges), layout, str(path))
+
+
+def build_layout(ids, xy, members, ranges, layout, source: str = "actuators") -> ActuatorLayout:
+    """Check and assemble actuators given by position and the panels each moves."""
+    if len(set(ids)) != len(ids):
+        raise ActuatorError(f"{source}: actuator ids repeat")
+    rim = layout.rim_radius
+    for name, (x, y) in zip(ids, xy, strict=True):
+        if not np.isfinite(x) or not np.isfinite(y) or np.hypot(x, y) > rim * (1 + 1e-9):
+            raise ActuatorError(f"{source}: actuator {name} at ({x:g}, {y:g}) m lies outside the "
+                                f"dish (rim radius {rim:g} m)")
+    supports: list[list[tuple[int, float, float]]] = [[] for _ in range(layout.n_panels)]
+    for a, panels in enumerate(members):
+        for p in panels:
+            if not 0 <= p < layout.n_panels:
+                raise ActuatorError(f"{source}: actuator {ids[a]} names panel {p}; the layout has "
+                                    f"panels 0..{layout.n_panels - 1}")
+            supports[p].append((a, float(xy[a, 0]), float(xy[a, 1])))
+    for p, sup in enumerate(supports):
+        if not sup:
+            raise ActuatorError(f"{source}: panel {p} is held by no actuator")
+        if len(sup) > len(MONOMIALS):
+            raise ActuatorError(f"{source}: panel {p} has {len(sup)} actuators; at most "
+                                f"{len(MONOMIALS)} are supported")
+    if np.any(ranges[:, 0] > ranges[:, 1]):
+        raise ActuatorError(f"{source}: an actuator's min_m exceeds its max_m")
+    bounded = np.isfinite(ranges).any()
+    return ActuatorLayout(tuple(ids), np.asarray(xy, dtype=np.float64),
+                          tuple(tuple(s) for s in supports), ranges if bounded else None)
+
+
+def shape_functions(layout, panel: int, support: tuple[tuple[int, float, float], ...],
+                    x, y) -> NDArray[np.float64]:
+    """Weights (len(x), k) of the k support points of ``panel`` at aperture points (x, y) (m): the
+    interpolant in the first k monomials of :data:`MONOMIALS` of the panel frame (s, t).
+    Raises when the points do not fix such a shape."""
+    k = len(support)
+    ps, pt = local_st(layout, panel, [p[1] for p in support], [p[2] for p in support])
+    V = np.stack([ps**i * pt**j for i, j in MONOMIALS[:k]], axis=-1)  # (k points, k monomials)
+    if np.linalg.matrix_rank(V) < k:
+        raise ActuatorError(f"panel {panel}: its {k} actuators do not fix a panel shape "
+                            "(collinear or coincident)")
+    s, t = local_st(layout, panel, x, y)
+    M = np.stack([s**i * t**j for i, j in MONOMIALS[:k]], axis=-1)  # (points, k monomials)
+    return np.linalg.solve(V.T, M.T).T

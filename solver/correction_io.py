@@ -1,0 +1,214 @@
+"""File in, files out: what ``raysim correct`` does (see :mod:`solver.correction`).
+
+Reads a SurfaceMap, takes the panel layout from a scene (given, or the one the SurfaceMap's
+source FieldMap records), builds or reads the actuators, computes the commands and writes in
+the output folder: ``commands.csv`` and ``commands.toml`` (one row per actuator, in the chosen
+unit, a header saying what a positive number does and the RMS before and after),
+``residual.nc`` (the predicted surface after the correction, a SurfaceMap), ``zernike.csv``
+(Noll content of the map and of the residual) and ``summary.txt``. Files are written through a
+temporary name and renamed; nothing is written when an input is bad.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from raysim.errors import RaysimError
+from solver import surface
+from solver.actuators import DEFAULT_SCREWS, ActuatorLayout, corners_layout, read_actuators, screws_layout
+from solver.correction import Correction, correct, ruze, zernike_fit
+from solver.errors import SolverError
+from solver.fit import parse_terms
+
+OUTPUTS = ("commands.csv", "commands.toml", "zernike.csv", "summary.txt", "residual.nc")
+UNITS = {"um": 1e-6, "mm": 1e-3, "mil": 25.4e-6}
+SIGN = ("a positive command moves the surface at the actuator along +z (away from the vertex, "
+        "toward the focus) by that many {unit}; the actuator moves by minus the measured error")
+
+
+@dataclass
+class CorrectionRun:
+    """What a run produced: the correction, the actuators, the unit and the tables written."""
+
+    correction: Correction
+    actuators: ActuatorLayout
+    unit: str
+    frequencies: tuple[float, ...]
+    efficiency_before: np.ndarray
+    efficiency_after: np.ndarray
+    zernike_before: list
+    zernike_after: list
+    files: list[Path]
+
+
+def layout_for(surface_map, scene_path: str | os.PathLike[str] | None, source: str):
+    """The panel layout: from ``scene_path`` or the scene the SurfaceMap's source FieldMap records."""
+    from raysim.scene.scene import load_scene, scene_of
+
+    if scene_path is not None:
+        scene = load_scene(scene_path)
+    else:
+        scene = None
+        src = surface_map.attrs.get("source_fieldmap")
+        if src and Path(str(src)).is_file():
+            from raysim.maps.fieldmap import load as load_fieldmap
+
+            scene = scene_of(load_fieldmap(src))
+    if scene is None or scene.panels is None:
+        raise RaysimError(f"{source}: no panel layout (give --scene with a [panels] table, or a "
+                          "SurfaceMap whose source FieldMap records one); per-panel commands need it")
+    return scene.panels
+
+
+def actuators_for(layout, kind: str | None, path: str | os.PathLike[str] | None,
+                  screws: tuple[tuple[float, float], ...] = DEFAULT_SCREWS) -> ActuatorLayout:
+    if path is not None:
+        return read_actuators(path, layout)
+    if kind in (None, "corners"):
+        return corners_layout(layout)
+    if kind == "screws":
+        return screws_layout(layout, screws)
+    raise SolverError(f"unknown --layout {kind!r}: choose corners or screws")
+
+
+def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind=None,
+                remove: str | None = "piston,tilt", unit: str = "um", frequencies=(),
+                zernike_order: int = 4, screws=DEFAULT_SCREWS,
+                stroke: float | None = None) -> CorrectionRun:
+    """Correct the SurfaceMap at ``surface_path`` and write the files in ``outdir`` (see the
+    module). ``stroke`` (m) bounds every generated actuator to [-stroke, stroke]."""
+    if unit not in UNITS:
+        raise SolverError(f"unknown --unit {unit!r}: choose {', '.join(UNITS)}")
+    if not 0 <= zernike_order <= 20:
+        raise SolverError(f"--zernike-order must be 0..20, got {zernike_order}")
+    freqs = tuple(float(f) for f in frequencies)
+    if any(not f > 0 for f in freqs):
+        raise SolverError("--frequency must be > 0 Hz")
+    terms = parse_terms(remove)
+    out = Path(outdir)
+    inputs = {Path(p).resolve() for p in (surface_path, scene, actuators) if p is not None}
+    for name in OUTPUTS:
+        if (out / name).resolve() in inputs:
+            raise SolverError(f"{out / name}: is an input; write the correction to another folder")
+    smap = surface.load(surface_path)
+    layout = layout_for(smap, scene, str(surface_path))
+    acts = actuators_for(layout, layout_kind, actuators, screws)
+    if stroke is not None:
+        if not stroke > 0:
+            raise SolverError("--stroke must be > 0")
+        acts = ActuatorLayout(acts.ids, acts.xy, acts.supports,
+                              np.tile([-stroke, stroke], (acts.n_actuators, 1)), acts.kind)
+    grid = surface.grid_of(smap)
+    std = smap["deformation_std"].values if "deformation_std" in smap else None
+    corr = correct(grid, smap["deformation"].values, layout, acts, terms, std)
+    run = CorrectionRun(corr, acts, unit, freqs, ruze(corr.rms_before, freqs),
+                        ruze(corr.rms_after, freqs), zernike_fit(grid, corr.before, zernike_order),
+                        zernike_fit(grid, corr.after, zernike_order), [])
+    out.mkdir(parents=True, exist_ok=True)
+    header = header_lines(run, terms)
+    _write(out / "commands.csv", commands_csv(run, header))
+    _write(out / "commands.toml", commands_toml(run, header))
+    _write(out / "zernike.csv", zernike_csv(run, header))
+    _write(out / "summary.txt", "\n".join([SIGN.format(unit=unit), *summary_lines(run)]) + "\n")
+    attrs = {k: v for k, v in smap.attrs.items() if k not in ("rms_m", "rrms")}
+    attrs.update(correction="predicted surface after the actuator commands",
+                 correction_rms_before_m=corr.rms_before, correction_rms_after_m=corr.rms_after,
+                 removed_terms=",".join(terms) or "none", command_sign=SIGN.format(unit=unit))
+    residual = surface.surfacemap(grid, np.nan_to_num(corr.after), attrs)
+    surface.save(residual, out / "residual.nc")
+    run.files = [out / n for n in OUTPUTS]
+    return run
+
+
+def header_lines(run: CorrectionRun, terms) -> list[str]:
+    c = run.correction
+    lines = [SIGN.format(unit=run.unit),
+             f"panel shape: {run.actuators.shape_description()}",
+             f"terms left to pointing/focus (removed before fitting): {','.join(terms) or 'none'}",
+             f"surface RMS before {c.rms_before / 1e-6:.3f} um, predicted after {c.rms_after / 1e-6:.3f} um",
+             f"out of reach within the panels (rigid-panel floor) {c.within_panel_rms / 1e-6:.3f} um"]
+    for f, b, a in zip(run.frequencies, run.efficiency_before, run.efficiency_after, strict=True):
+        lines.append(f"Ruze efficiency at {f / 1e9:g} GHz: {b:.5f} before, {a:.5f} after")
+    return lines
+
+
+def _rows(run: CorrectionRun) -> list[dict]:
+    scale = UNITS[run.unit]
+    c = run.correction
+    rows = []
+    for i, name in enumerate(run.actuators.ids):
+        row = {"id": name, "x_m": f"{run.actuators.xy[i, 0]:.4f}",
+               "y_m": f"{run.actuators.xy[i, 1]:.4f}",
+               "panels": " ".join(str(p) for p in run.actuators.panels_of(i)),
+               f"command_{run.unit}": f"{c.commands[i] / scale:.4f}"}
+        if c.command_std is not None:
+            row[f"command_std_{run.unit}"] = f"{c.command_std[i] / scale:.4f}"
+        rows.append(row)
+    return rows
+
+
+def commands_csv(run: CorrectionRun, header: list[str]) -> str:
+    buf = io.StringIO()
+    for line in header:
+        buf.write(f"# {line}\n")
+    rows = _rows(run)
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return buf.getvalue()
+
+
+def commands_toml(run: CorrectionRun, header: list[str]) -> str:
+    lines = [f"# {h}" for h in header]
+    c = run.correction
+    lines += [f'unit = "{run.unit}"', f"rms_before_{run.unit} = {c.rms_before / UNITS[run.unit]:.6g}",
+              f"rms_after_{run.unit} = {c.rms_after / UNITS[run.unit]:.6g}", ""]
+    for row in _rows(run):
+        lines.append("[[actuator]]")
+        for k, v in row.items():
+            if k == "id":
+                lines.append(f'id = "{v}"')
+            elif k == "panels":
+                lines.append(f"panels = [{', '.join(v.split())}]")
+            else:
+                lines.append(f"{k} = {v}")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def zernike_csv(run: CorrectionRun, header: list[str]) -> str:
+    buf = io.StringIO()
+    buf.write(f"# {header[0]}\n# Noll terms: coefficient = the term's RMS over the disk (um)\n")
+    buf.write("noll_j,n,m,map_um,residual_um\n")
+    for (j, n, m, b), (_, _, _, a) in zip(run.zernike_before, run.zernike_after, strict=True):
+        buf.write(f"{j},{n},{m},{b / 1e-6:.4f},{a / 1e-6:.4f}\n")
+    return buf.getvalue()
+
+
+def summary_lines(run: CorrectionRun) -> list[str]:
+    c = run.correction
+    lines = [f"{run.actuators.n_actuators} actuators ({run.actuators.kind}); "
+             f"{run.actuators.shape_description()}",
+             f"RMS {c.rms_before / 1e-6:.2f} um before, {c.rms_after / 1e-6:.2f} um predicted after "
+             f"({100 * c.rms_after / c.rms_before:.1f} % left; rigid-panel floor, out of reach of "
+             f"rigid panel motions: {c.within_panel_rms / 1e-6:.2f} um)",
+             f"commands: max |c| {np.max(np.abs(c.commands)) / UNITS[run.unit]:.3f} {run.unit}"
+             + (f", {c.clipped} at their range limit" if c.clipped else "")]
+    if c.command_std is not None:
+        lines.append(f"command error from the map's std: median {np.median(c.command_std) / 1e-6:.3f} "
+                     f"um, max {np.max(c.command_std) / 1e-6:.3f} um")
+    lines += header_lines(run, ())[5:]
+    lines += c.notes
+    return lines
+
+
+def _write(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
