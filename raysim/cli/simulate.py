@@ -114,4 +114,6 @@ def _simulate_blocks(scene, output: Path, method: str, device: str, **options) -
         ds = run(scene, output, method, device, report, **options)
     a = ds.attrs
     say(f"{output}: {summary(ds)}; {a['blocks']} blocks on {a['workers']} workers "
-        f"({a['blocks_reused']} reused, {a['blocks_computed_twice']} computed twice)")
+        f"({a['blocks_reused']} reused, {a['blocks_computed_twice']} computed twice"
+        + (f", {a['blocks_repaired']} failed verification and were recomputed" if a.get("blocks_repaired")
+           else "") + ")")
