@@ -1,0 +1,73 @@
+"""SIGINT (Ctrl-C to the process group) and SIGTERM end a command with one line and exit
+status 130 / 143: no traceback from the client or from its Dask workers, and the run resumes."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from raysim.cli import interrupted_line
+from tests.cli import popen_cli, run_cli
+from tests.processes import kill_group, wait_until
+
+pytestmark = pytest.mark.slow
+
+# a 10 m dish at 1 GHz on a 40 x 120 sphere: 75 blocks of 64 points, a few seconds of work each
+SCENE = """
+name = "interrupted"
+method = "po"
+[dish]
+diameter_m = 10.0
+focal_length_m = 4.0
+resolution_m = 0.2
+[source]
+frequency_hz = 1.0e9
+[sphere]
+radius_m = 2.0
+n_theta = 40
+n_phi = 120
+"""
+
+
+@pytest.mark.parametrize(("args", "terminated", "line"), [
+    (["simulate", "s.toml", "-o", "o.nc", "--workers", "2"], False,
+     "interrupted: raysim simulate stopped; resume with --resume"),
+    (["simulate", "s.toml", "-o", "o.nc"], True, "interrupted: raysim simulate stopped by SIGTERM"),
+    (["dataset", "d.toml", "-o", "d.zarr"], True,
+     "interrupted: raysim dataset stopped by SIGTERM; resume with --resume"),
+    (["report", "f.nc", "-o", "out"], False, "interrupted: raysim report stopped"),
+])
+def test_the_line_says_how_to_resume_only_where_resuming_exists(args, terminated, line):
+    assert interrupted_line(args, terminated) == line
+
+
+@pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_to_the_group_ends_simulate_on_workers_with_one_line(tmp_path, sig, status):
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE)
+    out = tmp_path / "o.nc"
+    args = ["simulate", scene, "-o", out, "--workers", "2", "--block-size", "64"]
+    proc = popen_cli(*args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    blocks = Path(f"{out}.partial.zarr") / "blocks"
+    try:
+        wait_until(lambda: proc.poll() is not None or (blocks.is_dir() and any(blocks.iterdir())),
+                   240, "the first block")
+        assert proc.poll() is None, "the run ended before it could be interrupted"
+        time.sleep(0.5)
+        import os
+
+        os.killpg(proc.pid, sig)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        kill_group(proc)
+    assert proc.returncode == status
+    assert stdout == b""
+    assert stderr.decode().splitlines() == [interrupted_line([str(a) for a in args], sig == signal.SIGTERM)]
+    if sig == signal.SIGINT:  # the blocks kept are verified and the run completes
+        done = run_cli(*args, "--resume", timeout=300)
+        assert done.code == 0, done.stderr
+        assert out.is_file() and not blocks.parent.exists()
