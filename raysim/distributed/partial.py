@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from raysim.distributed.cluster import ClusterError
+from raysim.files import atomic_path
 
 FORMAT = 1
 SUFFIX = ".partial.zarr"
@@ -228,9 +229,8 @@ def checksum(values: np.ndarray) -> str:
 
 def _write_json(path: Path, value: dict) -> None:
     """Write ``value`` to ``path`` atomically (a reader sees the old file or the new one)."""
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}")
-    tmp.write_text(json.dumps(value, sort_keys=True, allow_nan=True, default=_plain))
-    os.replace(tmp, path)
+    with atomic_path(path, clean=False) as tmp:
+        tmp.write_text(json.dumps(value, sort_keys=True, allow_nan=True, default=_plain))
 
 
 def _plain(value: Any) -> Any:

@@ -31,6 +31,7 @@ import numpy as np
 
 from hardware.plan import ScanPlan, load_plan
 from hardware.session import scan
+from raysim.files import write_text
 from raysim.maps import fieldmap as fieldmaps
 from raysim.maps import surfacemap as surfacemaps
 from raysim.pipeline.budget import budget_rows
@@ -130,7 +131,7 @@ def run_campaign(scene_path: str | os.PathLike[str], plan_path: str | os.PathLik
                                 row.hours, 10 ** (plan.simulator.gain_db / 10),
                                 float(surface.attrs["gain"]), ())
         lines = summary_lines(result, noise, rim, rim_std, surface.attrs)
-        (tmp / "campaign.txt").write_text("\n".join(lines) + "\n", encoding="utf-8")
+        write_text(tmp / "campaign.txt", "\n".join(lines) + "\n")
     report("done", 1.0)
     return replace(result, lines=tuple(lines))
 
