@@ -3,6 +3,7 @@ status 130 / 143: no traceback from the client or from its Dask workers, and the
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import time
@@ -58,8 +59,6 @@ def test_a_signal_to_the_group_ends_simulate_on_workers_with_one_line(tmp_path, 
                    240, "the first block")
         assert proc.poll() is None, "the run ended before it could be interrupted"
         time.sleep(0.5)
-        import os
-
         os.killpg(proc.pid, sig)
         stdout, stderr = proc.communicate(timeout=60)
     finally:
@@ -71,3 +70,38 @@ def test_a_signal_to_the_group_ends_simulate_on_workers_with_one_line(tmp_path, 
         done = run_cli(*args, "--resume", timeout=300)
         assert done.code == 0, done.stderr
         assert out.is_file() and not blocks.parent.exists()
+
+
+def test_simulate_killed_then_corrupted_resumes_to_the_single_process_fieldmap(tmp_path):
+    """SIGKILL to the whole run after a few blocks, then one block's chunks removed and
+    another's truncated: --resume recomputes both (and says so), and the FieldMap is the
+    single-process one bit for bit."""
+    from raysim.maps.fieldmap import load
+    from tests.raysim.distributed.conftest import assert_same_fieldmap
+
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE)
+    out, single = tmp_path / "o.nc", tmp_path / "single.nc"
+    args = ["simulate", scene, "-o", out, "--workers", "2", "--block-size", "64"]
+    proc = popen_cli(*args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    store = Path(f"{out}.partial.zarr")
+    try:
+        wait_until(lambda: proc.poll() is not None or ((store / "blocks").is_dir()
+                   and len(list((store / "blocks").glob("*.json"))) >= 3), 240, "three blocks")
+        assert proc.poll() is None, "the run ended before it could be killed"
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        kill_group(proc)
+    done = sorted(int(p.stem) for p in (store / "blocks").glob("*.json"))
+    chunks = {i: [f for part in store.iterdir() if (part / "zarr.json").is_file()
+                  for f in sorted((part / "c" / str(i)).rglob("*")) if f.is_file()] for i in done[:2]}
+    for f in chunks[done[0]]:
+        f.unlink()
+    for f in chunks[done[1]]:
+        f.write_bytes(f.read_bytes()[:10])
+    resumed = run_cli(*args, "--resume", timeout=300)
+    assert resumed.code == 0, resumed.stderr
+    assert "2 failed verification and were recomputed" in resumed.stdout
+    assert run_cli("simulate", scene, "-o", single, timeout=300).code == 0
+    assert_same_fieldmap(load(single), load(out))

@@ -304,3 +304,29 @@ def test_a_store_without_checksums_is_refused_in_one_line(reference, spec, tmp_p
     with pytest.raises(DatasetError, match="records no checksums") as info:
         generate(spec, store, resume=True, scheduler=inproc)
     assert str(store) in str(info.value)
+
+
+def test_a_killed_and_corrupted_store_resumes_to_the_uninterrupted_one(reference, spec, tmp_path, inproc):
+    """SIGKILL to the whole run (client and workers) after two samples, then one done sample's
+    deformation chunk removed and another's intensity chunk truncated: the resume finds both,
+    computes them again, and the store is the uninterrupted one bit for bit."""
+    store = tmp_path / "killed.zarr"
+    proc = popen_cli("dataset", str(DEMO), "-o", str(store), "--workers", "1", stdout=subprocess.DEVNULL,
+                     stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        wait_until(lambda: proc.poll() is not None or len(_markers(store)) >= 2, RUN_TIMEOUT,
+                   "two samples")
+        assert proc.poll() is None, "the run ended before it could be killed"
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        kill_group(proc)
+    status = np.asarray(zarr.open_group(str(store), mode="r")["status"][...])
+    first, second = np.flatnonzero(status == 1)[:2]
+    (removed,) = _sample_chunks(store, "deformation", int(first))
+    removed.unlink()
+    (truncated,) = _sample_chunks(store, "intensity", int(second))
+    truncated.write_bytes(truncated.read_bytes()[:10])
+    report = generate(spec, store, resume=True, scheduler=inproc)
+    assert report.repaired == 2 and report.done == spec.samples
+    assert_same_store(reference, store)
