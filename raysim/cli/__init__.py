@@ -28,7 +28,7 @@ from raysim.cli import (  # noqa: F401  (register commands)
     scenes,
     simulate,
 )
-from raysim.cli.common import app, error_line, say_error
+from raysim.cli.common import app, error_line, interrupt_notes, say_error
 from raysim.errors import RaysimError
 
 __all__ = ["app", "main"]
@@ -58,11 +58,14 @@ def _on_signal(signum: int, frame: object) -> None:
 _BLOCK_OPTIONS = ("--scheduler", "--workers", "--resume", "--block-size", "--threads")
 
 
-def interrupted_line(args: list[str], terminated: bool) -> str:
-    """The one line of an interrupted command: what stopped, and how to resume where it can."""
+def interrupted_line(args: list[str], terminated: bool, notes: list[str] | None = None) -> str:
+    """The one line of an interrupted command: what stopped (with the command's ``notes``),
+    and how to resume where it can."""
     name = next((a for a in args if not a.startswith("-")), "")
     what = f"raysim {name}".strip() + (" stopped by SIGTERM" if terminated else " stopped")
-    resumable = name == "dataset" or (name == "simulate" and any(
+    if notes:
+        what += f" ({'; '.join(notes)})"
+    resumable = name in ("dataset", "scan") or (name == "simulate" and any(
         a.split("=")[0] in _BLOCK_OPTIONS for a in args))
     return f"interrupted: {what}; resume with --resume" if resumable else f"interrupted: {what}"
 
@@ -112,5 +115,5 @@ def _interrupted(args: list[str], terminated: bool) -> None:
     signal while the line is printed changes nothing."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    say_error(interrupted_line(args, terminated), prefix="")
+    say_error(interrupted_line(args, terminated, interrupt_notes), prefix="")
     sys.exit(143 if terminated else 130)

@@ -46,6 +46,11 @@ def test_the_line_says_how_to_resume_only_where_resuming_exists(args, terminated
     assert interrupted_line(args, terminated) == line
 
 
+def test_a_command_adds_what_it_knows_to_the_line():
+    assert interrupted_line(["scan", "plan.toml", "-o", "o.nc"], True, ["3 of 9 steps are in o.journal"]) == \
+        "interrupted: raysim scan stopped by SIGTERM (3 of 9 steps are in o.journal); resume with --resume"
+
+
 @pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_a_signal_to_the_group_ends_simulate_on_workers_with_one_line(tmp_path, sig, status):
     scene = tmp_path / "s.toml"
