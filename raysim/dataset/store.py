@@ -252,6 +252,7 @@ class Writer:
 
     def __post_init__(self) -> None:
         self._arrays: dict[str, Any] = {}
+        self._names: list[str] | None = None
 
     def __getitem__(self, name: str) -> Any:
         if name not in self._arrays:
@@ -292,8 +293,9 @@ class Writer:
         if measured is not None:
             items["intensity_measured"] = measured
         self._put(index, items)
-        self["checksum"][index] = checksum({name: np.asarray(self[name][index])
-                                            for name in data_names(self.group)})
+        if self._names is None:  # the same for every sample of the store
+            self._names = data_names(self.group)
+        self["checksum"][index] = checksum({name: np.asarray(self[name][index]) for name in self._names})
         self["status"][index] = DONE
 
     def failed(self, index: int, reason: str, seconds: float = math.nan) -> None:
