@@ -330,3 +330,16 @@ def test_a_killed_and_corrupted_store_resumes_to_the_uninterrupted_one(reference
     report = generate(spec, store, resume=True, scheduler=inproc)
     assert report.repaired == 2 and report.done == spec.samples
     assert_same_store(reference, store)
+
+
+@pytest.mark.parametrize(("garbled", "message"), [("zarr.json", "not a Zarr store"),
+                                                  ("status/zarr.json", "its bookkeeping cannot be read")])
+def test_a_store_whose_metadata_cannot_be_read_is_refused_in_one_line(reference, spec, tmp_path, inproc,
+                                                                      garbled, message):
+    store = tmp_path / "garbled.zarr"
+    shutil.copytree(reference, store)
+    (store / garbled).write_text("{not json")
+    with pytest.raises(DatasetError, match=message) as info:
+        generate(spec, store, resume=True, scheduler=inproc)
+    assert str(store) in str(info.value) and "\n" not in str(info.value)
+    assert (store / garbled).read_text() == "{not json"  # left as it was, for the user to decide
