@@ -5,7 +5,7 @@
 - a Zarr (format 3) group whose attributes hold the format, the run's fingerprint and what it
   is made of (to say what differs when a resume is refused), the grid's point count and the
   block size; one float64 array per part of the engine, ``(n_points, *tail)``, one block per
-  chunk, so no two blocks share a chunk (Zarr writes each chunk file atomically);
+  chunk, so no two blocks share a chunk (a chunk torn by a kill fails its block's checksum);
 - ``context.json``: the context's attributes (the same from every worker), written before any
   block's marker;
 - ``blocks/NNNNNN.json``: the completion marker of each block, written last (atomically, by
