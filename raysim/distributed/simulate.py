@@ -154,6 +154,11 @@ def simulate(scene: Scene, output: str | Path, method: str | None = None, device
     created = not path.exists()
     store = _partial(path, job, description, resume)
     repaired = [] if created else store.verify()
+    if not created and store.context() is None and store.markers():
+        # the context's attributes come with every computed block: one block computed again
+        # brings back a context.json that was lost or torn
+        (store.path / "context.json").unlink(missing_ok=True)
+        repaired = repaired or [min(store.markers())]
     for index in repaired:  # a block whose data cannot be trusted is computed again
         store.reset(index)
     bounds = block_bounds(n_points, size)

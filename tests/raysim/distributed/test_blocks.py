@@ -221,3 +221,19 @@ def test_a_partial_store_with_unreadable_metadata_is_refused_in_one_line(scene, 
         simulate_blocks(scene, out, "po", scheduler=inproc, block_size=40, resume=True)
     assert str(path) in str(info.value) and "\n" not in str(info.value)
     assert path.exists()  # never destroyed: the user decides
+
+
+def test_a_resume_brings_back_a_torn_context(scene, single, inproc, tmp_path):
+    """Every block done and intact, but context.json torn: one block is computed again (it
+    brings the context) and the FieldMap is the single-process one."""
+    out = tmp_path / "field.nc"
+    job, description = scene_job(scene, "po", Options(), "cpu", 1, 40)
+    path = partial_path(out)
+    store = PartialStore.create(path, job.key, description, job.parts(), job.n_points, 40)
+    bounds = block_bounds(job.n_points, 40)
+    with connect(inproc) as cluster:
+        run_blocks(cluster.client, job, list(range(len(bounds))), bounds, store)
+    (path / "context.json").write_text('{"mesh": ')
+    ds = simulate_blocks(scene, out, "po", scheduler=inproc, block_size=40, resume=True)
+    assert_same_fieldmap(single["po"], ds)
+    assert (ds.attrs["blocks_repaired"], ds.attrs["blocks_computed"]) == (1, 1)
