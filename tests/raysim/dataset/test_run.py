@@ -278,8 +278,8 @@ def test_a_resume_recomputes_samples_whose_chunks_were_removed_or_truncated(refe
                                                                             inproc):
     """Kill-and-corrupt: a copy of the reference with samples 4.. pending (as a kill leaves
     them), sample 0's deformation chunk removed, sample 1's intensity chunk truncated to 10
-    bytes and sample 2's checksum removed; the resume finds the three, computes them again with
-    the pending ones, and the store is the uninterrupted one bit for bit."""
+    bytes, sample 2's checksum and the first frequency's ideal intensity removed; the resume finds the four,
+    computes them again with the pending ones, and the store is the uninterrupted one bit for bit."""
     store = tmp_path / "corrupt.zarr"
     shutil.copytree(reference, store)
     group = zarr.open_group(str(store), mode="r+")
@@ -290,10 +290,11 @@ def test_a_resume_recomputes_samples_whose_chunks_were_removed_or_truncated(refe
     (truncated,) = _sample_chunks(store, "intensity", 1)
     truncated.write_bytes(truncated.read_bytes()[:10])
     _sample_chunks(store, "checksum", 2)[0].unlink()
-    assert zstore.verify(zarr.open_group(str(store), mode="r+"), str(store)) == ([0, 1, 2], [])
+    _sample_chunks(store, "intensity_ideal", 0)[0].unlink()
+    assert zstore.verify(zarr.open_group(str(store), mode="r+"), str(store)) == ([0, 1, 2], [0])
     report = generate(spec, store, resume=True, scheduler=inproc)
-    assert (report.repaired, report.skipped, report.computed) == (3, 1, spec.samples - 1)
-    assert "3 done items failed verification and were recomputed" in report.summary()
+    assert (report.repaired, report.skipped, report.computed) == (4, 1, spec.samples - 1)
+    assert "4 done items failed verification and were recomputed" in report.summary()
     assert_same_store(reference, store)
 
 
