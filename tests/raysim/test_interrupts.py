@@ -110,3 +110,30 @@ def test_simulate_killed_then_corrupted_resumes_to_the_single_process_fieldmap(t
     assert "2 failed verification and were recomputed" in resumed.stdout
     assert run_cli("simulate", scene, "-o", single, timeout=300).code == 0
     assert_same_fieldmap(load(single), load(out))
+
+
+def test_ctrl_c_during_a_dataset_is_one_line_and_the_store_resumes(tmp_path):
+    """SIGINT to the group (client and its two local workers) once samples are done: one line,
+    status 130, no worker traceback; --resume completes the store."""
+    from raysim.dataset import load_spec
+
+    demo = Path(__file__).resolve().parents[2] / "scenes" / "dataset_demo.toml"
+    spec = tmp_path / "spec.toml"
+    spec.write_text(demo.read_text().replace("samples = 8", "samples = 60"))
+    store = tmp_path / "d.zarr"
+    args = ["dataset", spec, "-o", store, "--workers", "2"]
+    proc = popen_cli(*args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    status = store / "status" / "c"
+    try:
+        wait_until(lambda: proc.poll() is not None or (status.is_dir() and any(status.iterdir())), 240,
+                   "the first sample")
+        assert proc.poll() is None, "the run ended before it could be interrupted"
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        kill_group(proc)
+    assert proc.returncode == 130 and stdout == b""
+    assert stderr.decode().splitlines() == ["interrupted: raysim dataset stopped; resume with --resume"]
+    done = run_cli(*args, "--resume", timeout=300)
+    assert done.code == 0, done.stderr
+    assert f"{load_spec(spec).samples}/60 samples done" in done.stdout
