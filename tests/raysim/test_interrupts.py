@@ -137,3 +137,47 @@ def test_ctrl_c_during_a_dataset_is_one_line_and_the_store_resumes(tmp_path):
     done = run_cli(*args, "--resume", timeout=300)
     assert done.code == 0, done.stderr
     assert f"{load_spec(spec).samples}/60 samples done" in done.stdout
+
+
+def test_report_killed_or_terminated_leaves_no_staging_folder(tmp_path):
+    """SIGKILL mid-report leaves its staging folder .out.XXXX.tmp (nothing can catch it); the
+    next run removes it, and a SIGTERM ends that run with one line, status 143 and its own
+    staging removed; a last run writes the report."""
+    import numpy as np
+
+    from raysim.maps.fieldmap import fieldmap, save
+    from raysim.maps.sphere import SphereGrid, ideal_go_intensity
+
+    grid = SphereGrid(3.0, 45, 180)
+    t, p = np.meshgrid(grid.theta, grid.phi, indexing="ij")
+    ideal = ideal_go_intensity(t, 8.0, 3.0, 20.0)
+    field = tmp_path / "f.nc"
+    save(fieldmap(grid, ideal * (1 + 0.01 * np.cos(2 * p)), ideal, focal_length=8.0, diameter=20.0,
+                  frequency_hz=1e9, method="go", sampling="cell_mean"), field)
+    args = ["report", field, "-o", tmp_path / "out"]
+
+    def staged() -> set[Path]:
+        return set(tmp_path.glob(".out.*"))
+
+    def stop_once_staged(sig: int) -> tuple[int, str]:
+        """Start the report, send ``sig`` once a staging folder of its own exists."""
+        stale = staged()
+        proc = popen_cli(*args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+        try:
+            wait_until(lambda: proc.poll() is not None or bool(staged() - stale), 120, "the staging folder")
+            assert proc.poll() is None, "the report was written before it could be stopped"
+            proc.send_signal(sig)
+            _, stderr = proc.communicate(timeout=60)
+        finally:
+            kill_group(proc)
+        return proc.returncode, stderr.decode()
+
+    code, _ = stop_once_staged(signal.SIGKILL)
+    assert code == -signal.SIGKILL and len(staged()) == 1  # left behind: the next run's to remove
+    code, stderr = stop_once_staged(signal.SIGTERM)
+    assert code == 143 and "Traceback" not in stderr
+    assert stderr.splitlines()[-1] == "interrupted: raysim report stopped by SIGTERM"
+    assert staged() == set()
+    done = run_cli(*args, timeout=300)
+    assert done.code == 0, done.stderr
+    assert (tmp_path / "out" / "report.html").is_file() and staged() == set()
