@@ -34,10 +34,12 @@ from hardware.drift import DRIFT_MODES
 from hardware.errors import PlanError
 from hardware.rig import Rig, load_rig, rig_from_table
 from hardware.sim.settings import SimSettings, sim_settings_from_table
+from raysim.errors import SceneError
 from raysim.files import find_input
 from raysim.maps.probe import Probe
 from raysim.maps.sphere import SphereGrid
 from raysim.scene.obstacles import obstacles_of
+from raysim.scene.scene import check_frequency, check_sphere_cells
 from raysim.surface.obstacles import Obstacle, ObstacleMesh, obstacle_mesh
 
 SAMPLE = "sample"
@@ -256,6 +258,10 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
     frequency_hz = refl.number("frequency_hz", lo=0.0, lo_open=True)
     polarization = refl.angle("polarization_deg", 0.0, lo=-360.0, hi=360.0)
     refl.done()
+    try:  # the range of every frequency raysim reads
+        check_frequency(frequency_hz, "'reflector.frequency_hz'")
+    except SceneError as exc:
+        raise top.fail(str(exc)) from exc
     if rig.radius >= F:
         raise top.fail(f"the track radius {rig.radius:g} m must be below F = {F:g} m")
 
@@ -268,6 +274,10 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
     g.done()
     if phi_hi - phi_lo > 2 * math.pi + 1e-9:
         raise g.fail("'grid': the phi range exceeds 360 deg")
+    try:  # the same caps as a scene's sphere: a plan's points are its cells
+        check_sphere_cells(n_theta, n_phi, ("'grid' theta cells", "phi cells"))
+    except SceneError as exc:
+        raise g.fail(f"{exc}: coarser steps") from exc
     grid = SphereGrid(rig.radius, n_theta, n_phi, theta_lo, theta_hi, phi_lo, phi_hi)
 
     acq = top.sub("acquisition", required=False)

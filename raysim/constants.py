@@ -13,6 +13,11 @@ MU0 = 1.25663706212e-6  # vacuum permeability (H/m), CODATA 2018
 EPS0 = 1.0 / (MU0 * C0 * C0)  # vacuum permittivity (F/m), about 8.8542e-12
 ETA0 = MU0 * C0  # impedance of free space (Ohm), about 376.73
 
+#: the frequencies (Hz) raysim accepts anywhere (options, scenes, specs, files read back):
+#: microwaves of a radio telescope, 1 MHz .. 10 THz
+MIN_FREQUENCY_HZ = 1e6
+MAX_FREQUENCY_HZ = 1e13
+
 
 def wavelength(frequency_hz: float) -> float:
     """Free-space wavelength lambda = c / f (m) of a frequency in Hz."""
@@ -24,4 +29,5 @@ def wavenumber(frequency_hz: float) -> float:
     return 2.0 * math.pi * frequency_hz / C0
 
 
-__all__ = ["C0", "EPS0", "ETA0", "MU0", "wavelength", "wavenumber"]
+__all__ = ["C0", "EPS0", "ETA0", "MAX_FREQUENCY_HZ", "MIN_FREQUENCY_HZ", "MU0", "wavelength",
+           "wavenumber"]

@@ -8,14 +8,23 @@
   resolving symbolic links and relative paths), before any work is done.
 - :func:`new_file_mode` is the mode a new file gets under the process's umask (0644 under
   022), for files written through a private temporary file.
+- :func:`atomic_path` is the one way an output file is written: into a temporary file beside
+  it (``.NAME.XXXX.tmp``), flushed, then renamed over it, so that ``NAME`` is either the
+  previous file or the complete new one (a full disk, a kill, an interrupt leave the
+  previous state); :func:`write_bytes` and :func:`write_text` use it.
+  :func:`remove_stale` removes the temporary files and staging folders an earlier killed run
+  left beside an output.
 
 A leaf module: it imports nothing of raysim but the error base class.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
-from collections.abc import Iterable
+import shutil
+import tempfile
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from raysim.errors import RaysimError
@@ -102,12 +111,16 @@ def copy_example(name: str, folder: str | os.PathLike[str]) -> list[Path]:
         if (target / f.name).exists():
             raise RaysimError(f"{target / f.name}: exists; not overwritten (copy into another folder)")
     target.mkdir(parents=True, exist_ok=True)
-    written = []
-    for f in files:
-        dest = target / f.name
-        with open(dest, "x", encoding="utf-8") as fh:
-            fh.write(f.read_text(encoding="utf-8"))
-        written.append(dest)
+    written: list[Path] = []
+    try:
+        for f in files:
+            dest = target / f.name
+            write_text(dest, f.read_text(encoding="utf-8"))
+            written.append(dest)
+    except BaseException:  # all or nothing: a full disk leaves the folder as it was
+        for dest in written:
+            dest.unlink(missing_ok=True)
+        raise
     return written
 
 
@@ -183,3 +196,70 @@ def new_file_mode() -> int:
 def new_folder_mode() -> int:
     """Permission bits a newly created folder gets under the current umask (0o755 under 022)."""
     return 0o777 & ~_umask()
+
+
+def remove_stale(path: str | os.PathLike[str]) -> None:
+    """Remove what killed writers of ``path`` left beside it: temporary files and staging
+    folders ``.NAME.*.tmp`` and replaced folders ``.NAME.old-PID``."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        return
+    for pattern in (f".{path.name}.*.tmp", f".{path.name}.old-*"):
+        for stale in path.parent.glob(pattern):
+            if stale.is_dir() and not stale.is_symlink():
+                shutil.rmtree(stale, ignore_errors=True)
+            else:
+                with contextlib.suppress(OSError):
+                    stale.unlink()
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike[str], clean: bool = True) -> Iterator[Path]:
+    """A temporary file beside ``path`` to write; when the block completes it is flushed to
+    disk and renamed onto ``path`` (with the mode a new file gets), else removed.
+
+    ``path`` is never seen half-written: a full disk, a kill or an interrupt leave the
+    previous file (or none). An OSError (ENOSPC, EDQUOT, ...) is raised again naming
+    ``path``, which the CLI prints as one line. ``clean``: first remove what killed writers
+    left beside it (:func:`remove_stale`).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if clean:
+        remove_stale(path)
+    try:
+        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        yield tmp
+        os.chmod(tmp, new_file_mode())
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+        with contextlib.suppress(OSError):  # the rename itself on disk (not every FS allows it)
+            dir_fd = os.open(path.parent, os.O_RDONLY)
+            try:
+                os.fsync(dir_fd)
+            finally:
+                os.close(dir_fd)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
+    """Write ``data`` to ``path`` through :func:`atomic_path`; return the path."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
+def write_text(path: str | os.PathLike[str], text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` through :func:`atomic_path`; return the path."""
+    return write_bytes(path, text.encode("utf-8"))

@@ -130,6 +130,23 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
     return fieldmap_of(scene, method, run, deformed.F, deformed.D, attrs)
 
 
+def check_wave_size(method: str, diameter: float, frequency_hz: float,
+                    samples_per_wavelength: float | None = None) -> None:
+    """Refuse a wave computation whose memory would not fit, before any work (RaysimError,
+    one line): its size is PO's source samples per reflector, pi (D/2)^2 / (lambda/s)^2 for
+    a dish of diameter ``diameter`` (m) at ``frequency_hz`` (Hz) with ``s`` samples per
+    wavelength, at most :data:`MAX_PO_SAMPLES` (the one cap of simulate, datasets and the
+    inversion's wave models)."""
+    from raysim.constants import wavelength
+    from raysim.optics.po import DEFAULT_SAMPLES_PER_WAVELENGTH
+
+    spw = samples_per_wavelength or DEFAULT_SAMPLES_PER_WAVELENGTH
+    samples = math.pi * (diameter / 2) ** 2 / (wavelength(frequency_hz) / spw) ** 2
+    if not samples <= MAX_PO_SAMPLES:
+        raise RaysimError(f"{method} at {frequency_hz:g} Hz needs about {samples:.2g} source samples "
+                          f"per reflector (at most {MAX_PO_SAMPLES:.0g}): use go, or a lower frequency")
+
+
 def check_method(scene: Scene, method: str | None, options: Options,
                  device: str | None = None) -> str:
     """The method to run (``method``, else the scene's), its options and ``device`` (when
@@ -139,14 +156,7 @@ def check_method(scene: Scene, method: str | None, options: Options,
         raise RaysimError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
     _check_options(method, options)
     if method in ("po", "po+ptd") and scene.dish.diameter is not None:
-        from raysim.optics.po import DEFAULT_SAMPLES_PER_WAVELENGTH
-
-        spw = options.samples_per_wavelength or DEFAULT_SAMPLES_PER_WAVELENGTH
-        samples = math.pi * (scene.D / 2) ** 2 / (scene.source.wavelength / spw) ** 2
-        if samples > MAX_PO_SAMPLES:
-            raise RaysimError(f"{method} at {scene.source.frequency_hz:g} Hz needs about "
-                              f"{samples:.2g} source samples per reflector (at most "
-                              f"{MAX_PO_SAMPLES:.0g}): use go, or a lower frequency")
+        check_wave_size(method, scene.D, scene.source.frequency_hz, options.samples_per_wavelength)
     if device is not None:
         from raysim.optics.runtime import resolve_device
 

@@ -53,6 +53,9 @@ def parse_toml(text: str, source: str, error: type[RaysimError]) -> dict[str, An
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise error(f"{source}: not valid TOML ({' '.join(str(exc).split())})") from exc
+    except RecursionError:  # arrays or inline tables nested hundreds of levels deep
+        raise error(f"{source}: nested too deeply (arrays or inline tables within each other "
+                    "hundreds of levels down); no raysim file nests more than a few") from None
 
 
 def read_toml(path: str | Path, what: str, error: type[RaysimError]) -> tuple[dict[str, Any], str]:

@@ -471,6 +471,13 @@ def forward_for(model: str, attrs: dict, device: str | None = "cpu",
     frequency = float(attrs.get("frequency_hz", 0.0))
     if not frequency > 0:
         raise SolverError(f"model {model} needs the scan's frequency_hz (> 0), got {frequency}")
+    from raysim.errors import RaysimError
+    from raysim.simulate import check_wave_size
+
+    try:  # the engines' memory, before any work: the cap simulate has
+        check_wave_size(model, float(attrs.get("diameter", 0.0)), frequency, samples_per_wavelength)
+    except RaysimError as exc:
+        raise SolverError(str(exc)) from exc
     kind = GOEdgeForward if model == "go+edge" else WaveForward
     wave = kind(frequency, polarization,
                 total=str(attrs.get("field", "scattered")) == "total",

@@ -107,7 +107,9 @@ def estimate_gain(intensity: NDArray[np.float64], intensity_ideal: NDArray[np.fl
     A missing sample would drop its cell from both power sums and bias c by its FA; inside
     the ``n_rows`` usable rows it takes the inpainted ratio I / I_ideal, beyond them the
     ideal. The spread: c is a weighted sum of independent readings, so
-    var(c) = sum((A sigma_i)^2) / sum(A I_ideal)^2 with sigma_i = std_i or sqrt(v) I_i.
+    var(c) = sum((A sigma_i)^2) / sum(A I_ideal)^2 with sigma_i = std_i or sqrt(v) I_i (also
+    where std_i is NaN: one reading states no spread, never a spread of zero); NaN when the
+    noise is not known at all (v NaN): no standard error rather than a false one.
     """
     area = np.broadcast_to(sphere.cell_area(), intensity.shape)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -121,8 +123,10 @@ def estimate_gain(intensity: NDArray[np.float64], intensity_ideal: NDArray[np.fl
         return GainEstimate(scale, 0.0, 0.0)
     used = seen.copy()
     used[n_rows:] = False
-    sigma = (np.where(np.isfinite(intensity_std), intensity_std, 0.0) if intensity_std is not None
-             else np.sqrt(v) * np.where(seen, intensity, 0.0))
+    from_noise = np.sqrt(v) * np.where(seen, intensity, 0.0)  # NaN when v is unknown
+    # a point of one reading states no spread (NaN): its sigma comes from the noise v instead
+    sigma = (np.where(np.isfinite(intensity_std), intensity_std, from_noise) if intensity_std is not None
+             else from_noise)
     std = float(np.sqrt(np.sum((area * sigma)[used] ** 2))) / total
     coverage = float(np.sum((intensity_ideal * area)[used & np.isfinite(intensity_ideal)])) / total
     return GainEstimate(scale, std, coverage)

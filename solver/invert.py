@@ -243,14 +243,17 @@ def delta_c_mode(inverse: LinearInverse, refined: bool) -> NDArray[np.float64]:
 def measured_fa(scan: Scan, gain: GainChoice) -> MeasuredFA:
     """FA of the scan after the gain (trusted or estimated), with the noise bias removed."""
     n_rows = usable_rows(scan.sphere, scan.F, scan.D)
-    if scan.intensity_std is not None:
-        v = stated_noise_variance(scan.intensity, scan.intensity_std, n_rows)
+    stated = scan.intensity_std
+    if stated is not None and not np.any(np.isfinite(stated[:n_rows])):
+        stated = None  # one reading per point: no spread stated, the noise is estimated instead
+    if stated is not None:
+        v = stated_noise_variance(scan.intensity, stated, n_rows)
         source = "intensity_std"
     else:
         v = noise_variance(intensity_ratio_fa(scan.intensity, scan.intensity_ideal), n_rows)
         source = "estimated from second differences along phi"
     estimate = (estimate_gain(scan.intensity, scan.intensity_ideal, scan.sphere, n_rows, v,
-                              scan.intensity_std) if gain.estimated
+                              stated) if gain.estimated
                 else GainEstimate(1.0, 0.0, 1.0))
     fa = intensity_ratio_fa(scan.intensity / estimate.scale, scan.intensity_ideal)
     missing = int(np.count_nonzero(~np.isfinite(fa[:n_rows])))

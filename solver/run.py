@@ -7,6 +7,7 @@ adjustment table, and returns the SurfaceMap with a short human summary.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -103,8 +104,10 @@ def summary(result: xr.Dataset) -> list[str]:
         lines.append(f"gain known ({a['gain_choice']}): scale {a['gain']:.6f} trusted, delta_c "
                      "kept")
     else:
-        lines.append(f"gain ESTIMATED ({a['gain_choice']}): scale {a['gain']:.6f} +- "
-                     f"{a['gain_std']:.1e}, {100 * a['gain_coverage']:.1f} % of the power "
+        spread = (f"+- {a['gain_std']:.1e}" if math.isfinite(a["gain_std"])
+                  else "(no standard error: the readings' noise is unknown)")
+        lines.append(f"gain ESTIMATED ({a['gain_choice']}): scale {a['gain']:.6f} {spread}, "
+                     f"{100 * a['gain_coverage']:.1f} % of the power "
                      f"scanned; delta_c (the shape a scale error makes) is UNOBSERVABLE and "
                      f"removed: coefficient {a['removed_delta_c']:.3e} (an FA offset), "
                      f"{1e6 * a['removed_delta_c_centre_m']:.2f} um at the centre")

@@ -253,6 +253,7 @@ def workspace(tmp_path_factory):
     from solver.run import run_invert
 
     run_invert(ws / "f.nc", ws / "s.nc", N=32, refine=0)
+    _issue_32_files(ws)  # issue 32
     return ws
 
 
@@ -529,6 +530,78 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["paper", "--json", "/proc/raysim.json"], "cannot write in /proc"),
     ],
 }
+
+
+# --- issue 32: sizes without limits, nonsense read back from files, counts of 0 ---------------
+def _issue_32_files(ws: Path) -> None:
+    """The inputs of the issue-32 rows: a TOML nested 1000 deep, an STL with a NaN vertex (and
+    a scene naming it), FieldMaps whose attributes lie, plans too fine or at 1e30 Hz."""
+    import trimesh
+
+    from raysim.surface.mesh import paraboloid
+
+    (ws / "deep.toml").write_text("a = " + "[" * 1000 + "]" * 1000 + "\n")
+    dish = paraboloid(D, F, 2.0)
+    vertices = np.array(dish.vertices, dtype=np.float64)
+    vertices[len(vertices) // 2] = np.nan
+    trimesh.Trimesh(vertices, dish.faces, process=False).export(ws / "nan.stl")
+    (ws / "nan_mesh.toml").write_text(SCENE.replace("diameter_m = 20.0\nfocal_length_m = 8.0",
+                                                    'focal_length_m = 8.0\nmesh = "nan.stl"'))
+    for name, key, value in (("f_thz.nc", "frequency_hz", 1e13), ("f_1e30.nc", "frequency_hz", 1e30),
+                             ("f_magic.nc", "method", "magic")):
+        ds = _fieldmap()
+        ds.attrs[key] = value
+        ds.to_netcdf(ws / name)  # save() would refuse them
+    (ws / "plan_fine.toml").write_text(PLAN.replace("theta_step_deg = 20.0", "theta_step_deg = 0.001")
+                                       .replace("phi_step_deg = 90.0", "phi_step_deg = 0.001"))
+    (ws / "plan_1e30.toml").write_text(PLAN.replace("frequency_hz = 1.0e9", "frequency_hz = 1.0e30"))
+
+
+ISSUE_32: dict[str, list[tuple[list[str], str]]] = {
+    "simulate": [
+        (["simulate", "scene.toml", "-o", "o.nc", "--workers", "0"],
+         "--workers must be an integer in 1..1024, got 0"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--workers", "1", "--threads", "0"],
+         "--threads must be an integer in 1..256, got 0"),
+        (["simulate", "deep.toml", "-o", "o.nc"], "deep.toml: nested too deeply"),
+        (["simulate", "nan_mesh.toml", "-o", "o.nc"], "nan.stl: holds vertices that are not finite"),
+    ],
+    "invert": [
+        (["invert", "f_thz.nc", "-o", "o.nc", "--model", "po"], "source samples per reflector"),
+        (["invert", "f_thz.nc", "-o", "o.nc", "--model", "go+edge"], "source samples per reflector"),
+        (["invert", "f_1e30.nc", "-o", "o.nc"], "'frequency_hz' = 1e+30 Hz is outside"),
+        (["invert", "f_magic.nc", "-o", "o.nc"], "attribute 'method' must be one of"),
+    ],
+    "render": [
+        (["render", "f_magic.nc", "-o", "o.png"], "attribute 'method' must be one of"),
+    ],
+    "report": [
+        (["report", "f_1e30.nc", "-o", "rep_new"], "is outside 1e+06 .. 1e+13 Hz"),
+    ],
+    "check": [
+        (["check", "scene.toml", "-o", "rep_new", "--gap-m", "-0.01"],
+         "--gap-m must be a finite width >= 0 m, got -0.01"),
+        (["check", "nan.stl", "-o", "rep_new", "--frequency", "1e9"], "holds vertices that are not finite"),
+    ],
+    "dataset": [
+        (["dataset", "deep.toml", "-o", "d.zarr"], "nested too deeply"),
+    ],
+    "scan": [
+        (["scan", "plan_fine.toml", "-o", "o.nc", "--simulate", "f.nc"],
+         "'grid' theta cells must be an integer in 1..9000"),
+        (["scan", "plan_1e30.toml", "-o", "o.nc", "--simulate", "f.nc"], "'reflector.frequency_hz' = 1e+30"),
+    ],
+    "budget": [
+        (["budget", "plan_fine.toml"], "'grid' theta cells must be an integer in 1..9000"),
+        (["budget", "plan_1e30.toml"], "'reflector.frequency_hz' = 1e+30"),
+    ],
+    "campaign": [
+        (["campaign", "scene.toml", "plan_fine.toml", "-o", "c"], "'grid' theta cells must be an integer"),
+    ],
+}
+for _command, _rows in ISSUE_32.items():
+    CASES[_command].extend(_rows)
+# --- end of issue 32 -----------------------------------------------------------------------------
 
 
 def _snapshot(folder: Path) -> dict[str, bytes]:

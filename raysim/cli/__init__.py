@@ -12,6 +12,8 @@ bad file, an unreachable instrument) ends with exactly one line on stderr and ex
 
 from __future__ import annotations
 
+import logging
+import signal
 import sys
 
 import typer
@@ -28,7 +30,7 @@ from raysim.cli import (  # noqa: F401  (register commands)
     scenes,
     simulate,
 )
-from raysim.cli.common import app, error_line, say_error
+from raysim.cli.common import app, error_line, interrupt_notes, say_error
 from raysim.errors import RaysimError
 
 __all__ = ["app", "main"]
@@ -39,30 +41,81 @@ def _usage_error(exc: Exception) -> bool:
     return hasattr(exc, "format_message") and isinstance(getattr(exc, "exit_code", None), int)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is (so the same clean-up runs as for Ctrl-C)."""
+
+
+_received: list[int] = []  # the signals that interrupted this command
+
+
+def _on_signal(signum: int, frame: object) -> None:
+    """Record the signal, then raise where the program is (the framework turns a
+    KeyboardInterrupt into exit status 130 silently; the record says what happened)."""
+    _received.append(signum)
+    logging.disable(logging.CRITICAL)  # the cluster's complaints about workers going away
+    raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+#: options that make ``simulate`` resumable (its blocks on Dask)
+_BLOCK_OPTIONS = ("--scheduler", "--workers", "--resume", "--block-size", "--threads")
+
+
+def interrupted_line(args: list[str], terminated: bool, notes: list[str] | None = None) -> str:
+    """The one line of an interrupted command: what stopped (with the command's ``notes``),
+    and how to resume where it can."""
+    name = next((a for a in args if not a.startswith("-")), "")
+    what = f"raysim {name}".strip() + (" stopped by SIGTERM" if terminated else " stopped")
+    if notes:
+        what += f" ({'; '.join(notes)})"
+    resumable = name in ("dataset", "scan") or (name == "simulate" and any(
+        a.split("=")[0] in _BLOCK_OPTIONS for a in args))
+    return f"interrupted: {what}; resume with --resume" if resumable else f"interrupted: {what}"
+
+
 def main(argv: list[str] | None = None) -> None:
-    """Console-script entry point: user errors become one line and exit status 2."""
+    """Console-script entry point: user errors become one line and exit status 2; SIGINT
+    (Ctrl-C) and SIGTERM one line ``interrupted: ...`` and exit status 130 and 143, after the
+    clean-up of the running command (its ``finally`` blocks) has run."""
     command = typer.main.get_command(app)
     args = sys.argv[1:] if argv is None else list(argv)
+    if argv is None:  # the real command (not a test calling main in its own process)
+        signal.signal(signal.SIGTERM, _on_signal)
+        signal.signal(signal.SIGINT, _on_signal)
     try:
         code = command.main(args=args, prog_name="raysim", standalone_mode=False)
     except RaysimError as exc:
+        if _received:  # an error the interrupt itself caused
+            _interrupted(args, _received[0] == signal.SIGTERM)
         say_error(str(exc))
         sys.exit(2)
     except OSError as exc:
+        if _received:
+            _interrupted(args, _received[0] == signal.SIGTERM)
         name = f"{exc.filename}: " if exc.filename else ""
         say_error(f"{name}{exc.strerror or exc}")
         sys.exit(2)
-    except KeyboardInterrupt:
-        say_error("interrupted", prefix="")
-        sys.exit(130)
+    except KeyboardInterrupt as exc:
+        _interrupted(args, isinstance(exc, Terminated))
     except Exception as exc:
+        if _received:
+            _interrupted(args, _received[0] == signal.SIGTERM)
         if type(exc).__name__ == "Abort":  # Ctrl-C while the framework parsed or prompted
-            say_error("interrupted", prefix="")
-            sys.exit(130)
+            _interrupted(args, isinstance(exc.__context__, Terminated))
         if type(exc).__name__ == "NoArgsIsHelpError":  # help was shown
             sys.exit(0)
         if not _usage_error(exc):
             raise
         say_error(error_line(exc))
         sys.exit(2)
+    if _received:
+        _interrupted(args, _received[0] == signal.SIGTERM)
     sys.exit(code if isinstance(code, int) else 0)
+
+
+def _interrupted(args: list[str], terminated: bool) -> None:
+    """End an interrupted command: one line, 143 after SIGTERM, 130 after SIGINT; a second
+    signal while the line is printed changes nothing."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    say_error(interrupted_line(args, terminated, interrupt_notes), prefix="")
+    sys.exit(143 if terminated else 130)

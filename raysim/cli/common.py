@@ -47,6 +47,17 @@ def note(text: str) -> None:
     console.print(text, markup=False, highlight=False, soft_wrap=True)
 
 
+#: what the interrupted command adds to its one line ("12 of 40 steps are in J"), see
+#: :func:`raysim.cli.interrupted_line`
+interrupt_notes: list[str] = []
+
+
+def note_interrupt(text: str) -> None:
+    """Add ``text`` to the line an interrupt (SIGINT, SIGTERM) ends the command with; the
+    command then lets the KeyboardInterrupt go on."""
+    interrupt_notes.append(" ".join(text.split()))
+
+
 def say_error(message: str, prefix: str = "error:") -> None:
     """The one line of a failed command on stderr (the message collapsed onto one line)."""
     line = " ".join(str(message).split())

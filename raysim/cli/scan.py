@@ -13,7 +13,7 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
-from raysim.cli.common import app, output_path, progress_bar, say, say_error
+from raysim.cli.common import app, note_interrupt, output_path, progress_bar, say
 from raysim.errors import RaysimError
 
 rig_app = typer.Typer(help="The scanning rig (track, slider, rotation, power meter).",
@@ -65,7 +65,6 @@ def scan(
     Every completed sample is journaled to disk first; after a stop (Ctrl-C, kill, an
     instrument fault) the same command with --resume continues where it stopped.
     """
-    import signal
 
     from hardware.session import fieldmap_file_from_journal, journal_path, scan_files
 
@@ -80,10 +79,6 @@ def scan(
                "centre_offset": _vector3(centre_offset, "--centre-offset"), "time_scale": time_scale}
     done = [0, 0]
 
-    def on_signal(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, on_signal)
     columns = (TextColumn("scan"), BarColumn(), MofNCompleteColumn(), TextColumn("elapsed"),
                TimeElapsedColumn(), TextColumn("left"), TimeRemainingColumn())
     try:
@@ -101,13 +96,9 @@ def scan(
             result = scan_files(plan, output, rig=rig, journal=journal, resources=resource,
                                 simulate=simulate, resume=resume, sim_options=options,
                                 progress=progress)
-    except KeyboardInterrupt:
-        where = journal or journal_path(output)
-        say_error(f"{done[0]} of {done[1]} steps are in {where}; run the same command with "
-                  "--resume to continue", prefix="interrupted:")
-        raise typer.Exit(code=130) from None
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    except KeyboardInterrupt:  # SIGINT or SIGTERM: the one interrupt line (raysim.cli.main)
+        note_interrupt(f"{done[0]} of {done[1]} steps are in {journal or journal_path(output)}")
+        raise
     ds = result.fieldmap
     say(f"wrote {result.output}: {ds.attrs['samples_measured']} samples, "
         f"{result.steps_taken} of {result.steps_total} steps taken now (journal {result.journal})")

@@ -74,10 +74,14 @@ def simulate(
     method = method or loaded.method
     check_options(loaded, method=method, device=device, total=total, save_field=save_field,
                   samples_per_wavelength=samples_per_wavelength, edges=edges, fresnel=fresnel)
-    blocks = scheduler or workers or resume or block_size or threads
-    if blocks and fresnel:
-        from raysim.errors import RaysimError
+    from raysim.dataset.run import MAX_THREADS, MAX_WORKERS
+    from raysim.errors import RaysimError
 
+    for name, value, hi in (("--workers", workers, MAX_WORKERS), ("--threads", threads, MAX_THREADS)):
+        if value is not None and not 1 <= value <= hi:  # 0 is a count, not "off"
+            raise RaysimError(f"{name} must be an integer in 1..{hi}, got {value}")
+    blocks = scheduler or resume or any(v is not None for v in (workers, block_size, threads))
+    if blocks and fresnel:
         raise RaysimError("--fresnel runs in this process: drop --scheduler, --workers, --resume, "
                           "--block-size and --threads")
     output_path(output, loaded.inputs())
@@ -114,4 +118,6 @@ def _simulate_blocks(scene, output: Path, method: str, device: str, **options) -
         ds = run(scene, output, method, device, report, **options)
     a = ds.attrs
     say(f"{output}: {summary(ds)}; {a['blocks']} blocks on {a['workers']} workers "
-        f"({a['blocks_reused']} reused, {a['blocks_computed_twice']} computed twice)")
+        f"({a['blocks_reused']} reused, {a['blocks_computed_twice']} computed twice"
+        + (f", {a['blocks_repaired']} failed verification and were recomputed" if a.get("blocks_repaired")
+           else "") + ")")

@@ -43,6 +43,7 @@ class RunReport:
     seconds: float
     failures: tuple[tuple[int, str], ...]  # (sample, reason) of this run's failures, first 20
     ideal_failures: tuple[tuple[int, str], ...]  # (frequency index, reason)
+    repaired: int = 0  # done samples (and ideal intensities) that failed verification: recomputed
 
     @property
     def samples_per_second(self) -> float:
@@ -60,6 +61,8 @@ class RunReport:
             line += f"; {self.failed} failed (sample {index}: {reason})"
         if self.ideal_failures:
             line += f"; the ideal intensity failed ({self.ideal_failures[0][1]})"
+        if self.repaired:
+            line += f"; {self.repaired} done items failed verification and were recomputed"
         return line
 
 
@@ -75,8 +78,9 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
     workers : local worker processes (default: the usable cores divided by ``threads``).
     scheduler : address of a running Dask scheduler (``tcp://host:port``) instead of a
         local cluster; ``workers`` is then ignored.
-    resume : complete an existing store made by the same spec (done samples are kept,
-        pending and failed ones are computed); without it an existing path is refused.
+    resume : complete an existing store made by the same spec (done samples are kept once
+        they match their checksums, pending, failed and unverified ones are computed; see
+        :func:`raysim.dataset.store.verify`); without it an existing path is refused.
     device : Warp device of the traces (``cpu``; ``cuda`` on workers with a GPU).
     threads : CPU threads of each Warp launch in every worker (``RAYSIM_THREADS``). The
         result of a trace depends on it at round-off level, not on anything else, so a
@@ -91,6 +95,11 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
                       threads=threads, resume=resume)
     path = _store_path(store)
     group, created = _existing_store(path, spec, resume), False
+    repaired = 0
+    if group is not None:  # resume: data that fail their checksums are computed again
+        bad, ideal_bad = zstore.verify(group, path)
+        zstore.reset(group, bad, ideal_bad)
+        repaired = len(bad) + len(ideal_bad)
     if group is None:  # a new store: every sample and every frequency's ideal is pending
         pending, ideal_pending = np.arange(spec.samples), np.arange(len(spec.frequencies))
     else:
@@ -126,7 +135,7 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
         store=path, samples=spec.samples, done=int(np.sum(final == zstore.DONE)),
         failed=int(np.sum(final == zstore.FAILED)), computed=len(pending), skipped=skipped,
         workers=n_workers, seconds=time.perf_counter() - start, failures=tuple(failures[:20]),
-        ideal_failures=tuple(ideal_failures))
+        ideal_failures=tuple(ideal_failures), repaired=repaired)
 
 
 SampleReport = Callable[[int, int, int], None]  # (done in the store, failed this run, total)

@@ -17,14 +17,19 @@ Layout (Zarr format 3, every array with ``dimension_names`` and a ``units`` attr
   time) per sample.
 
 Every array a worker writes is chunked one sample per chunk, so workers never share a chunk.
-A sample's ``status`` is written after all its data: it is the completion marker ``resume``
-trusts. Attributes hold the spec and scene text, the spec's fingerprint, the FieldMap
+A sample's ``status`` is written after all its data and its ``checksum`` (SHA-256 of every
+per-sample data array, :func:`sample_checksum`): it is the completion marker, and ``resume``
+verifies every done sample against its checksum first (:func:`verify`; a chunk that does not
+decode, or was removed and reads as the fill value, fails), making the ones that fail
+pending again (:func:`reset`). ``intensity_ideal`` has ``ideal_checksum`` likewise.
+Attributes hold the spec and scene text, the spec's fingerprint, the FieldMap
 attributes (``focal_length``, ``diameter``, ``sphere_radius``, ``method``, ``sampling``, the
 sphere's edges) and the versions of the packages that made the store.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import platform
@@ -45,6 +50,9 @@ from raysim.dataset.store_layout import FORMAT, ArraySpec, layout
 from raysim.version import VERSION_ATTR, __version__
 
 PENDING, DONE, FAILED = 0, 1, 2
+#: per-sample arrays that record a run rather than a sample's data (not in its checksum)
+BOOKKEEPING = frozenset({"status", "error", "checksum", "seconds", "cpu_seconds", "finished"})
+_BATCH = 256  # samples read at once while verifying
 _PACKAGES = ("numpy", "warp-lang", "dask", "distributed", "zarr", "xarray")
 
 
@@ -141,6 +149,101 @@ def ideal_status(group: zarr.Group) -> np.ndarray:
     return np.asarray(group["ideal_status"][...])
 
 
+def data_names(group: zarr.Group) -> list[str]:
+    """The per-sample data arrays of a store (one sample per chunk, not bookkeeping), sorted."""
+    names = []
+    for name, arr in group.arrays():
+        dims = arr.metadata.dimension_names or ()
+        if (dims[:1] == ("sample",) and arr.chunks[0] == 1 and name not in BOOKKEEPING
+                and np.dtype(arr.dtype).kind in "biuf"):
+            names.append(name)
+    return sorted(names)
+
+
+def checksum(values: dict[str, np.ndarray]) -> str:
+    """SHA-256 (hex) of named arrays: each name, then its values' bytes in C order."""
+    sha = hashlib.sha256()
+    for name in sorted(values):
+        sha.update(name.encode())
+        sha.update(np.ascontiguousarray(values[name]).tobytes())
+    return sha.hexdigest()
+
+
+def sample_checksum(group: zarr.Group, index: int, names: list[str] | None = None) -> str:
+    """The checksum of sample ``index`` as stored (its data arrays read back)."""
+    names = data_names(group) if names is None else names
+    return checksum({name: np.asarray(group[name][index]) for name in names})
+
+
+def verify(group: zarr.Group, path: str) -> tuple[list[int], list[int]]:
+    """The done samples, and the done ideal intensities, whose stored data do not match
+    their checksums (or do not decode). A store that records no checksums, or whose
+    bookkeeping cannot be read, is refused (DatasetError, one line naming it)."""
+    try:
+        if "checksum" not in group or "ideal_checksum" not in group:
+            raise DatasetError(f"{path}: records no checksums (made by an older raysim), so its samples "
+                               "cannot be verified: make it again at a new store path")
+        names = data_names(group)
+        done = np.flatnonzero(status(group) == DONE)
+        sums = _read_each(group["checksum"], done)
+        arrays = {name: group[name] for name in names}
+        ideal_done = np.flatnonzero(ideal_status(group) == DONE)
+        ideal_sums = _read_each(group["ideal_checksum"], ideal_done)
+        ideal_values = _read_each(group["intensity_ideal"], ideal_done)
+    except DatasetError:
+        raise
+    except Exception as exc:
+        raise DatasetError(f"{path}: its bookkeeping cannot be read ({type(exc).__name__}); "
+                           "make it again at a new store path") from exc
+    bad = []
+    for lo in range(0, len(done), _BATCH):
+        batch = done[lo:lo + _BATCH]
+        read = {name: _read_each(arr, batch) for name, arr in arrays.items()}
+        for k, index in enumerate(batch.tolist()):
+            values = {name: read[name][k] for name in names}
+            if any(v is None for v in values.values()) or sums[lo + k] != checksum(values):
+                bad.append(index)
+    ideal_bad = [int(f) for f, v, s in zip(ideal_done, ideal_values, ideal_sums, strict=True)
+                 if v is None or s != checksum({"intensity_ideal": v})]
+    return bad, ideal_bad
+
+
+def _read_each(arr: Any, indices: np.ndarray) -> list[Any]:
+    """``arr[i]`` for each index (None where its chunk does not decode): one read of the
+    range when it decodes, else one per index."""
+    if not len(indices):
+        return []
+    lo, hi = int(indices[0]), int(indices[-1]) + 1
+    try:
+        block = np.asarray(arr[lo:hi])
+        return [np.asarray(block[i - lo]) for i in indices.tolist()]
+    except Exception:
+        out: list[Any] = []
+        for i in indices.tolist():
+            try:
+                out.append(np.asarray(arr[i]))
+            except Exception:
+                out.append(None)
+        return out
+
+
+def reset(group: zarr.Group, samples: list[int], ideals: list[int]) -> None:
+    """Make samples and ideal intensities pending again: the marker first, then their data
+    chunks written as the fill value (which removes them), so that a recomputation gives the
+    store an uninterrupted run would have."""
+    names = [*data_names(group), "checksum"]
+    for index in samples:
+        group["status"][index] = PENDING
+        for name in names:
+            arr = group[name]
+            arr[index] = arr.metadata.fill_value
+    for f in ideals:
+        group["ideal_status"][f] = PENDING
+        for name in ("intensity_ideal", "ideal_checksum"):
+            arr = group[name]
+            arr[f] = arr.metadata.fill_value
+
+
 @dataclass
 class Writer:
     """Writes one process's samples into an open store (array handles cached)."""
@@ -149,6 +252,7 @@ class Writer:
 
     def __post_init__(self) -> None:
         self._arrays: dict[str, Any] = {}
+        self._names: list[str] | None = None
 
     def __getitem__(self, name: str) -> Any:
         if name not in self._arrays:
@@ -189,6 +293,9 @@ class Writer:
         if measured is not None:
             items["intensity_measured"] = measured
         self._put(index, items)
+        if self._names is None:  # the same for every sample of the store
+            self._names = data_names(self.group)
+        self["checksum"][index] = checksum({name: np.asarray(self[name][index]) for name in self._names})
         self["status"][index] = DONE
 
     def failed(self, index: int, reason: str, seconds: float = math.nan) -> None:
@@ -202,6 +309,8 @@ class Writer:
         """The ideal intensity of frequency ``f_index`` (or its failure), then its marker."""
         if intensity is not None:
             self["intensity_ideal"][f_index] = intensity
+            stored = np.asarray(self["intensity_ideal"][f_index])
+            self["ideal_checksum"][f_index] = checksum({"intensity_ideal": stored})
             self["ideal_status"][f_index] = DONE
         else:
             self["ideal_error"][f_index] = " ".join(reason.split())[:500]
@@ -245,5 +354,6 @@ def exists(path: str) -> bool:
     return "://" not in path and Path(path).exists()
 
 
-__all__ = ["DONE", "FAILED", "PENDING", "ArraySpec", "Writer", "create", "exists", "ideal_status",
-           "open_checked", "open_readonly", "status", "versions"]
+__all__ = ["DONE", "FAILED", "PENDING", "ArraySpec", "Writer", "checksum", "create", "data_names",
+           "exists", "ideal_status", "open_checked", "open_readonly", "reset", "sample_checksum",
+           "status", "verify", "versions"]

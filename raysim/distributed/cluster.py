@@ -145,9 +145,10 @@ def _local(workers: int | None, threads: int, device: str, tasks: int | None) ->
     try:
         with warnings.catch_warnings():  # the scheduler's HTTP port taken: it picks another
             warnings.filterwarnings("ignore", message="Port .* is already in use")
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                   dashboard_address=None, silence_logs=logging.ERROR,
-                                   env={"RAYSIM_THREADS": str(threads)})
+            with _workers_ignore_sigint():
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                       host="127.0.0.1", dashboard_address=None,
+                                       silence_logs=logging.ERROR, env={"RAYSIM_THREADS": str(threads)})
     except (RuntimeError, OSError) as exc:
         raise ClusterError(f"could not start a local Dask cluster of {n} workers ({_reason(exc)})") from exc
     try:
@@ -159,6 +160,28 @@ def _local(workers: int | None, threads: int, device: str, tasks: int | None) ->
             _stop_workers(cluster)
     finally:
         cluster.close()
+
+
+@contextlib.contextmanager
+def _workers_ignore_sigint() -> Iterator[None]:
+    """Start local worker processes with SIGINT ignored (they inherit it through exec).
+
+    Ctrl-C reaches the whole foreground process group: the client alone should stop, and it
+    stops the workers quietly as it leaves; a worker that took the KeyboardInterrupt would
+    print its own tracebacks. Only the main thread can change a handler: elsewhere, nothing
+    changes.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _stop_workers(cluster: Any, timeout_s: float = 30.0) -> None:

@@ -5,22 +5,27 @@
 - a Zarr (format 3) group whose attributes hold the format, the run's fingerprint and what it
   is made of (to say what differs when a resume is refused), the grid's point count and the
   block size; one float64 array per part of the engine, ``(n_points, *tail)``, one block per
-  chunk, so no two blocks share a chunk (Zarr writes each chunk file atomically);
+  chunk, so no two blocks share a chunk (a chunk torn by a kill fails its block's checksum);
 - ``context.json``: the context's attributes (the same from every worker), written before any
   block's marker;
 - ``blocks/NNNNNN.json``: the completion marker of each block, written last (atomically, by
-  rename) with the block's figures, the digest of the elements that made it and ``count``,
-  how many times the block was computed and written (1; more only if two workers ran it at
-  once, which the FieldMap records as ``blocks_computed_twice``).
+  rename) with the block's figures, the digest of the elements that made it, ``sha256`` (per
+  part, the SHA-256 of the block's float64 values in C order, as written) and ``count``, how
+  many times the block was computed and written (1; more only if two workers ran it at once,
+  which the FieldMap records as ``blocks_computed_twice``).
 
-A block whose marker exists is never computed again: a killed client or worker resumes
-from the markers, and a worker handed a block already marked (Dask rerunning a task whose
-result was lost with its worker) skips it.
+A block whose marker exists is not computed again: a killed client or worker resumes from
+the markers, and a worker handed a block already marked (Dask rerunning a task whose result
+was lost with its worker) skips it. A resume first re-reads every marked block
+(:meth:`PartialStore.verify`): one that does not decode, has the wrong shape, or whose values
+do not match its checksum (a chunk file removed reads as NaN) loses its marker and its chunks
+and is computed again (:meth:`PartialStore.reset`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
 import shutil
@@ -32,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from raysim.distributed.cluster import ClusterError
+from raysim.files import atomic_path
 
 FORMAT = 1
 SUFFIX = ".partial.zarr"
@@ -97,7 +103,13 @@ class PartialStore:
         if made != FORMAT:
             raise ClusterError(f"{path}: not a raysim partial store of format {FORMAT}; delete it "
                                "to start again")
-        store = cls(path, group)
+        try:
+            store = cls(path, group)
+            for name in store.parts:
+                store._array(name)
+        except (KeyError, TypeError, ValueError, OSError) as exc:
+            raise ClusterError(f"{path}: its metadata cannot be read ({type(exc).__name__}: {exc}); "
+                               "delete it to start again") from exc
         if fingerprint is not None and store.fingerprint != fingerprint:
             theirs = dict(group.attrs.get("fingerprint_parts", {}))
             ours = description or {}
@@ -141,16 +153,49 @@ class PartialStore:
     def write(self, index: int, arrays: dict[str, np.ndarray], record: dict) -> int:
         """Write block ``index``'s arrays, then its marker; return its computation count."""
         lo, hi = self.bounds(index)
+        sums = {}
         for name, tail in self.parts.items():
             values = np.asarray(arrays[name], dtype=np.float64)
             if values.shape != (hi - lo, *tail):
                 raise ClusterError(f"block {index}: part {name!r} has shape {values.shape}, "
                                    f"expected {(hi - lo, *tail)}")
             self._array(name)[lo:hi] = values
+            sums[name] = checksum(values)
         previous = self.marker(index)
         count = 1 + (int(previous["count"]) if previous else 0)
-        _write_json(self._marker(index), {**record, "index": index, "count": count})
+        _write_json(self._marker(index), {**record, "index": index, "count": count, "sha256": sums})
         return count
+
+    def intact(self, index: int, record: dict) -> bool:
+        """Whether block ``index``'s stored values decode, have their shape and match the
+        checksums of its marker ``record`` (a marker without them cannot be trusted)."""
+        sums = record.get("sha256")
+        if not isinstance(sums, dict) or set(sums) != set(self.parts):
+            return False
+        lo, hi = self.bounds(index)
+        for name, tail in self.parts.items():
+            try:
+                values = np.asarray(self._array(name)[lo:hi])
+            except Exception:  # a truncated or garbled chunk: its codec's error
+                return False
+            if values.shape != (hi - lo, *tail) or checksum(values) != sums[name]:
+                return False
+        return True
+
+    def verify(self) -> list[int]:
+        """The marked blocks that fail :meth:`intact` (and markers outside the grid), sorted."""
+        return sorted(i for i, record in self.markers().items()
+                      if not 0 <= i < self.n_blocks or not self.intact(i, record))
+
+    def reset(self, index: int) -> None:
+        """Make block ``index`` pending again: its marker first, then its chunks (written as
+        the fill value, which removes them)."""
+        self._marker(index).unlink(missing_ok=True)
+        if not 0 <= index < self.n_blocks:
+            return
+        lo, hi = self.bounds(index)
+        for name, tail in self.parts.items():
+            self._array(name)[lo:hi] = np.full((hi - lo, *tail), np.nan)
 
     def _array(self, name: str) -> Any:
         if name not in self._arrays:
@@ -177,11 +222,15 @@ class PartialStore:
         shutil.rmtree(self.path, ignore_errors=True)
 
 
+def checksum(values: np.ndarray) -> str:
+    """SHA-256 (hex) of ``values`` as float64 in C order: what a marker records per part."""
+    return hashlib.sha256(np.ascontiguousarray(values, dtype=np.float64).tobytes()).hexdigest()
+
+
 def _write_json(path: Path, value: dict) -> None:
     """Write ``value`` to ``path`` atomically (a reader sees the old file or the new one)."""
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}")
-    tmp.write_text(json.dumps(value, sort_keys=True, allow_nan=True, default=_plain))
-    os.replace(tmp, path)
+    with atomic_path(path, clean=False) as tmp:
+        tmp.write_text(json.dumps(value, sort_keys=True, allow_nan=True, default=_plain))
 
 
 def _plain(value: Any) -> Any:

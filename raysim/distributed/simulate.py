@@ -40,7 +40,7 @@ from raysim.version import __version__
 FORMAT = 1
 #: FieldMap attributes that describe a run rather than its result (they differ between runs)
 RUN_ATTRS = ("created", "seconds_mesh", "seconds_total", "seconds_edges", "pair_rate", "workers",
-             "scheduler", "blocks", "block_size", "blocks_reused", "blocks_computed",
+             "scheduler", "blocks", "block_size", "blocks_reused", "blocks_computed", "blocks_repaired",
              "blocks_computed_twice", "block_element_sets", "seconds_blocks", "seconds_blocks_cpu",
              "seconds_context", "seconds_context_total")
 
@@ -130,6 +130,8 @@ def simulate(scene: Scene, output: str | Path, method: str | None = None, device
     cuda); ``threads`` (CPU threads of each Warp launch in a worker); ``resume`` (complete the
     partial store an interrupted run left; without it an existing one is refused);
     ``block_size`` (points per block, a multiple of 4; default 1024 on the CPU, 32768 on CUDA);
+    a resume first verifies every finished block against its checksums and computes again the
+    ones that fail (``blocks_repaired`` in the FieldMap's attributes);
     ``progress(stage, fraction)`` over blocks (:mod:`raysim.progress`; the stage reads
     ``N of M blocks``).
     """
@@ -151,6 +153,14 @@ def simulate(scene: Scene, output: str | Path, method: str | None = None, device
     path = partial_path(output)
     created = not path.exists()
     store = _partial(path, job, description, resume)
+    repaired = [] if created else store.verify()
+    if not created and store.context() is None and store.markers():
+        # the context's attributes come with every computed block: one block computed again
+        # brings back a context.json that was lost or torn
+        (store.path / "context.json").unlink(missing_ok=True)
+        repaired = repaired or [min(store.markers())]
+    for index in repaired:  # a block whose data cannot be trusted is computed again
+        store.reset(index)
     bounds = block_bounds(n_points, size)
     run = _Run(len(bounds), len(store.markers()), progress)
     pending = [i for i in range(len(bounds)) if store.marker(i) is None]
@@ -168,7 +178,7 @@ def simulate(scene: Scene, output: str | Path, method: str | None = None, device
     ds = _fieldmap(scene, method, options, store, device)
     ds.attrs.update({"seconds_total": time.perf_counter() - start, "workers": cluster_workers,
                      "scheduler": address, "blocks_reused": run.reused,
-                     "blocks_computed": run.computed})
+                     "blocks_computed": run.computed, "blocks_repaired": len(repaired)})
     from raysim.maps.fieldmap import save
 
     save(ds, output)

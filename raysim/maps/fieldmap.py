@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from raysim.constants import MAX_FREQUENCY_HZ, MIN_FREQUENCY_HZ
 from raysim.errors import FieldMapError
 from raysim.maps.netcdf import canonical_order, read, write_atomic
 from raysim.maps.sphere import SphereGrid
@@ -178,6 +179,12 @@ def validate(ds: xr.Dataset, source: str = "FieldMap") -> xr.Dataset:
     if not (frequency > 0 and np.isfinite(frequency)):
         raise FieldMapError(f"{source}: attribute 'frequency_hz' must be a finite frequency > 0 Hz, "
                             f"got {frequency}")
+    if not MIN_FREQUENCY_HZ <= frequency <= MAX_FREQUENCY_HZ:
+        raise FieldMapError(f"{source}: attribute 'frequency_hz' = {frequency:g} Hz is outside "
+                            f"{MIN_FREQUENCY_HZ:g} .. {MAX_FREQUENCY_HZ:g} Hz (1 MHz .. 10 THz)")
+    if ds.attrs["method"] not in METHODS:
+        raise FieldMapError(f"{source}: attribute 'method' must be one of {', '.join(METHODS)}, "
+                            f"got {ds.attrs['method']!r}")
     if ds.attrs["sampling"] not in SAMPLINGS:
         raise FieldMapError(f"{source}: attribute 'sampling' must be one of {', '.join(SAMPLINGS)}, "
                             f"got {ds.attrs['sampling']!r}")

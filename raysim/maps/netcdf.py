@@ -9,13 +9,12 @@ An operating-system failure names the target, never the temporary file.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
-from raysim.files import new_file_mode
+from raysim.files import atomic_path
 
 
 def canonical_order(ds: xr.Dataset, dims: tuple[str, str], unit: str, source: str,
@@ -56,26 +55,8 @@ def read(path: str | os.PathLike[str], error: type[Exception]) -> xr.Dataset:
 
 
 def write_atomic(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
-    """Write ``ds`` to ``path`` as NetCDF-4 so that ``path`` is either old or complete."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
+    """Write ``ds`` to ``path`` as NetCDF-4 so that ``path`` is either old or complete
+    (:func:`raysim.files.atomic_path`)."""
+    with atomic_path(path) as tmp:
         ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
-        os.chmod(tmp, new_file_mode())
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-        dir_fd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dir_fd)
-        finally:
-            os.close(dir_fd)
-    except OSError as exc:
-        Path(tmp).unlink(missing_ok=True)
-        raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return Path(path)

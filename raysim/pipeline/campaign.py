@@ -37,6 +37,7 @@ import numpy as np
 
 from hardware.plan import ScanPlan, load_plan
 from hardware.session import scan
+from raysim.files import write_text
 from raysim.maps import fieldmap as fieldmaps
 from raysim.maps import surfacemap as surfacemaps
 from raysim.pipeline.budget import budget_rows
@@ -140,7 +141,7 @@ def run_campaign(scene_path: str | os.PathLike[str], plan_path: str | os.PathLik
         if scene.panels is not None:
             lines += correction_lines(scene, plan, surface, tmp / "commands.csv", noise, k, rim,
                                       rim_std, refine)
-        (tmp / "campaign.txt").write_text("\n".join(lines) + "\n", encoding="utf-8")
+        write_text(tmp / "campaign.txt", "\n".join(lines) + "\n")
     report("done", 1.0)
     return replace(result, lines=tuple(lines))
 

@@ -286,10 +286,11 @@ def _inputs(source) -> list[tuple[str, Path]]:
 
 def save(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
     """Write the check dataset to NetCDF (atomically: a temporary file renamed)."""
+    from raysim.files import atomic_path
+
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    ds.to_netcdf(tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp)
     return path
 
 

@@ -244,6 +244,8 @@ def with_gap(dish: Dish, gap: float | None) -> Dish:
     """The dish with panel gaps ``gap`` (m): the scene's layout, or :func:`default_layout`."""
     if gap is None:
         return dish
+    if not math.isfinite(gap) or gap < 0:
+        raise CheckError(f"--gap-m must be a finite width >= 0 m, got {gap:g}")
     if dish.is_mesh:
         raise CheckError("--gap-m applies to a generated dish: a mesh file's gaps are in the file")
     layout = dish.go.panels or default_layout(dish.D, gap)

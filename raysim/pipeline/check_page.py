@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from raysim.files import write_bytes, write_text
 from raysim.pipeline.check_verdict import summary_rows, verdict_lines
 from raysim.pipeline.report import PAGE_STYLE, figure_html, png_bytes
 from raysim.render import backend
@@ -31,10 +32,10 @@ def write_page(ds: xr.Dataset, out: Path) -> Path:
     blocks = []
     for name, caption, fig in _figures(ds):
         png = png_bytes(backend.figure_image(fig))
-        (out / "figures" / f"{name}.png").write_bytes(png)
+        write_bytes(out / "figures" / f"{name}.png", png)
         blocks.append((name, figure_html(name, caption, png)))
     path = out / "check.html"
-    path.write_text(_page(ds, dict(blocks)), encoding="utf-8")
+    write_text(path, _page(ds, dict(blocks)))
     return path
 
 

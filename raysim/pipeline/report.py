@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from raysim.files import write_bytes, write_text
 from raysim.progress import Progress, silent
 from raysim.render import backend, figures
 from raysim.render.backend import RenderError
@@ -148,9 +149,10 @@ def staging(target: Path) -> Iterator[Path]:
     import shutil
     import tempfile
 
-    from raysim.files import new_folder_mode
+    from raysim.files import new_folder_mode, remove_stale
 
     target.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale(target)  # what a killed run left
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
     try:
         yield tmp
@@ -198,16 +200,12 @@ def write_report(field: xr.Dataset, surface: xr.Dataset | None, out_dir: str | o
     blocks = []
     for name, caption, image in items:
         png = png_bytes(image)
-        (out / "figures" / f"{name}.png").write_bytes(png)
+        write_bytes(out / "figures" / f"{name}.png", png)
         blocks.append(figure_html(name, caption, png))
     blocks += correction_section(field, surface, out)
     times = {**(timings or {}), "draw": seconds_draw}
     page = _page(field, surface, blocks, times)
-    path = out / "report.html"
-    tmp = path.with_suffix(".html.tmp")
-    tmp.write_text(page, encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    return write_text(out / "report.html", page)
 
 
 # --- the figures -----------------------------------------------------------------------------

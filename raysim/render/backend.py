@@ -173,9 +173,11 @@ def write_png(image: Any, output: str | os.PathLike[str]) -> Path:
     """Write an RGB(A) uint8 image array as PNG, creating the folder."""
     from matplotlib.image import imsave
 
+    from raysim.files import atomic_path
+
     path = Path(output)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    imsave(path, image, format="png")
+    with atomic_path(path) as tmp:
+        imsave(tmp, image, format="png")
     return path
 
 

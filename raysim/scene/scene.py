@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from raysim.constants import wavelength
+from raysim.constants import MAX_FREQUENCY_HZ, MIN_FREQUENCY_HZ, wavelength
 from raysim.errors import SceneError
 from raysim.files import find_input
 from raysim.maps.probe import IDEAL, PROBE_KEYS, Probe, probe_from_table
@@ -284,7 +284,7 @@ def check_frequency(f: float, name: str) -> None:
     """Refuse a frequency (Hz) that is not a finite microwave one (1 MHz .. 10 THz)."""
     if not math.isfinite(f) or not f > 0:
         raise SceneError(f"{name} must be a finite frequency > 0 Hz, got {f:g}")
-    if f < 1e6:
+    if f < MIN_FREQUENCY_HZ:
         raise SceneError(f"{name} = {f:g} is in Hz: {f:g} Hz is not a microwave; "
                          f"for {f:g} GHz write {f * 1e9:g}")
     if f > MAX_FREQUENCY_HZ:
@@ -292,7 +292,6 @@ def check_frequency(f: float, name: str) -> None:
                          "not a radio telescope's frequency")
 
 
-MAX_FREQUENCY_HZ = 1e13
 
 
 def _source(t: Table) -> Source:

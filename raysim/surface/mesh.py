@@ -358,11 +358,14 @@ def _read_mesh(path: str | Path, unit: float):
     if not path.is_file():
         raise MeshError(f"{path}: no such mesh file")
     try:
-        mesh = trimesh.load(path, force="mesh", process=True)
+        mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many kinds for unreadable files
         raise MeshError(f"{path}: trimesh cannot read it ({exc.__class__.__name__}: {exc})") from exc
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise MeshError(f"{path}: holds no triangles")
+    if not np.all(np.isfinite(np.asarray(mesh.vertices))):  # processing would drop them silently
+        raise MeshError(f"{path}: holds vertices that are not finite numbers (NaN or infinite)")
+    mesh.process()  # what loading with process=True does: merge duplicate vertices
     mesh.apply_scale(unit)
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     if not np.all(np.isfinite(vertices)):

@@ -120,3 +120,22 @@ def test_the_gain_estimate_states_its_own_spread(paper_field, sphere):
         scales.append(g.scale)
         stds.append(g.std)
     assert np.std(scales, ddof=1) == pytest.approx(np.mean(stds), rel=0.35)
+
+
+def test_one_reading_per_point_still_states_the_spread_of_the_noise(paper_field, sphere):
+    """A scan of one reading per point has intensity_std NaN everywhere (no spread from one
+    reading): the stated std comes from the noise v, as without intensity_std, never 0."""
+    clean = paper_field["intensity"].values
+    ideal = paper_field["intensity_ideal"].values
+    rel = 0.01 * np.log(10) / 10
+    rng = np.random.default_rng(4)
+    unstated = np.full_like(clean, np.nan)
+    scales, stds = [], []
+    for _ in range(24):
+        noisy = clean * (1 + rel * rng.standard_normal(clean.shape))
+        g = estimate_gain(noisy, ideal, sphere, 79, rel**2, unstated)
+        scales.append(g.scale)
+        stds.append(g.std)
+    assert min(stds) > 0
+    assert np.std(scales, ddof=1) == pytest.approx(np.mean(stds), rel=0.35)
+    assert np.isnan(estimate_gain(noisy, ideal, sphere, 79, np.nan, unstated).std)  # noise unknown: none

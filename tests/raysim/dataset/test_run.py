@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import signal
 import subprocess
 import time
@@ -22,6 +23,7 @@ from raysim.dataset import (
     sample_fieldmap,
     sample_intensity,
 )
+from raysim.dataset import store as zstore
 from raysim.dataset import worker as dataset_worker
 from raysim.dataset.models import RimAstigmatism
 from raysim.maps.fieldmap import validate
@@ -265,3 +267,80 @@ def test_separate_scheduler_and_worker_with_a_worker_killed(reference, spec, tmp
         assert run.returncode == 0, err
         assert f"{spec.samples}/{spec.samples} samples done" in out and "on 1 workers" in out
         assert_same_store(reference, store)
+
+
+def _sample_chunks(path: Path, name: str, index: int) -> list[Path]:
+    first = path / name / "c" / str(index)
+    return [first] if first.is_file() else sorted(f for f in first.rglob("*") if f.is_file())
+
+
+def test_a_resume_recomputes_samples_whose_chunks_were_removed_or_truncated(reference, spec, tmp_path,
+                                                                            inproc):
+    """Kill-and-corrupt: a copy of the reference with samples 4.. pending (as a kill leaves
+    them), sample 0's deformation chunk removed, sample 1's intensity chunk truncated to 10
+    bytes, sample 2's checksum and the first frequency's ideal intensity removed; the resume finds the four,
+    computes them again with the pending ones, and the store is the uninterrupted one bit for bit."""
+    store = tmp_path / "corrupt.zarr"
+    shutil.copytree(reference, store)
+    group = zarr.open_group(str(store), mode="r+")
+    for i in range(4, spec.samples):
+        group["status"][i] = 0
+    (removed,) = _sample_chunks(store, "deformation", 0)
+    removed.unlink()
+    (truncated,) = _sample_chunks(store, "intensity", 1)
+    truncated.write_bytes(truncated.read_bytes()[:10])
+    _sample_chunks(store, "checksum", 2)[0].unlink()
+    _sample_chunks(store, "intensity_ideal", 0)[0].unlink()
+    assert zstore.verify(zarr.open_group(str(store), mode="r+"), str(store)) == ([0, 1, 2], [0])
+    report = generate(spec, store, resume=True, scheduler=inproc)
+    assert (report.repaired, report.skipped, report.computed) == (4, 1, spec.samples - 1)
+    assert "4 done items failed verification and were recomputed" in report.summary()
+    assert_same_store(reference, store)
+
+
+def test_a_store_without_checksums_is_refused_in_one_line(reference, spec, tmp_path, inproc):
+    store = tmp_path / "old.zarr"
+    shutil.copytree(reference, store)
+    shutil.rmtree(store / "checksum")
+    with pytest.raises(DatasetError, match="records no checksums") as info:
+        generate(spec, store, resume=True, scheduler=inproc)
+    assert str(store) in str(info.value)
+
+
+def test_a_killed_and_corrupted_store_resumes_to_the_uninterrupted_one(reference, spec, tmp_path, inproc):
+    """SIGKILL to the whole run (client and workers) after two samples, then one done sample's
+    deformation chunk removed and another's intensity chunk truncated: the resume finds both,
+    computes them again, and the store is the uninterrupted one bit for bit."""
+    store = tmp_path / "killed.zarr"
+    proc = popen_cli("dataset", str(DEMO), "-o", str(store), "--workers", "1", stdout=subprocess.DEVNULL,
+                     stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        wait_until(lambda: proc.poll() is not None or len(_markers(store)) >= 2, RUN_TIMEOUT,
+                   "two samples")
+        assert proc.poll() is None, "the run ended before it could be killed"
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        kill_group(proc)
+    status = np.asarray(zarr.open_group(str(store), mode="r")["status"][...])
+    first, second = np.flatnonzero(status == 1)[:2]
+    (removed,) = _sample_chunks(store, "deformation", int(first))
+    removed.unlink()
+    (truncated,) = _sample_chunks(store, "intensity", int(second))
+    truncated.write_bytes(truncated.read_bytes()[:10])
+    report = generate(spec, store, resume=True, scheduler=inproc)
+    assert report.repaired == 2 and report.done == spec.samples
+    assert_same_store(reference, store)
+
+
+@pytest.mark.parametrize(("garbled", "message"), [("zarr.json", "not a Zarr store"),
+                                                  ("status/zarr.json", "its bookkeeping cannot be read")])
+def test_a_store_whose_metadata_cannot_be_read_is_refused_in_one_line(reference, spec, tmp_path, inproc,
+                                                                      garbled, message):
+    store = tmp_path / "garbled.zarr"
+    shutil.copytree(reference, store)
+    (store / garbled).write_text("{not json")
+    with pytest.raises(DatasetError, match=message) as info:
+        generate(spec, store, resume=True, scheduler=inproc)
+    assert str(store) in str(info.value) and "\n" not in str(info.value)
+    assert (store / garbled).read_text() == "{not json"  # left as it was, for the user to decide

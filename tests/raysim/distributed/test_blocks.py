@@ -172,3 +172,68 @@ def test_scheduler_addresses():
     for bad in ("head", "tcp://head", "head:0", "head:70000", "http://head:80"):
         with pytest.raises(ClusterError):
             scheduler_address(bad)
+
+
+def _chunk_files(store_path: Path, index: int) -> list[Path]:
+    """The chunk files of block ``index`` in every part of a partial store."""
+    out = []
+    for part in sorted(p for p in store_path.iterdir() if (p / "zarr.json").is_file()):
+        first = part / "c" / str(index)
+        out += [first] if first.is_file() else sorted(f for f in first.rglob("*") if f.is_file())
+    return out
+
+
+def test_a_resume_recomputes_blocks_whose_chunks_were_removed_or_truncated(scene, single, inproc,
+                                                                          tmp_path):
+    """Kill-and-corrupt: blocks 0..4 done, then one block's chunks removed and another's
+    truncated; the resume finds both by their checksums, computes them again and gives the
+    single-process FieldMap bit for bit."""
+    out = tmp_path / "field.nc"
+    job, description = scene_job(scene, "po", Options(), "cpu", 1, 40)
+    path = partial_path(out)
+    store = PartialStore.create(path, job.key, description, job.parts(), job.n_points, 40)
+    bounds = block_bounds(job.n_points, 40)
+    with connect(inproc) as cluster:
+        run_blocks(cluster.client, job, [0, 1, 2, 3, 4], bounds, store)
+    assert store.verify() == []
+    removed, truncated = _chunk_files(path, 1), _chunk_files(path, 3)
+    assert removed and truncated
+    for f in removed:
+        f.unlink()
+    for f in truncated:
+        f.write_bytes(f.read_bytes()[:10])
+    assert PartialStore.open(path).verify() == [1, 3]
+    ds = simulate_blocks(scene, out, "po", scheduler=inproc, block_size=40, resume=True)
+    assert_same_fieldmap(single["po"], ds)
+    assert_same_fieldmap(single["po"], load(out))
+    a = ds.attrs
+    assert (a["blocks_repaired"], a["blocks_reused"], a["blocks_computed"]) == (2, 3, len(bounds) - 3)
+
+
+def test_a_partial_store_with_unreadable_metadata_is_refused_in_one_line(scene, inproc, tmp_path):
+    out = tmp_path / "field.nc"
+    job, description = scene_job(scene, "po", Options(), "cpu", 1, 40)
+    path = partial_path(out)
+    PartialStore.create(path, job.key, description, job.parts(), job.n_points, 40)
+    part = next(p for p in path.iterdir() if (p / "zarr.json").is_file())
+    (part / "zarr.json").write_text("{garbled")
+    with pytest.raises(ClusterError, match="delete it to start again") as info:
+        simulate_blocks(scene, out, "po", scheduler=inproc, block_size=40, resume=True)
+    assert str(path) in str(info.value) and "\n" not in str(info.value)
+    assert path.exists()  # never destroyed: the user decides
+
+
+def test_a_resume_brings_back_a_torn_context(scene, single, inproc, tmp_path):
+    """Every block done and intact, but context.json torn: one block is computed again (it
+    brings the context) and the FieldMap is the single-process one."""
+    out = tmp_path / "field.nc"
+    job, description = scene_job(scene, "po", Options(), "cpu", 1, 40)
+    path = partial_path(out)
+    store = PartialStore.create(path, job.key, description, job.parts(), job.n_points, 40)
+    bounds = block_bounds(job.n_points, 40)
+    with connect(inproc) as cluster:
+        run_blocks(cluster.client, job, list(range(len(bounds))), bounds, store)
+    (path / "context.json").write_text('{"mesh": ')
+    ds = simulate_blocks(scene, out, "po", scheduler=inproc, block_size=40, resume=True)
+    assert_same_fieldmap(single["po"], ds)
+    assert (ds.attrs["blocks_repaired"], ds.attrs["blocks_computed"]) == (1, 1)

@@ -1,0 +1,94 @@
+"""Outputs are written through a temporary file and a rename: a full disk (ENOSPC, simulated
+by failing the write) leaves the previous state and one line; stale staging is removed."""
+
+from __future__ import annotations
+
+import errno
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from raysim.files import atomic_path, example, remove_stale
+from raysim.maps.fieldmap import fieldmap, save
+from raysim.maps.sphere import SphereGrid, ideal_go_intensity
+from raysim.pipeline.report import staging
+from tests.cli import run_in_process
+
+
+def _disk_full(*args, **kwargs):
+    raise OSError(errno.ENOSPC, "No space left on device")
+
+
+def _listing(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_an_interrupted_write_leaves_the_previous_file_and_no_temporary(tmp_path):
+    path = tmp_path / "out.bin"
+    path.write_bytes(b"previous")
+    with pytest.raises(OSError, match="No space left") as info, atomic_path(path) as tmp:
+        tmp.write_bytes(b"half")
+        _disk_full()
+    assert info.value.filename == str(path)
+    assert _listing(tmp_path) == {"out.bin": b"previous"}
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(b"new")
+    assert _listing(tmp_path) == {"out.bin": b"new"}
+
+
+def test_render_on_a_full_disk_keeps_the_previous_picture(tmp_path, capfd, monkeypatch):
+    grid = SphereGrid(3.0, 10, 20)
+    t, _ = np.meshgrid(grid.theta, grid.phi, indexing="ij")
+    ideal = ideal_go_intensity(t, 8.0, 3.0, 20.0)
+    save(fieldmap(grid, ideal * 1.001, ideal, focal_length=8.0, diameter=20.0, frequency_hz=1e9,
+                  method="go", sampling="cell_mean"), tmp_path / "f.nc")
+    assert run_in_process(capfd, "render", tmp_path / "f.nc", "-o", tmp_path / "o.png").code == 0
+    before = _listing(tmp_path)
+
+    import matplotlib.image
+
+    def half_then_full(fname, *args, **kwargs):
+        Path(fname).write_bytes(b"\x89PNG half")
+        _disk_full()
+
+    monkeypatch.setattr(matplotlib.image, "imsave", half_then_full)
+    result = run_in_process(capfd, "render", tmp_path / "f.nc", "-o", tmp_path / "o.png")
+    assert result.code == 2
+    assert result.stderr.strip().splitlines() == [f"error: {tmp_path / 'o.png'}: No space left on device"]
+    assert _listing(tmp_path) == before
+
+
+def test_scenes_copy_on_a_full_disk_writes_nothing(tmp_path, capfd, monkeypatch):
+    """scan_demo names its rig: the second file fails, the first is taken back."""
+    assert example("scan_demo") is not None
+    target = tmp_path / "copies"
+    target.mkdir()
+    real = Path.write_bytes
+    calls = []
+
+    def second_fails(self, data):
+        calls.append(self)
+        if len(calls) == 2:
+            real(self, data[:3])
+            _disk_full()
+        return real(self, data)
+
+    monkeypatch.setattr(Path, "write_bytes", second_fails)
+    result = run_in_process(capfd, "scenes", "copy", "scan_demo", target)
+    assert result.code == 2 and len(result.stderr.strip().splitlines()) == 1
+    assert "No space left on device" in result.stderr
+    assert list(target.iterdir()) == []
+
+
+def test_a_later_run_removes_the_staging_a_killed_one_left(tmp_path):
+    target = tmp_path / "out"
+    (tmp_path / ".out.k1ll.tmp").mkdir()
+    (tmp_path / ".out.k1ll.tmp" / "report.html").write_text("half")
+    (tmp_path / ".out.old-123").mkdir()
+    (tmp_path / ".other.k1ll.tmp").mkdir()  # another output's: kept
+    with staging(target) as tmp:
+        (tmp / "report.html").write_text("whole")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".other.k1ll.tmp", "out"]
+    assert (target / "report.html").read_text() == "whole"
+    remove_stale(tmp_path / "missing" / "x")  # no folder: nothing to do

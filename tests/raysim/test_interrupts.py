@@ -1,0 +1,183 @@
+"""SIGINT (Ctrl-C to the process group) and SIGTERM end a command with one line and exit
+status 130 / 143: no traceback from the client or from its Dask workers, and the run resumes."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from raysim.cli import interrupted_line
+from tests.cli import popen_cli, run_cli
+from tests.processes import kill_group, wait_until
+
+pytestmark = pytest.mark.slow
+
+# a 10 m dish at 1 GHz on a 40 x 120 sphere: 75 blocks of 64 points, a few seconds of work each
+SCENE = """
+name = "interrupted"
+method = "po"
+[dish]
+diameter_m = 10.0
+focal_length_m = 4.0
+resolution_m = 0.2
+[source]
+frequency_hz = 1.0e9
+[sphere]
+radius_m = 2.0
+n_theta = 40
+n_phi = 120
+"""
+
+
+@pytest.mark.parametrize(("args", "terminated", "line"), [
+    (["simulate", "s.toml", "-o", "o.nc", "--workers", "2"], False,
+     "interrupted: raysim simulate stopped; resume with --resume"),
+    (["simulate", "s.toml", "-o", "o.nc"], True, "interrupted: raysim simulate stopped by SIGTERM"),
+    (["dataset", "d.toml", "-o", "d.zarr"], True,
+     "interrupted: raysim dataset stopped by SIGTERM; resume with --resume"),
+    (["report", "f.nc", "-o", "out"], False, "interrupted: raysim report stopped"),
+])
+def test_the_line_says_how_to_resume_only_where_resuming_exists(args, terminated, line):
+    assert interrupted_line(args, terminated) == line
+
+
+def test_a_command_adds_what_it_knows_to_the_line():
+    assert interrupted_line(["scan", "plan.toml", "-o", "o.nc"], True, ["3 of 9 steps are in o.journal"]) == \
+        "interrupted: raysim scan stopped by SIGTERM (3 of 9 steps are in o.journal); resume with --resume"
+
+
+@pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_to_the_group_ends_simulate_on_workers_with_one_line(tmp_path, sig, status):
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE)
+    out = tmp_path / "o.nc"
+    args = ["simulate", scene, "-o", out, "--workers", "2", "--block-size", "64"]
+    proc = popen_cli(*args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    blocks = Path(f"{out}.partial.zarr") / "blocks"
+    try:
+        wait_until(lambda: proc.poll() is not None or (blocks.is_dir() and any(blocks.iterdir())),
+                   240, "the first block")
+        assert proc.poll() is None, "the run ended before it could be interrupted"
+        time.sleep(0.5)
+        os.killpg(proc.pid, sig)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        kill_group(proc)
+    assert proc.returncode == status
+    assert stdout == b""
+    assert stderr.decode().splitlines() == [interrupted_line([str(a) for a in args], sig == signal.SIGTERM)]
+    if sig == signal.SIGINT:  # the blocks kept are verified and the run completes
+        done = run_cli(*args, "--resume", timeout=300)
+        assert done.code == 0, done.stderr
+        assert out.is_file() and not blocks.parent.exists()
+
+
+def test_simulate_killed_then_corrupted_resumes_to_the_single_process_fieldmap(tmp_path):
+    """SIGKILL to the whole run after a few blocks, then one block's chunks removed and
+    another's truncated: --resume recomputes both (and says so), and the FieldMap is the
+    single-process one bit for bit."""
+    from raysim.maps.fieldmap import load
+    from tests.raysim.distributed.conftest import assert_same_fieldmap
+
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE)
+    out, single = tmp_path / "o.nc", tmp_path / "single.nc"
+    args = ["simulate", scene, "-o", out, "--workers", "2", "--block-size", "64"]
+    proc = popen_cli(*args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    store = Path(f"{out}.partial.zarr")
+    try:
+        wait_until(lambda: proc.poll() is not None or ((store / "blocks").is_dir()
+                   and len(list((store / "blocks").glob("*.json"))) >= 3), 240, "three blocks")
+        assert proc.poll() is None, "the run ended before it could be killed"
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        kill_group(proc)
+    done = sorted(int(p.stem) for p in (store / "blocks").glob("*.json"))
+    chunks = {i: [f for part in store.iterdir() if (part / "zarr.json").is_file()
+                  for f in sorted((part / "c" / str(i)).rglob("*")) if f.is_file()] for i in done[:2]}
+    for f in chunks[done[0]]:
+        f.unlink()
+    for f in chunks[done[1]]:
+        f.write_bytes(f.read_bytes()[:10])
+    resumed = run_cli(*args, "--resume", timeout=300)
+    assert resumed.code == 0, resumed.stderr
+    assert "2 failed verification and were recomputed" in resumed.stdout
+    assert run_cli("simulate", scene, "-o", single, timeout=300).code == 0
+    assert_same_fieldmap(load(single), load(out))
+
+
+def test_ctrl_c_during_a_dataset_is_one_line_and_the_store_resumes(tmp_path):
+    """SIGINT to the group (client and its two local workers) once samples are done: one line,
+    status 130, no worker traceback; --resume completes the store."""
+    from raysim.dataset import load_spec
+
+    demo = Path(__file__).resolve().parents[2] / "scenes" / "dataset_demo.toml"
+    spec = tmp_path / "spec.toml"
+    spec.write_text(demo.read_text().replace("samples = 8", "samples = 60"))
+    store = tmp_path / "d.zarr"
+    args = ["dataset", spec, "-o", store, "--workers", "2"]
+    proc = popen_cli(*args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    status = store / "status" / "c"
+    try:
+        wait_until(lambda: proc.poll() is not None or (status.is_dir() and any(status.iterdir())), 240,
+                   "the first sample")
+        assert proc.poll() is None, "the run ended before it could be interrupted"
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        kill_group(proc)
+    assert proc.returncode == 130 and stdout == b""
+    assert stderr.decode().splitlines() == ["interrupted: raysim dataset stopped; resume with --resume"]
+    done = run_cli(*args, "--resume", timeout=300)
+    assert done.code == 0, done.stderr
+    assert f"{load_spec(spec).samples}/60 samples done" in done.stdout
+
+
+def test_report_killed_or_terminated_leaves_no_staging_folder(tmp_path):
+    """SIGKILL mid-report leaves its staging folder .out.XXXX.tmp (nothing can catch it); the
+    next run removes it, and a SIGTERM ends that run with one line, status 143 and its own
+    staging removed; a last run writes the report."""
+    import numpy as np
+
+    from raysim.maps.fieldmap import fieldmap, save
+    from raysim.maps.sphere import SphereGrid, ideal_go_intensity
+
+    grid = SphereGrid(3.0, 45, 180)
+    t, p = np.meshgrid(grid.theta, grid.phi, indexing="ij")
+    ideal = ideal_go_intensity(t, 8.0, 3.0, 20.0)
+    field = tmp_path / "f.nc"
+    save(fieldmap(grid, ideal * (1 + 0.01 * np.cos(2 * p)), ideal, focal_length=8.0, diameter=20.0,
+                  frequency_hz=1e9, method="go", sampling="cell_mean"), field)
+    args = ["report", field, "-o", tmp_path / "out"]
+
+    def staged() -> set[Path]:
+        return set(tmp_path.glob(".out.*"))
+
+    def stop_once_staged(sig: int) -> tuple[int, str]:
+        """Start the report, send ``sig`` once a staging folder of its own exists."""
+        stale = staged()
+        proc = popen_cli(*args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+        try:
+            wait_until(lambda: proc.poll() is not None or bool(staged() - stale), 120, "the staging folder")
+            assert proc.poll() is None, "the report was written before it could be stopped"
+            proc.send_signal(sig)
+            _, stderr = proc.communicate(timeout=60)
+        finally:
+            kill_group(proc)
+        return proc.returncode, stderr.decode()
+
+    code, _ = stop_once_staged(signal.SIGKILL)
+    assert code == -signal.SIGKILL and len(staged()) == 1  # left behind: the next run's to remove
+    code, stderr = stop_once_staged(signal.SIGTERM)
+    assert code == 143 and "Traceback" not in stderr
+    assert stderr.splitlines()[-1] == "interrupted: raysim report stopped by SIGTERM"
+    assert staged() == set()
+    done = run_cli(*args, timeout=300)
+    assert done.code == 0, done.stderr
+    assert (tmp_path / "out" / "report.html").is_file() and staged() == set()
