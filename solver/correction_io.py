@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from raysim.errors import RaysimError
+from raysim.files import write_text
 from solver import surface
 from solver.actuators import DEFAULT_SCREWS, ActuatorLayout, corners_layout, read_actuators, screws_layout
 from solver.correction import Correction, correct, ruze, zernike_fit
@@ -112,10 +113,10 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
                         zernike_fit(grid, corr.after, zernike_order), [])
     out.mkdir(parents=True, exist_ok=True)
     header = header_lines(run, terms)
-    _write(out / "commands.csv", commands_csv(run, header))
-    _write(out / "commands.toml", commands_toml(run, header))
-    _write(out / "zernike.csv", zernike_csv(run, header))
-    _write(out / "summary.txt", "\n".join([SIGN.format(unit=unit), *summary_lines(run)]) + "\n")
+    write_text(out / "commands.csv", commands_csv(run, header))
+    write_text(out / "commands.toml", commands_toml(run, header))
+    write_text(out / "zernike.csv", zernike_csv(run, header))
+    write_text(out / "summary.txt", "\n".join([SIGN.format(unit=unit), *summary_lines(run)]) + "\n")
     attrs = {k: v for k, v in smap.attrs.items() if k not in ("rms_m", "rrms")}
     attrs.update(correction="predicted surface after the actuator commands",
                  correction_rms_before_m=corr.rms_before, correction_rms_after_m=corr.rms_after,
@@ -207,8 +208,3 @@ def summary_lines(run: CorrectionRun) -> list[str]:
     lines += c.notes
     return lines
 
-
-def _write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
