@@ -229,3 +229,38 @@ def adjoint_kernel(load: Any, pair: Any) -> Any:
             out[c, s] = out[c, s] + acc[c]
 
     return adjoint
+
+
+def segment_kernel(load: Any, pair: Any) -> Any:
+    """The leaf sums of the fast radiator for one kind of element (same ``load`` and ``pair``).
+
+    Every cluster (leaf) sees the same ``nodes`` (3, n_nodes) field points; thread t is node
+    ``t % n_nodes`` of leaf ``t // n_nodes`` and sums the leaf's elements
+    ``begins[leaf]..ends[leaf]-1`` of ``src`` into ``E[:, t]`` (6, n_leaves * n_nodes), raw
+    (before the kind's prefactor), as :func:`radiation_kernels` does for one point.
+    """
+
+    @wp.kernel(module="unique")
+    def radiate_segments(
+        nodes: wp.array2d(dtype=wp.float64),
+        begins: wp.array(dtype=wp.int32),
+        ends: wp.array(dtype=wp.int32),
+        n_nodes: int,
+        src: wp.array2d(dtype=wp.float64),
+        k: wp.float64,
+        k_inv: wp.float64,
+        table: wp.array(dtype=wp.vec2d),
+        E: wp.array2d(dtype=wp.float64),
+        offset: int,
+    ):
+        t = wp.tid() + offset
+        leaf = t // n_nodes
+        node = t - leaf * n_nodes
+        p = wp.vec3d(nodes[0, node], nodes[1, node], nodes[2, node])
+        acc = vec6d()
+        for s in range(begins[leaf], ends[leaf]):
+            acc += pair(p, load(src, s), k, k_inv, table)
+        for c in range(6):
+            E[c, t] = acc[c]
+
+    return radiate_segments
