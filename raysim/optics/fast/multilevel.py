@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from raysim.optics import runtime
 from raysim.optics.fast import tree as quadtree
-from raysim.optics.fast.chart import Axis, Domain, axis_for, from_chart, lagrange, matrix
+from raysim.optics.fast.chart import Axis, Domain, axis_for, from_chart, lagrange
 
 #: relative costs, in direct pair evaluations, of the steps' inner operations (measured roughly
 #: on the CPU: a pair about 20 ns a core, a BLAS complex multiply-add well under 1 ns, an
@@ -108,9 +108,14 @@ def _distances(points: NDArray[np.float64], centres: NDArray[np.float64]) -> NDA
     return np.sqrt(np.sum((points[None, :, :] - centres[:, None, :]) ** 2, axis=2))
 
 
+def _arr(a: NDArray, device: str, dtype: Any = None) -> Any:
+    wp = runtime.init()
+    return wp.array(np.ascontiguousarray(a), dtype=dtype or wp.float64, device=device)
+
+
 def leaf_grids(segments: Any, src: NDArray[np.float64], the_plan: Plan, domain: Domain, k: float,
-               device: str) -> NDArray[np.complex128]:
-    """F_c (C, nu, nv, 3) of every leaf cluster on the leaf level's grid."""
+               device: str) -> NDArray[np.float64]:
+    """F_c of every leaf cluster on the leaf level's grid: (C, nu * nv, 6) Re x, y, z, Im x, y, z."""
     wp = runtime.init()
     from raysim.optics.kernels import radiation
 
@@ -119,67 +124,64 @@ def leaf_grids(segments: Any, src: NDArray[np.float64], the_plan: Plan, domain: 
     nodes = _grid_points((au, av), domain)
     n_nodes = len(nodes)
     C = len(level.keys)
-    sorted_src = np.ascontiguousarray(src[:, the_plan.order])
     out = wp.zeros((6, C * n_nodes), dtype=wp.float64, device=device)
     runtime.launch(segments, C * n_nodes, [
-        wp.array(np.ascontiguousarray(nodes.T), dtype=wp.float64, device=device),
-        wp.array(level.begins.astype(np.int32), dtype=wp.int32, device=device),
-        wp.array(level.ends.astype(np.int32), dtype=wp.int32, device=device),
-        n_nodes,
-        wp.array(sorted_src, dtype=wp.float64, device=device),
-        k, 1.0 / k,
-        wp.array(radiation.cis_table(), dtype=wp.vec2d, device=device),
-        out], device, min_chunk=64)
+        _arr(nodes.T, device), _arr(level.begins.astype(np.int32), device, wp.int32),
+        _arr(level.ends.astype(np.int32), device, wp.int32), n_nodes,
+        _arr(src[:, the_plan.order], device), k, 1.0 / k,
+        _arr(radiation.cis_table(), device, wp.vec2d), out], device, min_chunk=64)
     raw = out.numpy()
     G = (raw[:3] + 1j * raw[3:]).reshape(3, C, n_nodes)
     G = G * np.exp(1j * k * _distances(nodes, level.centres))[None]
-    return np.ascontiguousarray(G.transpose(1, 2, 0)).reshape(C, au.n, av.n, 3)
+    return np.ascontiguousarray(np.concatenate([G.real, G.imag], axis=0).transpose(1, 2, 0))
 
 
-def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Domain,
-              k: float, p: int, chunk_nodes: int = 4_000_000) -> NDArray[np.complex128]:
-    """The parent level's grids (C0, nu, nv, 3) from the child level's ``G`` (C1, ...)."""
+def aggregate(G: NDArray[np.float64], child: int, the_plan: Plan, domain: Domain, k: float, p: int,
+              device: str) -> NDArray[np.float64]:
+    """The parent level's grids (C0, nu * nv, 6) from the child level's ``G`` (C1, ..., 6):
+    separable Lagrange interpolation (u, then v), re-phasing, children summed in order."""
+    wp = runtime.init()
+    from raysim.optics.kernels import fast, radiation
+
     low, up = the_plan.levels[child], the_plan.levels[child - 1]
     cu, cv = the_plan.axes[child]
     pu, pv = the_plan.axes[child - 1]
-    Iu = matrix(pu.nodes, cu, p)
-    Iv = matrix(pv.nodes, cv, p)
-    nodes = _grid_points((pu, pv), domain)
-    out = np.empty((len(up.keys), pu.n, pv.n, 3), dtype=np.complex128)
-    # children sorted by key are grouped by parent: take whole parents per chunk
-    starts = np.flatnonzero(np.r_[True, low.parent[1:] != low.parent[:-1]])
-    ends = np.r_[starts[1:], len(low.parent)]
-    per = max(1, chunk_nodes // max(1, pu.n * pv.n * 4))
-    for g in range(0, len(starts), per):
-        b, e = starts[g], ends[min(g + per, len(starts)) - 1]
-        parents = low.parent[b:e]
-        A = np.matmul(Iu, G[b:e].reshape(e - b, cu.n, cv.n * 3)).reshape(e - b, pu.n, cv.n, 3)
-        X = np.matmul(A.transpose(0, 1, 3, 2), Iv.T).transpose(0, 1, 3, 2)  # (c, pu, pv, 3)
-        shift = _distances(nodes, up.centres[parents]) - _distances(nodes, low.centres[b:e])
-        X = X * np.exp(1j * k * shift).reshape(e - b, pu.n, pv.n)[..., None]
-        local = starts[g:min(g + per, len(starts))] - b
-        out[parents[local]] = np.add.reduceat(X, local, axis=0)
-    return out
+    iu, wu = lagrange(pu.nodes, cu, p)
+    iv, wv = lagrange(pv.nodes, cv, p)
+    C1, C0 = len(low.keys), len(up.keys)
+    half = wp.zeros((C1, pu.n * cv.n, 6), dtype=wp.float64, device=device)
+    runtime.launch(fast.interpolate_u, C1 * pu.n * cv.n, [
+        _arr(G, device), cv.n, p, _arr(iu.astype(np.int32), device, wp.int32), _arr(wu, device), half],
+        device, min_chunk=256)
+    first = np.searchsorted(low.parent, np.arange(C0 + 1)).astype(np.int32)
+    out = wp.zeros((C0, pu.n * pv.n, 6), dtype=wp.float64, device=device)
+    runtime.launch(fast.interpolate_v_merge, C0 * pu.n * pv.n, [
+        half, cv.n, p, _arr(iv.astype(np.int32), device, wp.int32), _arr(wv, device),
+        _arr(first, device, wp.int32), _arr(low.centres, device), _arr(up.centres, device),
+        _arr(_grid_points((pu, pv), domain), device), k,
+        _arr(radiation.cis_table(), device, wp.vec2d), out], device, min_chunk=256)
+    return out.numpy()
 
 
 def to_targets(G: NDArray[np.complex128], the_plan: Plan, u: NDArray[np.float64],
-               points: NDArray[np.float64], k: float, p: int) -> NDArray[np.complex128]:
-    """The field sum (M, 3) at the targets (chart ``u`` (M, 2), ``points`` (M, 3) m) from the
-    stop level's grids; elementwise per target (a block of targets gives the same bits)."""
+               points: NDArray[np.float64], k: float, p: int, device: str) -> NDArray[np.float64]:
+    """The raw sums (M, 6) at the targets (chart ``u`` (M, 2), ``points`` (M, 3) m) from the
+    stop level's grids; one thread per target (a block of targets gives the same bits)."""
+    wp = runtime.init()
+    from raysim.optics.kernels import fast, radiation
+
     level = the_plan.levels[the_plan.stop]
     au, av = the_plan.axes[the_plan.stop]
     iu, wu = lagrange(u[:, 0], au, p)
     iv, wv = lagrange(u[:, 1], av, p)
-    total = np.zeros((len(u), 3), dtype=np.complex128)
-    for c in range(len(level.keys)):
-        flat = G[c].reshape(-1, 3)
-        acc = np.zeros((len(u), 3), dtype=np.complex128)
-        for a in range(p):
-            row = (iu + a) * av.n + iv
-            inner = np.zeros((len(u), 3), dtype=np.complex128)
-            for b in range(p):
-                inner += wv[:, b, None] * flat[row + b]
-            acc += wu[:, a, None] * inner
-        r = np.sqrt(np.sum((points - level.centres[c]) ** 2, axis=1))
-        total += acc * np.exp(-1j * k * r)[:, None]
-    return total
+    grids = G
+
+    def arr(a: NDArray, dtype: Any = None) -> Any:
+        return _arr(a, device, dtype)
+
+    out = wp.zeros((len(u), 6), dtype=wp.float64, device=device)
+    runtime.launch(fast.interpolate_targets, len(u), [
+        arr(grids), av.n, p, arr(iu.astype(np.int32), wp.int32), arr(iv.astype(np.int32), wp.int32),
+        arr(wu), arr(wv), arr(level.centres), arr(points), k,
+        arr(radiation.cis_table(), wp.vec2d), out], device, min_chunk=16)
+    return out.numpy()

@@ -128,9 +128,8 @@ class FastRadiator:
         assert self.domain is not None
         G = multilevel.leaf_grids(_segments(kind), src, the_plan, self.domain, self.k, self.device)
         for child in range(the_plan.leaf, the_plan.stop, -1):
-            G = multilevel.aggregate(G, child, the_plan, self.domain, self.k, p)
-        E = multilevel.to_targets(G, the_plan, self.u, self.points, self.k, p)
-        return np.ascontiguousarray(np.column_stack([E.real, E.imag]))
+            G = multilevel.aggregate(G, child, the_plan, self.domain, self.k, p, self.device)
+        return multilevel.to_targets(G, the_plan, self.u, self.points, self.k, p, self.device)
 
     def field(self, kinds: tuple[str, ...] | None = None) -> NDArray[np.complex128]:
         """E (n, 3) complex (V/m) of everything added so far (or of the ``kinds`` named)."""
