@@ -133,7 +133,7 @@ def choose_order(tol: float) -> tuple[int, float]:
     for p in (4, 6, 8, 10, 12, 14, 16, 20, 24):
         for s in (1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0):
             if lagrange_error(p, s) <= tol:
-                cost = s * s * (p + 6)
+                cost = s * s * p + 1.5 * p * p  # aggregation ~ s^2 p, targets ~ p^2
                 if best is None or cost < best[0]:
                     best = (cost, p, s)
     if best is None:

@@ -103,11 +103,6 @@ def _grid_points(axes: tuple[Axis, Axis], domain: Domain) -> NDArray[np.float64]
     return from_chart(np.column_stack([U.ravel(), V.ravel()]), domain.centre, domain.radius)
 
 
-def _distances(points: NDArray[np.float64], centres: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(C, n) distances (m) from each centre to each point."""
-    return np.sqrt(np.sum((points[None, :, :] - centres[:, None, :]) ** 2, axis=2))
-
-
 def _arr(a: NDArray, device: str, dtype: Any = None) -> Any:
     wp = runtime.init()
     return wp.array(np.ascontiguousarray(a), dtype=dtype or wp.float64, device=device)
@@ -124,16 +119,13 @@ def leaf_grids(segments: Any, src: NDArray[np.float64], the_plan: Plan, domain: 
     nodes = _grid_points((au, av), domain)
     n_nodes = len(nodes)
     C = len(level.keys)
-    out = wp.zeros((6, C * n_nodes), dtype=wp.float64, device=device)
+    out = wp.zeros((C * n_nodes, 6), dtype=wp.float64, device=device)
     runtime.launch(segments, C * n_nodes, [
         _arr(nodes.T, device), _arr(level.begins.astype(np.int32), device, wp.int32),
-        _arr(level.ends.astype(np.int32), device, wp.int32), n_nodes,
+        _arr(level.ends.astype(np.int32), device, wp.int32), _arr(level.centres, device), n_nodes,
         _arr(src[:, the_plan.order], device), k, 1.0 / k,
         _arr(radiation.cis_table(), device, wp.vec2d), out], device, min_chunk=64)
-    raw = out.numpy()
-    G = (raw[:3] + 1j * raw[3:]).reshape(3, C, n_nodes)
-    G = G * np.exp(1j * k * _distances(nodes, level.centres))[None]
-    return np.ascontiguousarray(np.concatenate([G.real, G.imag], axis=0).transpose(1, 2, 0))
+    return out.numpy().reshape(C, n_nodes, 6)
 
 
 def aggregate(G: NDArray[np.float64], child: int, the_plan: Plan, domain: Domain, k: float, p: int,

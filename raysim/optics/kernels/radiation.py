@@ -236,8 +236,9 @@ def segment_kernel(load: Any, pair: Any) -> Any:
 
     Every cluster (leaf) sees the same ``nodes`` (3, n_nodes) field points; thread t is node
     ``t % n_nodes`` of leaf ``t // n_nodes`` and sums the leaf's elements
-    ``begins[leaf]..ends[leaf]-1`` of ``src`` into ``E[:, t]`` (6, n_leaves * n_nodes), raw
-    (before the kind's prefactor), as :func:`radiation_kernels` does for one point.
+    ``begins[leaf]..ends[leaf]-1`` of ``src``, raw (before the kind's prefactor) as
+    :func:`radiation_kernels` does for one point, times exp(+j k |P - centres[leaf]|) (the
+    phase of the leaf's centre taken out), into ``E[t]`` (n_leaves * n_nodes, 6).
     """
 
     @wp.kernel(module="unique")
@@ -245,6 +246,7 @@ def segment_kernel(load: Any, pair: Any) -> Any:
         nodes: wp.array2d(dtype=wp.float64),
         begins: wp.array(dtype=wp.int32),
         ends: wp.array(dtype=wp.int32),
+        centres: wp.array2d(dtype=wp.float64),
         n_nodes: int,
         src: wp.array2d(dtype=wp.float64),
         k: wp.float64,
@@ -260,7 +262,9 @@ def segment_kernel(load: Any, pair: Any) -> Any:
         acc = vec6d()
         for s in range(begins[leaf], ends[leaf]):
             acc += pair(p, load(src, s), k, k_inv, table)
+        d = p - wp.vec3d(centres[leaf, 0], centres[leaf, 1], centres[leaf, 2])
+        v = times(acc, cis(k * wp.sqrt(wp.dot(d, d)), table))
         for c in range(6):
-            E[c, t] = acc[c]
+            E[t, c] = v[c]
 
     return radiate_segments
