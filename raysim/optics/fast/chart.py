@@ -81,9 +81,10 @@ class Axis:
 
 
 def axis_for(lo: float, hi: float, h: float, p: int) -> Axis:
-    """Nodes of spacing ``h`` covering [lo, hi] with p / 2 nodes of margin each side, so that
-    every point of [lo, hi] has a centred p-point stencil inside the grid."""
-    m = p // 2
+    """Nodes of spacing ``h`` covering [lo, hi] with p nodes of margin each side, so that every
+    point of [lo, hi], and of a finer grid's own p / 2-node margin, has a centred p-point
+    stencil inside the grid."""
+    m = p
     cells = max(1, math.ceil((hi - lo) / h - 1e-9))
     centre = 0.5 * (lo + hi)
     return Axis(centre - 0.5 * cells * h - m * h, h, cells + 2 * m + 1)

@@ -22,6 +22,10 @@ from raysim.optics.fast.chart import Domain, choose_order, domain_of, to_chart
 from raysim.optics.radiator import Radiator, field_of
 from raysim.progress import Progress
 
+#: kinds the multilevel sum serves: point elements. go+edge's diffraction elements integrate
+#: along edge segments metres long (their field is not that of a point at their position), so
+#: they always take the direct sum
+FAST_KINDS = ("electric", "magnetic", "fringe", "shift")
 #: default tolerance: fields agree with the direct sum to about this relative RMS
 DEFAULT_TOL = 1e-6
 RADIATORS = ("fast", "direct")
@@ -48,11 +52,14 @@ class FastRadiator:
     domain : the whole job's :class:`Domain` (a block of a grid passes the grid's, so the
         field is bit-identical whatever the split); default: the points' own.
     force : run the multilevel sum even where the direct sum is estimated cheaper (tests).
+    cache : a dict kept by the owner of the elements (:class:`raysim.optics.sources.Sources`):
+        the stop level's grids are stored there per kind, domain and tolerance, so later blocks
+        of points only interpolate (the elements of a kind must not change between uses).
     """
 
     def __init__(self, points: ArrayLike, k: float, device: str | None = "cpu", block: int | None = None,
                  tol: float = DEFAULT_TOL, centre: ArrayLike | None = None, domain: Domain | None = None,
-                 force: bool = False) -> None:
+                 force: bool = False, cache: dict | None = None) -> None:
         if not 0 < tol < 1:
             raise RaysimError(f"radiator tolerance must be in (0, 1), got {tol:g}")
         self.direct = Radiator(points, k, device, block=block)
@@ -62,6 +69,7 @@ class FastRadiator:
         self.k = float(k)
         self.tol = float(tol)
         self.force = force
+        self.cache = cache
         self.domain = domain
         self.u: NDArray[np.float64] | None = None
         if centre is not None and self.n:
@@ -117,18 +125,25 @@ class FastRadiator:
     def _run(self, kind: str, src: NDArray[np.float64]) -> NDArray[np.float64]:
         the_plan = None
         p, s = choose_order(self.tol / 8.0)
-        if self.domain is not None and self.u is not None:
+        key = (kind, self.domain, self.tol, src.shape[1])
+        if self.cache is not None and key in self.cache:
+            the_plan, G = self.cache[key]
+            self.method[kind] = _describe(the_plan, p, s)
+            return multilevel.to_targets(G, the_plan, self.u, self.points, self.k, p, self.device)
+        if self.domain is not None and self.u is not None and kind in FAST_KINDS:
             the_plan = multilevel.plan(np.ascontiguousarray(src[:3].T), self.domain, self.k, p, s)
         if the_plan is None or (the_plan.cost >= the_plan.direct_cost and not self.force):
             self.method[kind] = "direct"
             one = Radiator(self.points, self.k, self.device, block=self.direct.block)
             one.add_packed(src, kind)
             return one.sums_of(kind)
-        self.method[kind] = f"fast (levels {the_plan.stop}..{the_plan.leaf}, p {p}, s {s:g})"
+        self.method[kind] = _describe(the_plan, p, s)
         assert self.domain is not None
         G = multilevel.leaf_grids(_segments(kind), src, the_plan, self.domain, self.k, self.device)
         for child in range(the_plan.leaf, the_plan.stop, -1):
             G = multilevel.aggregate(G, child, the_plan, self.domain, self.k, p, self.device)
+        if self.cache is not None:
+            self.cache[key] = (the_plan, G)
         return multilevel.to_targets(G, the_plan, self.u, self.points, self.k, p, self.device)
 
     def field(self, kinds: tuple[str, ...] | None = None) -> NDArray[np.complex128]:
@@ -137,6 +152,10 @@ class FastRadiator:
         if not chosen:
             return np.zeros((self.n, 3), dtype=np.complex128)
         return field_of({kind: self.sums_of(kind) for kind in chosen}, self.k)
+
+
+def _describe(the_plan: multilevel.Plan, p: int, s: float) -> str:
+    return f"fast (levels {the_plan.stop}..{the_plan.leaf}, p {p}, s {s:g})"
 
 
 def _inside(own: Domain, domain: Domain | None) -> bool:
@@ -151,11 +170,11 @@ def _inside(own: Domain, domain: Domain | None) -> bool:
 
 def make_radiator(points: ArrayLike, k: float, device: str | None = "cpu", block: int | None = None,
                   radiator: str = "fast", tol: float = DEFAULT_TOL, centre: ArrayLike | None = None,
-                  domain: Domain | None = None) -> Radiator | FastRadiator:
+                  domain: Domain | None = None, cache: dict | None = None) -> Radiator | FastRadiator:
     """A radiator of the chosen method: ``fast`` (multilevel where cheaper, else direct; needs
     ``centre``, the targets' sphere centre) or ``direct`` (the reference sum)."""
     if radiator not in RADIATORS:
         raise RaysimError(f"unknown radiator {radiator!r}: use one of {', '.join(RADIATORS)}")
     if radiator == "direct" or centre is None:
         return Radiator(points, k, device, block=block)
-    return FastRadiator(points, k, device, block=block, tol=tol, centre=centre, domain=domain)
+    return FastRadiator(points, k, device, block=block, tol=tol, centre=centre, domain=domain, cache=cache)
