@@ -170,11 +170,14 @@ def _inside(own: Domain, domain: Domain | None) -> bool:
 
 def make_radiator(points: ArrayLike, k: float, device: str | None = "cpu", block: int | None = None,
                   radiator: str = "fast", tol: float = DEFAULT_TOL, centre: ArrayLike | None = None,
-                  domain: Domain | None = None, cache: dict | None = None) -> Radiator | FastRadiator:
+                  domain: Domain | None = None, cache: dict | None = None,
+                  force: bool = False) -> Radiator | FastRadiator:
     """A radiator of the chosen method: ``fast`` (multilevel where cheaper, else direct; needs
-    ``centre``, the targets' sphere centre) or ``direct`` (the reference sum)."""
+    ``centre``, the targets' sphere centre; ``force``: multilevel whatever the cost estimate,
+    for tests and benchmarks) or ``direct`` (the reference sum)."""
     if radiator not in RADIATORS:
         raise RaysimError(f"unknown radiator {radiator!r}: use one of {', '.join(RADIATORS)}")
     if radiator == "direct" or centre is None:
         return Radiator(points, k, device, block=block)
-    return FastRadiator(points, k, device, block=block, tol=tol, centre=centre, domain=domain, cache=cache)
+    return FastRadiator(points, k, device, block=block, tol=tol, centre=centre, domain=domain, cache=cache,
+                        force=force)

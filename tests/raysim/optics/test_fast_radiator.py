@@ -125,3 +125,27 @@ def test_make_radiator_refuses_an_unknown_method() -> None:
         make_radiator(_grid_points(2, 4), K, radiator="fmm", centre=CENTRE)
     with pytest.raises(RaysimError, match="tolerance"):
         FastRadiator(_grid_points(2, 4), K, tol=0.0, centre=CENTRE)
+
+
+def test_jacobian_jvp_through_the_fast_radiator_is_the_transpose_of_the_direct_vjp() -> None:
+    """The PO Jacobian's JVP (shift elements) by the fast sum: equal to the direct JVP to the
+    tolerance, and <J v, w> = <v, J^T w> with the direct VJP to the tolerance."""
+    from raysim.optics import po_jacobian
+    from raysim.optics.illumination import Illumination
+    from raysim.surface.mesh import paraboloid
+
+    dish = paraboloid(D, F, 1.0)
+    wave = Illumination.plane_wave(1e9, (0, 0, -1), (1, 0, 0))
+    elements = po_jacobian.surface_elements(dish, wave, 1.5, "cpu")
+    rng = np.random.default_rng(4)
+    n = len(elements.r)
+    dz, hx, hy = (rng.standard_normal(n) * 1e-3 for _ in range(3))
+    pts = _grid_points(12, 24)
+    direct = po_jacobian.jvp(elements, pts, dz, hx, hy)
+    fast = po_jacobian.jvp(elements, pts, dz, hx, hy, radiator="fast", tol=1e-6, centre=CENTRE, force=True)
+    assert np.sqrt(np.sum(np.abs(fast - direct) ** 2) / np.sum(np.abs(direct) ** 2)) < 1e-6
+    w = rng.standard_normal((len(pts), 3)) + 1j * rng.standard_normal((len(pts), 3))
+    gz, gx, gy = po_jacobian.vjp(elements, pts, w)
+    lhs = float(np.real(np.sum(np.conj(w) * fast)))
+    rhs = float(gz @ dz + gx @ hx + gy @ hy)
+    assert abs(lhs - rhs) <= 1e-6 * abs(rhs)
