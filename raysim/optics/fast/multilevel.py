@@ -33,6 +33,7 @@ from raysim.optics.fast.chart import Axis, Domain, axis_for, from_chart, lagrang
 COST_BLAS = 0.03
 COST_NUMPY = 0.1
 COST_EXP = 1.5
+MEMORY_BYTES = 3e9  # the largest level's grids (two levels are held at once), at most
 MIN_LEAF = 8  # elements per non-empty leaf on average, at least
 AMPLITUDE = 6.0  # rad per unit of 2 R / r_min: the amplitude's and near-field terms' change
 
@@ -81,7 +82,8 @@ def plan(positions: NDArray[np.float64], domain: Domain, k: float, p: int, s: fl
         nodes = axes[leaf][0].n * axes[leaf][1].n
         cost = float(n) * nodes + len(levels[leaf].keys) * nodes * COST_EXP
         for stop in range(leaf, -1, -1):
-            if axes[stop] is None:
+            if axes[stop] is None or 48.0 * len(levels[stop].keys) * axes[stop][0].n * axes[stop][1].n \
+                    > MEMORY_BYTES:
                 break
             if stop < leaf:  # one more aggregation step, level stop + 1 -> stop
                 cu, cv = axes[stop + 1]
