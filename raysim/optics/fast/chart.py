@@ -132,9 +132,9 @@ def choose_order(tol: float) -> tuple[int, float]:
     """(p, s): the cheapest stencil and oversampling whose measured error is below ``tol``."""
     best: tuple[float, int, float] | None = None
     for p in (4, 6, 8, 10, 12, 14, 16, 20, 24):
-        for s in (1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0):
+        for s in (1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0):
             if lagrange_error(p, s) <= tol:
-                cost = s * s * p + 1.5 * p * p  # aggregation ~ s^2 p, targets ~ p^2
+                cost = (5 * s + p) ** 2 + p * p  # grid nodes ~ (s W B / pi + 2 p)^2; targets ~ p^2
                 if best is None or cost < best[0]:
                     best = (cost, p, s)
     if best is None:
