@@ -105,16 +105,6 @@ def lagrange(x: ArrayLike, axis: Axis, p: int) -> tuple[NDArray[np.int64], NDArr
     return i0, w
 
 
-def matrix(x: ArrayLike, axis: Axis, p: int) -> NDArray[np.float64]:
-    """Dense (len(x), axis.n) interpolation matrix from ``axis``'s nodes to the points ``x``."""
-    i0, w = lagrange(x, axis, p)
-    out = np.zeros((len(i0), axis.n))
-    rows = np.arange(len(i0))
-    for j in range(p):
-        out[rows, i0 + j] = w[:, j]
-    return out
-
-
 @lru_cache(maxsize=64)
 def lagrange_error(p: int, s: float) -> float:
     """Largest error of centred p-point Lagrange interpolation of exp(j x) on nodes pi / s apart
