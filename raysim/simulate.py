@@ -55,6 +55,8 @@ class Options:
     samples_per_wavelength: float | None = None
     edges: str | None = None
     fresnel: bool = False
+    radiator: str = "fast"
+    radiator_tol: float = 1e-6
 
 
 @dataclass
@@ -91,7 +93,7 @@ def scene_attrs(scene: Scene, deformed: Reflector) -> dict:
 def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu",
              progress: Progress | None = None, *, total: bool = False, save_field: bool = False,
              samples_per_wavelength: float | None = None, edges: str | None = None,
-             fresnel: bool = False) -> xr.Dataset:
+             fresnel: bool = False, radiator: str = "fast", radiator_tol: float = 1e-6) -> xr.Dataset:
     """Simulate ``scene`` and return its FieldMap (an ``xarray.Dataset``; see raysim.maps.fieldmap).
 
     Parameters
@@ -114,8 +116,11 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
     fresnel : ``go+edge`` only: add the deformed geometric wave's Fresnel-zone correction
         (:mod:`raysim.optics.fresnel`), for deformations with structure finer than the Fresnel
         zone (on the paper's dish, below about 3 GHz).
+    radiator : ``po``/``po+ptd`` only: ``fast`` (the multilevel sum of
+        :mod:`raysim.optics.fast`, where its cost estimate beats the direct sum's) or ``direct``
+        (the reference sum); ``radiator_tol`` the fast sum's relative accuracy.
     """
-    options = Options(total, save_field, samples_per_wavelength, edges, fresnel)
+    options = Options(total, save_field, samples_per_wavelength, edges, fresnel, radiator, radiator_tol)
     method = check_method(scene, method, options, device)
     report = progress or (lambda stage, fraction: None)
     start = time.perf_counter()
@@ -167,11 +172,11 @@ def check_method(scene: Scene, method: str | None, options: Options,
 def check_options(scene: Scene, *, method: str | None = None, device: str | None = "cpu",
                   total: bool = False, save_field: bool = False,
                   samples_per_wavelength: float | None = None, edges: str | None = None,
-                  fresnel: bool = False) -> str:
+                  fresnel: bool = False, radiator: str = "fast", radiator_tol: float = 1e-6) -> str:
     """Refuse what :func:`simulate` cannot honour, before any work (the keywords of
     :func:`simulate`); return the method that would run."""
-    return check_method(scene, method,
-                        Options(total, save_field, samples_per_wavelength, edges, fresnel), device)
+    return check_method(scene, method, Options(total, save_field, samples_per_wavelength, edges, fresnel,
+                                               radiator, radiator_tol), device)
 
 
 def fieldmap_of(scene: Scene, method: str, run: Run, F: float, D: float, attrs: dict) -> xr.Dataset:
@@ -214,6 +219,10 @@ def _check_options(method: str, options: Options) -> None:
         raise RaysimError("--fresnel applies to --method go+edge only")
     if method == "go+edge" and options.samples_per_wavelength is not None:
         raise RaysimError("--samples-per-wavelength applies to --method po and po+ptd only")
+    if options.radiator not in ("fast", "direct"):
+        raise RaysimError(f"unknown radiator {options.radiator!r}: use fast or direct")
+    if not (math.isfinite(options.radiator_tol) and 0 < options.radiator_tol < 1):
+        raise RaysimError(f"--radiator-tol must lie in (0, 1), got {options.radiator_tol:g}")
     spw = options.samples_per_wavelength
     if spw is not None and not (math.isfinite(spw) and 0 < spw <= 20):
         raise RaysimError(f"--samples-per-wavelength must lie in (0, 20], got {spw:g}")
@@ -332,9 +341,16 @@ class _WaveContext:
         wave = _wave(scene)
         self.points = {name: scene.sphere.points(r.F).reshape(-1, 3)
                        for name, r in (("ideal", ideal), ("deformed", deformed))}
+        from raysim.optics.fast.chart import domain_of
+
+        self.radiator, self.radiator_tol = options.radiator, options.radiator_tol
         self.sources: dict[str, Sources] = {
-            name: Sources(r, wave, self.spw, self.edges, device, keep)
+            name: Sources(r, wave, self.spw, self.edges, device, keep, radiator=options.radiator,
+                          tol=options.radiator_tol)
             for name, r in (("ideal", ideal), ("deformed", deformed))}
+        # the whole grid's chart domain: every block of points is summed on the same grids
+        self.domains = {name: domain_of(self.points[name], (0.0, 0.0, float(r.F)))
+                        for name, r in (("ideal", ideal), ("deformed", deformed))}
         self.mesh = scene_attrs(scene, deformed)
         self.F, self.D = float(deformed.F), float(deformed.D)
         self.edge_note = _edge_note(self.edges, deformed, wave.wavelength)
@@ -344,7 +360,8 @@ class _WaveContext:
         arrays: dict[str, NDArray[np.float64]] = {}
         figures = {"pairs": 0.0, "seconds": 0.0, "pairs_edges": 0.0, "seconds_edges": 0.0}
         for i, (name, sources) in enumerate(self.sources.items()):
-            out = sources.radiate(self.points[name][lo:hi], _stage(report, 0.5 * i, 0.5, name))
+            out = sources.radiate(self.points[name][lo:hi], _stage(report, 0.5 * i, 0.5, name),
+                                  domain=self.domains[name])
             arrays[f"po_{name}"] = out.sums["electric"]
             if self.edges:
                 arrays[f"edges_{name}"] = out.sums["fringe"]
@@ -361,6 +378,9 @@ class _WaveContext:
         if self.edges:
             engine.update({"edge_points": int(deformed.n_edge_points),
                            "edge_points_lit": int(deformed.n_edge_lit), **self.edge_note})
+        ran = sorted({m.split(" ")[0] for src in (ideal, deformed) for m in src.methods.values()})
+        engine.update({"radiator": self.radiator, "radiator_tol": float(self.radiator_tol),
+                       "radiator_ran": ",".join(ran) or self.radiator})
         return {"mesh": self.mesh, "focal_length": self.F, "diameter": self.D, "engine": engine}
 
     def digest(self) -> str:

@@ -294,6 +294,11 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["simulate", "scene.toml", "-o", "o.nc", "--device", "tpu"], "unknown device 'tpu'"),
         (["simulate", "scene.toml", "-o", "o.nc", "--edges", "all"], "--edges applies to --method po+ptd"),
         (["simulate", "scene.toml", "-o", "o.nc", "--fresnel"], "--fresnel applies to --method go+edge"),
+        # issue 31: the fast radiator's options
+        (["simulate", "scene.toml", "-o", "o.nc", "--method", "po", "--radiator", "fmm"],
+         "unknown radiator 'fmm'"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--method", "po", "--radiator-tol", "2"],
+         "--radiator-tol must lie in (0, 1)"),
         (["simulate", "scene.toml", "-o", "o.nc", "--method", "go+edge", "--fresnel", "--workers",
           "2"], "--fresnel runs in this process"),
         (["simulate", "scene.toml", "-o", "o.nc", "--method", "po", "--samples-per-wavelength", "-1"],

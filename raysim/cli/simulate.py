@@ -42,6 +42,12 @@ def simulate(
         help="go+edge: add the Fresnel-zone correction of the deformed geometric wave (wave "
              "optics' smoothing of features finer than the Fresnel zone; on the paper's dish "
              "it helps below about 3 GHz)."),
+    radiator: str = typer.Option(
+        "fast", "--radiator",
+        help="po, po+ptd: fast (the multilevel sum, where its cost estimate beats the direct "
+             "sum; the FieldMap records which ran) or direct (the reference sum)."),
+    radiator_tol: float = typer.Option(
+        1e-6, "--radiator-tol", help="po, po+ptd: relative RMS accuracy of the fast radiator."),
     scheduler: str | None = typer.Option(
         None, "--scheduler",
         help="po, po+ptd: compute the sphere's points in blocks on the Dask scheduler at "
@@ -73,7 +79,8 @@ def simulate(
     loaded = load_scene(scene).with_overrides(frequency, n_theta, n_phi)
     method = method or loaded.method
     check_options(loaded, method=method, device=device, total=total, save_field=save_field,
-                  samples_per_wavelength=samples_per_wavelength, edges=edges, fresnel=fresnel)
+                  samples_per_wavelength=samples_per_wavelength, edges=edges, fresnel=fresnel,
+                  radiator=radiator, radiator_tol=radiator_tol)
     from raysim.dataset.run import MAX_THREADS, MAX_WORKERS
     from raysim.errors import RaysimError
 
@@ -89,7 +96,7 @@ def simulate(
         _simulate_blocks(loaded, output, method, device, total=total, save_field=save_field,
                          samples_per_wavelength=samples_per_wavelength, edges=edges,
                          scheduler=scheduler, workers=workers, threads=threads or 1, resume=resume,
-                         block_size=block_size)
+                         block_size=block_size, radiator=radiator, radiator_tol=radiator_tol)
         return
     with progress_bar() as bar:
         task = bar.add_task(f"{method} {loaded.name}", total=1.0)
@@ -99,7 +106,7 @@ def simulate(
 
         ds = run(loaded, method=method, device=device, progress=report, total=total,
                  save_field=save_field, samples_per_wavelength=samples_per_wavelength, edges=edges,
-                 fresnel=fresnel)
+                 fresnel=fresnel, radiator=radiator, radiator_tol=radiator_tol)
     save(ds, output)
     say(f"{output}: {summary(ds)}")
 

@@ -122,7 +122,8 @@ def simulate(scene: Scene, output: str | Path, method: str | None = None, device
              progress: Progress | None = None, *, scheduler: str | None = None,
              workers: int | None = None, threads: int = 1, resume: bool = False,
              block_size: int | None = None, total: bool = False, save_field: bool = False,
-             samples_per_wavelength: float | None = None, edges: str | None = None) -> xr.Dataset:
+             samples_per_wavelength: float | None = None, edges: str | None = None,
+             radiator: str = "fast", radiator_tol: float = 1e-6) -> xr.Dataset:
     """Simulate ``scene`` on Dask and write its FieldMap to ``output``; return the FieldMap.
 
     Options as :func:`raysim.simulate.simulate`, and: ``scheduler`` (address of a running Dask
@@ -136,7 +137,7 @@ def simulate(scene: Scene, output: str | Path, method: str | None = None, device
     ``N of M blocks``).
     """
     start = time.perf_counter()
-    options = Options(total, save_field, samples_per_wavelength, edges)
+    options = Options(total, save_field, samples_per_wavelength, edges, False, radiator, radiator_tol)
     method = check_method(scene, method, options, device)
     if method not in BLOCK_ENGINES:
         raise ClusterError(f"--scheduler and --workers apply to the wave methods "

@@ -35,6 +35,8 @@ from numpy.typing import ArrayLike, NDArray
 from raysim.maps.sphere import SphereGrid
 from raysim.optics import runtime
 from raysim.optics.bvh import ReflectorBVH, facet_sag, shadow_tolerance
+from raysim.optics.fast.chart import Domain
+from raysim.optics.fast.radiator import DEFAULT_TOL, make_radiator
 from raysim.optics.illumination import C0, ETA0, MU0, Illumination, Taper, incident_field
 from raysim.optics.radiator import CurrentElements, Radiator
 from raysim.progress import Progress
@@ -118,18 +120,20 @@ class POResult:
 def scatter(reflector: Reflector, points: ArrayLike, wave: Illumination,
             samples_per_wavelength: float = DEFAULT_SAMPLES_PER_WAVELENGTH,
             device: str | None = "cpu", taper: Taper | None = None,
-            progress: Progress | None = None) -> POResult:
+            progress: Progress | None = None, radiator: str = "direct", tol: float = DEFAULT_TOL,
+            centre: ArrayLike | None = None, domain: Domain | None = None) -> POResult:
     """PO field scattered by ``reflector`` at ``points`` (n, 3), m, reflector frame.
 
     ``samples_per_wavelength`` sets the quadrature (samples about lambda / that apart);
-    ``taper(x, y)`` optionally weights the current (1 inside, smoothly to 0, for tests).
+    ``taper(x, y)`` optionally weights the current (1 inside, smoothly to 0, for tests);
+    ``radiator``, ``tol``, ``centre``, ``domain``: as :func:`raysim.optics.fast.radiator.make_radiator`.
     """
     start = time.perf_counter()
     report = progress or (lambda stage, fraction: None)
     dev = runtime.resolve_device(device)
     quadrature = plan(reflector, wave.wavelength, samples_per_wavelength)
     total = max(quadrature.n_samples, 1)
-    radiator = Radiator(points, wave.k, dev)
+    rad = make_radiator(points, wave.k, dev, radiator=radiator, tol=tol, centre=centre, domain=domain)
     stats = ElementStats()
     done = 0
     report("currents", 0.0)
@@ -139,21 +143,23 @@ def scatter(reflector: Reflector, points: ArrayLike, wave: Illumination,
         def sub(stage: str, f: float, base: int = base, size: int = src.shape[1]) -> None:
             report(f"radiating, {stage}", min(1.0, (base + f * size) / total))
 
-        radiator.add_packed(src, progress=sub)
+        rad.add_packed(src, progress=sub)
         done = stats.n_samples
-    return POResult(radiator.field(), stats.n_samples, stats.n_lit, radiator.pairs,
-                    time.perf_counter() - start, radiator.seconds)
+    return POResult(rad.field(), stats.n_samples, stats.n_lit, rad.pairs,
+                    time.perf_counter() - start, rad.seconds)
 
 
 def sphere_field(reflector: Reflector, grid: SphereGrid, wave: Illumination,
                  samples_per_wavelength: float = DEFAULT_SAMPLES_PER_WAVELENGTH,
                  device: str | None = "cpu", taper: Taper | None = None,
-                 progress: Progress | None = None) -> POResult:
+                 progress: Progress | None = None, radiator: str = "direct",
+                 tol: float = DEFAULT_TOL) -> POResult:
     """PO scattered field at the cell centres of ``grid`` (sphere about the focus (0, 0, F)).
 
-    ``E`` has shape (n_theta, n_phi, 3).
+    ``E`` has shape (n_theta, n_phi, 3); ``radiator`` ``fast`` or ``direct`` (``tol``: fast's).
     """
     points = grid.points(reflector.F).reshape(-1, 3)
-    result = scatter(reflector, points, wave, samples_per_wavelength, device, taper, progress)
+    result = scatter(reflector, points, wave, samples_per_wavelength, device, taper, progress,
+                     radiator, tol, centre=(0.0, 0.0, float(reflector.F)))
     return POResult(result.E.reshape(grid.n_theta, grid.n_phi, 3), result.n_samples, result.n_lit,
                     result.pairs, result.seconds, result.seconds_radiate)

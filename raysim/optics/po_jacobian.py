@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 from raysim.errors import RaysimError
 from raysim.optics import runtime
 from raysim.optics.bvh import ReflectorBVH
+from raysim.optics.fast.radiator import DEFAULT_TOL, make_radiator
 from raysim.optics.illumination import ETA0, Illumination
 from raysim.optics.radiator import PREFACTORS, Radiator
 from raysim.surface.mesh import Reflector
@@ -107,15 +108,20 @@ def radiate(elements: SurfaceElements, points: ArrayLike, device: str | None = "
 
 
 def jvp(elements: SurfaceElements, points: ArrayLike, dz: ArrayLike, dhx: ArrayLike,
-        dhy: ArrayLike, device: str | None = "cpu", progress=None) -> NDArray[np.complex128]:
-    """dE (n, 3) at ``points`` for per-sample dz (m) and slope changes dhx, dhy (module docs)."""
+        dhy: ArrayLike, device: str | None = "cpu", progress=None, radiator: str = "direct",
+        tol: float = DEFAULT_TOL, centre: ArrayLike | None = None,
+        force: bool = False) -> NDArray[np.complex128]:
+    """dE (n, 3) at ``points`` for per-sample dz (m) and slope changes dhx, dhy (module docs).
+
+    ``radiator``, ``tol``, ``centre`` (the sphere's centre, m), ``force``: as
+    :func:`raysim.optics.fast.radiator.make_radiator` (the fast sum of the shift elements)."""
     dz, dhx, dhy = (np.asarray(a, dtype=np.float64)[:, None] for a in (dz, dhx, dhy))
     p = elements.dm_dz * dz + elements.dm_dhx * dhx + elements.dm_dhy * dhy
     packed = np.vstack([elements.r.T, elements.m.real.T, elements.m.imag.T, p.real.T, p.imag.T,
                         (dz * Z_HAT[None, :]).T])
-    radiator = Radiator(points, elements.k, device)
-    radiator.add_packed(packed, "shift", progress)
-    return radiator.field()
+    rad = make_radiator(points, elements.k, device, radiator=radiator, tol=tol, centre=centre, force=force)
+    rad.add_packed(packed, "shift", progress)
+    return rad.field()
 
 
 def vjp(elements: SurfaceElements, points: ArrayLike, c: ArrayLike, device: str | None = "cpu",

@@ -65,8 +65,8 @@ from raysim.errors import RaysimError
 from raysim.maps.sphere import SphereGrid
 from raysim.optics import runtime
 from raysim.optics.bvh import ReflectorBVH
+from raysim.optics.fast.radiator import DEFAULT_TOL, make_radiator
 from raysim.optics.illumination import ETA0, Illumination, Taper
-from raysim.optics.radiator import Radiator
 from raysim.progress import Progress
 from raysim.surface.edges import Edges, edge_quadrature
 from raysim.surface.mesh import Reflector
@@ -145,12 +145,14 @@ def lit_points(reflector: Reflector, edges: Edges, wave: Illumination, device: s
 def edge_field(reflector: Reflector, points: ArrayLike, wave: Illumination, edges: str = "rim",
                points_per_wavelength: float = DEFAULT_POINTS_PER_WAVELENGTH,
                device: str | None = "cpu", taper: Taper | None = None, curve: bool = True,
-               progress: Progress | None = None) -> EdgeResult:
+               progress: Progress | None = None, radiator: str = "direct", tol: float = DEFAULT_TOL,
+               centre: ArrayLike | None = None) -> EdgeResult:
     """Fringe field of ``reflector``'s free edges at ``points`` (n, 3), m, reflector frame.
 
     ``edges`` is ``rim`` or ``all`` (rim, hole and panel-gap edges); ``points_per_wavelength``
     sets the Gauss points along the edges; ``taper(x, y)`` optionally weights the currents as
-    PO's taper does; ``curve`` False keeps every edge straight.
+    PO's taper does; ``curve`` False keeps every edge straight; ``radiator``, ``tol``,
+    ``centre``: as :func:`raysim.optics.fast.radiator.make_radiator`.
     """
     start = time.perf_counter()
     if not points_per_wavelength > 0:
@@ -158,17 +160,19 @@ def edge_field(reflector: Reflector, points: ArrayLike, wave: Illumination, edge
     dev = runtime.resolve_device(device)
     quad = edge_quadrature(reflector, wave.wavelength / points_per_wavelength, edges, curve=curve)
     lit = lit_points(reflector, quad, wave, dev)
-    radiator = Radiator(points, wave.k, dev, block=1024)
-    radiator.add_packed(fringe_elements(quad, wave, lit, taper), "fringe", progress)
-    return EdgeResult(radiator.field(), len(quad), int(lit.sum()), radiator.pairs,
+    rad = make_radiator(points, wave.k, dev, block=1024, radiator=radiator, tol=tol, centre=centre)
+    rad.add_packed(fringe_elements(quad, wave, lit, taper), "fringe", progress)
+    return EdgeResult(rad.field(), len(quad), int(lit.sum()), rad.pairs,
                       time.perf_counter() - start)
 
 
 def sphere_edge_field(reflector: Reflector, grid: SphereGrid, wave: Illumination, edges: str = "rim",
                       points_per_wavelength: float = DEFAULT_POINTS_PER_WAVELENGTH,
-                      device: str | None = "cpu", progress: Progress | None = None) -> EdgeResult:
+                      device: str | None = "cpu", progress: Progress | None = None,
+                      radiator: str = "direct", tol: float = DEFAULT_TOL) -> EdgeResult:
     """:func:`edge_field` at the cell centres of ``grid``; ``E`` shaped (n_theta, n_phi, 3)."""
     result = edge_field(reflector, grid.points(reflector.F).reshape(-1, 3), wave, edges,
-                        points_per_wavelength, device, progress=progress)
+                        points_per_wavelength, device, progress=progress, radiator=radiator, tol=tol,
+                        centre=(0.0, 0.0, float(reflector.F)))
     return EdgeResult(result.E.reshape(grid.n_theta, grid.n_phi, 3), result.n_points, result.n_lit,
                       result.pairs, result.seconds)

@@ -34,9 +34,11 @@ from numpy.typing import ArrayLike, NDArray
 from raysim.errors import RaysimError
 from raysim.optics import runtime
 from raysim.optics.bvh import ReflectorBVH
+from raysim.optics.fast.chart import Domain
+from raysim.optics.fast.radiator import DEFAULT_TOL, RADIATORS, make_radiator
 from raysim.optics.illumination import Illumination
 from raysim.optics.po import ElementStats, po_elements
-from raysim.optics.radiator import Radiator, position_extent
+from raysim.optics.radiator import position_extent
 from raysim.progress import Progress
 from raysim.surface.mesh import Reflector
 from raysim.surface.quadrature import plan
@@ -79,9 +81,15 @@ class Sources:
 
     def __init__(self, reflector: Reflector, wave: Illumination, samples_per_wavelength: float,
                  edges: str | None = None, device: str | None = "cpu", keep: bool = True,
-                 edge_points_per_wavelength: float | None = None) -> None:
+                 edge_points_per_wavelength: float | None = None, radiator: str = "direct",
+                 tol: float = DEFAULT_TOL) -> None:
         from raysim.optics import ptd
 
+        if radiator not in RADIATORS:
+            raise RaysimError(f"unknown radiator {radiator!r}: use one of {', '.join(RADIATORS)}")
+        self.radiator, self.tol = radiator, float(tol)
+        self._fast_cache: dict = {}  # the fast radiator's stop-level grids, per domain
+        self.methods: dict[str, str] = {}  # kind -> which sum ran last (fast radiator)
         self.device = runtime.resolve_device(device)
         self.reflector, self.wave = reflector, wave
         self.quadrature = plan(reflector, wave.wavelength, samples_per_wavelength)
@@ -152,11 +160,19 @@ class Sources:
         return hashlib.blake2b(self._fringe_digest + (self._po_digest or b""), digest_size=16).hexdigest()
 
     # --- radiation ---------------------------------------------------------------------------
-    def radiate(self, points: ArrayLike, progress: Progress | None = None) -> Radiated:
-        """Raw sums of the elements at ``points`` (n, 3), m, reflector frame."""
+    def _radiator(self, pts: NDArray[np.float64], domain: Domain | None, block: int | None = None):
+        return make_radiator(pts, self.wave.k, self.device, block=block, radiator=self.radiator,
+                             tol=self.tol, centre=(0.0, 0.0, float(self.reflector.F)), domain=domain,
+                             cache=self._fast_cache)
+
+    def radiate(self, points: ArrayLike, progress: Progress | None = None,
+                domain: Domain | None = None) -> Radiated:
+        """Raw sums of the elements at ``points`` (n, 3), m, reflector frame. ``domain``: the
+        whole job's points (:func:`raysim.optics.fast.chart.domain_of`), so that the fast
+        radiator gives every block the bits of the whole."""
         report = progress or (lambda stage, fraction: None)
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        po = Radiator(pts, self.wave.k, self.device)
+        po = self._radiator(pts, domain)
         expected = max(self.stats.n_lit if self._po_digest is not None else self.quadrature.n_samples, 1)
         done = 0
         report("currents", 0.0)
@@ -169,11 +185,13 @@ class Sources:
             po.add_packed(src, "electric", sub, extent=extent)
             done += size
         sums = {"electric": po.sums_of("electric")}
+        self.methods.update(getattr(po, "method", {}))
         if self.edges is None:
             return Radiated(sums, po.pairs, po.seconds)
         start = time.perf_counter()
-        fr = Radiator(pts, self.wave.k, self.device, block=FRINGE_BLOCK)
+        fr = self._radiator(pts, domain, FRINGE_BLOCK)
         if self.fringe is not None:
             fr.add_packed(self.fringe[0], "fringe", extent=self.fringe[1])
         sums["fringe"] = fr.sums_of("fringe")
+        self.methods.update(getattr(fr, "method", {}))
         return Radiated(sums, po.pairs, po.seconds, fr.pairs, time.perf_counter() - start)

@@ -26,6 +26,7 @@ from raysim.optics.kernels.radiation import (
     green,
     magnetic_bracket,
     radiation_kernels,
+    segment_kernel,
     times,
     vec6d,
 )
@@ -211,3 +212,4 @@ def diffraction_pair(p: wp.vec3d, e: Diffraction, k: wp.float64, k_inv: wp.float
 
 
 radiate_diffraction, radiate_diffraction4 = radiation_kernels(load_diffraction, diffraction_pair)
+segments_diffraction = segment_kernel(load_diffraction, diffraction_pair)

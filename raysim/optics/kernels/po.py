@@ -24,6 +24,7 @@ from raysim.optics.kernels.radiation import (
     green,
     magnetic_bracket,
     radiation_kernels,
+    segment_kernel,
     times,
     vec6d,
 )
@@ -73,6 +74,8 @@ def magnetic_pair(p: wp.vec3d, e: Dipole, k: wp.float64, k_inv: wp.float64,
 
 radiate_electric, radiate_electric4 = radiation_kernels(load_dipole, electric_pair)
 radiate_magnetic, radiate_magnetic4 = radiation_kernels(load_dipole, magnetic_pair)
+segments_electric = segment_kernel(load_dipole, electric_pair)
+segments_magnetic = segment_kernel(load_dipole, magnetic_pair)
 
 
 @wp.kernel

@@ -41,6 +41,7 @@ from raysim.optics.kernels.radiation import (
     electric_bracket,
     green,
     radiation_kernels,
+    segment_kernel,
     times,
     vec6d,
     vec8d,
@@ -118,6 +119,7 @@ def shift_pair(p: wp.vec3d, e: ShiftElement, k: wp.float64, k_inv: wp.float64,
 
 
 radiate_shift, radiate_shift4 = radiation_kernels(load_shift, shift_pair)
+segments_shift = segment_kernel(load_shift, shift_pair)
 
 
 @wp.struct

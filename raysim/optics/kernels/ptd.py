@@ -37,6 +37,7 @@ from raysim.optics.kernels.radiation import (
     green,
     magnetic_bracket,
     radiation_kernels,
+    segment_kernel,
     times,
     vec6d,
 )
@@ -120,3 +121,4 @@ def fringe_pair(p: wp.vec3d, e: EdgeElement, k: wp.float64, k_inv: wp.float64,
 
 
 radiate_fringe, radiate_fringe4 = radiation_kernels(load_edge, fringe_pair)
+segments_fringe = segment_kernel(load_edge, fringe_pair)

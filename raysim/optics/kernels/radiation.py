@@ -229,3 +229,87 @@ def adjoint_kernel(load: Any, pair: Any) -> Any:
             out[c, s] = out[c, s] + acc[c]
 
     return adjoint
+
+
+def segment_kernel(load: Any, pair: Any) -> tuple[Any, Any]:
+    """The leaf sums of the fast radiator for one kind of element (same ``load`` and ``pair``):
+    ``(radiate_segments, radiate_segments4)``, one node or four nodes per thread.
+
+    Every cluster (leaf) sees the same ``nodes`` (3, n_nodes) field points; thread t is node
+    ``t % n_nodes`` of leaf ``t // n_nodes`` and sums the leaf's elements
+    ``begins[leaf]..ends[leaf]-1`` of ``src``, raw (before the kind's prefactor) as
+    :func:`radiation_kernels` does for one point, times exp(+j k |P - centres[leaf]|) (the
+    phase of the leaf's centre taken out), into ``E[t]`` (n_leaves * n_nodes, 6).
+    """
+
+    @wp.kernel(module="unique")
+    def radiate_segments(
+        nodes: wp.array2d(dtype=wp.float64),
+        begins: wp.array(dtype=wp.int32),
+        ends: wp.array(dtype=wp.int32),
+        centres: wp.array2d(dtype=wp.float64),
+        n_nodes: int,
+        src: wp.array2d(dtype=wp.float64),
+        k: wp.float64,
+        k_inv: wp.float64,
+        table: wp.array(dtype=wp.vec2d),
+        E: wp.array2d(dtype=wp.float64),
+        offset: int,
+    ):
+        t = wp.tid() + offset
+        leaf = t // n_nodes
+        node = t - leaf * n_nodes
+        p = wp.vec3d(nodes[0, node], nodes[1, node], nodes[2, node])
+        acc = vec6d()
+        for s in range(begins[leaf], ends[leaf]):
+            acc += pair(p, load(src, s), k, k_inv, table)
+        d = p - wp.vec3d(centres[leaf, 0], centres[leaf, 1], centres[leaf, 2])
+        v = times(acc, cis(k * wp.sqrt(wp.dot(d, d)), table))
+        for c in range(6):
+            E[t, c] = v[c]
+
+    @wp.kernel(module="unique")
+    def radiate_segments4(
+        nodes: wp.array2d(dtype=wp.float64),
+        begins: wp.array(dtype=wp.int32),
+        ends: wp.array(dtype=wp.int32),
+        centres: wp.array2d(dtype=wp.float64),
+        n_nodes: int,
+        src: wp.array2d(dtype=wp.float64),
+        k: wp.float64,
+        k_inv: wp.float64,
+        table: wp.array(dtype=wp.vec2d),
+        E: wp.array2d(dtype=wp.float64),
+        offset: int,
+    ):
+        # four nodes 4j..4j+3 of one leaf per thread (n_nodes a multiple of four): each element
+        # is loaded once for four nodes, as radiate4 does
+        t = (wp.tid() + offset) * 4
+        leaf = t // n_nodes
+        node = t - leaf * n_nodes
+        c = wp.vec3d(centres[leaf, 0], centres[leaf, 1], centres[leaf, 2])
+        p0 = wp.vec3d(nodes[0, node], nodes[1, node], nodes[2, node])
+        p1 = wp.vec3d(nodes[0, node + 1], nodes[1, node + 1], nodes[2, node + 1])
+        p2 = wp.vec3d(nodes[0, node + 2], nodes[1, node + 2], nodes[2, node + 2])
+        p3 = wp.vec3d(nodes[0, node + 3], nodes[1, node + 3], nodes[2, node + 3])
+        a0 = vec6d()
+        a1 = vec6d()
+        a2 = vec6d()
+        a3 = vec6d()
+        for s in range(begins[leaf], ends[leaf]):
+            e = load(src, s)
+            a0 += pair(p0, e, k, k_inv, table)
+            a1 += pair(p1, e, k, k_inv, table)
+            a2 += pair(p2, e, k, k_inv, table)
+            a3 += pair(p3, e, k, k_inv, table)
+        v0 = times(a0, cis(wp.length(p0 - c) * k, table))
+        v1 = times(a1, cis(wp.length(p1 - c) * k, table))
+        v2 = times(a2, cis(wp.length(p2 - c) * k, table))
+        v3 = times(a3, cis(wp.length(p3 - c) * k, table))
+        for q in range(6):
+            E[t, q] = v0[q]
+            E[t + 1, q] = v1[q]
+            E[t + 2, q] = v2[q]
+            E[t + 3, q] = v3[q]
+
+    return radiate_segments, radiate_segments4

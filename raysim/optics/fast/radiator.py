@@ -1,0 +1,183 @@
+"""The fast radiator: :class:`raysim.optics.radiator.Radiator`'s interface, summed multilevel.
+
+Elements added under a kind are kept (sources change nothing until a field is read); the first
+:meth:`FastRadiator.sums_of` of a kind plans a tree (:mod:`raysim.optics.fast.multilevel`),
+compares its estimated cost with the direct sum's and runs the cheaper; ``method`` records
+which ran per kind. Targets that are not on one sphere about ``centre`` (or that reach past
+the chart's limit) always take the direct sum. ``pairs`` counts the element-point pairs the
+direct sum would have evaluated, so ``rate()`` is an equivalent rate.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from raysim.errors import RaysimError
+from raysim.optics.fast import multilevel
+from raysim.optics.fast.chart import Domain, choose_order, domain_of, to_chart
+from raysim.optics.radiator import Radiator, field_of
+from raysim.progress import Progress
+
+#: kinds the multilevel sum serves: point elements. go+edge's diffraction elements integrate
+#: along edge segments metres long (their field is not that of a point at their position), so
+#: they always take the direct sum
+FAST_KINDS = ("electric", "magnetic", "fringe", "shift")
+#: default tolerance: fields agree with the direct sum to about this relative RMS
+DEFAULT_TOL = 1e-6
+RADIATORS = ("fast", "direct")
+
+
+def _segments(kind: str) -> Any:
+    from raysim.optics.kernels import goedge, po, po_derivative, ptd
+
+    return {"electric": po.segments_electric, "magnetic": po.segments_magnetic,
+            "fringe": ptd.segments_fringe, "diffraction": goedge.segments_diffraction,
+            "shift": po_derivative.segments_shift}[kind]
+
+
+class FastRadiator:
+    """The field (V/m) of current elements at points on a sphere, by the multilevel sum.
+
+    Parameters
+    ----------
+    points : (n, 3) field points (m, reflector frame).
+    k : wavenumber (rad/m).
+    device : Warp device.
+    tol : the relative accuracy sought (interpolation error per step is set from it).
+    centre : (3,) m, the centre of the targets' sphere (the focus); None: direct sum only.
+    domain : the whole job's :class:`Domain` (a block of a grid passes the grid's, so the
+        field is bit-identical whatever the split); default: the points' own.
+    force : run the multilevel sum even where the direct sum is estimated cheaper (tests).
+    cache : a dict kept by the owner of the elements (:class:`raysim.optics.sources.Sources`):
+        the stop level's grids are stored there per kind, domain and tolerance, so later blocks
+        of points only interpolate (the elements of a kind must not change between uses).
+    """
+
+    def __init__(self, points: ArrayLike, k: float, device: str | None = "cpu", block: int | None = None,
+                 tol: float = DEFAULT_TOL, centre: ArrayLike | None = None, domain: Domain | None = None,
+                 force: bool = False, cache: dict | None = None) -> None:
+        if not 0 < tol < 1:
+            raise RaysimError(f"radiator tolerance must be in (0, 1), got {tol:g}")
+        self.direct = Radiator(points, k, device, block=block)
+        self.device = self.direct.device
+        self.points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        self.n = self.direct.n
+        self.k = float(k)
+        self.tol = float(tol)
+        self.force = force
+        self.cache = cache
+        self.domain = domain
+        self.u: NDArray[np.float64] | None = None
+        if centre is not None and self.n:
+            own = domain_of(self.points, centre)
+            if own is not None and domain is None:
+                self.domain = own
+            if own is None or not _inside(own, self.domain):
+                self.domain = None
+            if self.domain is not None:
+                self.u = to_chart(self.points, self.domain.centre)[0]
+        elif centre is None:
+            self.domain = None
+        self.sources: dict[str, list[NDArray[np.float64]]] = {}
+        self.results: dict[str, NDArray[np.float64]] = {}
+        self.method: dict[str, str] = {}
+        self.pairs = 0
+        self.seconds = 0.0
+
+    def add_packed(self, src: Any, kind: str = "electric", progress: Progress | None = None,
+                   extent: Any = None) -> None:
+        """Keep elements of ``kind`` (numpy or Warp float64, the kernels' packed layout)."""
+        spec = self.direct.kinds[kind]
+        a = src.numpy() if hasattr(src, "numpy") else np.asarray(src, dtype=np.float64)
+        if a.shape[0] != spec.rows:
+            raise RaysimError(f"{kind} elements have {spec.rows} rows, got {a.shape[0]}")
+        if a.shape[1] == 0 or self.n == 0:
+            return
+        self.direct._check_phase((a[:3].min(axis=1), a[:3].max(axis=1)))
+        self.sources.setdefault(kind, []).append(np.array(a, dtype=np.float64))
+        self.results.pop(kind, None)
+        self.pairs += a.shape[1] * self.n
+        if progress is not None:
+            progress("elements kept", 1.0)
+
+    def add(self, elements: Any, progress: Progress | None = None) -> None:
+        if len(elements):
+            self.add_packed(elements.packed(), elements.kind, progress)
+
+    def rate(self) -> float:
+        """Equivalent pairs (element x field point) per second so far."""
+        return self.pairs / self.seconds if self.seconds > 0 else 0.0
+
+    def sums_of(self, kind: str) -> NDArray[np.float64]:
+        """The raw sums (n, 6) of ``kind`` at the points, as :meth:`Radiator.sums_of`."""
+        if kind not in self.sources:
+            return np.zeros((self.n, 6))
+        if kind not in self.results:
+            start = time.perf_counter()
+            self.results[kind] = self._run(kind, np.concatenate(self.sources[kind], axis=1))
+            self.seconds += time.perf_counter() - start
+        return self.results[kind]
+
+    def _run(self, kind: str, src: NDArray[np.float64]) -> NDArray[np.float64]:
+        the_plan = None
+        p, s = choose_order(self.tol / 2.0)  # measured: the field errs about 10x below the table
+        key = (kind, self.domain, self.tol, src.shape[1])
+        if self.cache is not None and key in self.cache:
+            the_plan, G = self.cache[key]
+            self.method[kind] = _describe(the_plan, p, s)
+            return multilevel.to_targets(G, the_plan, self.u, self.points, self.k, p, self.device)
+        if self.domain is not None and self.u is not None and kind in FAST_KINDS:
+            the_plan = multilevel.plan(np.ascontiguousarray(src[:3].T), self.domain, self.k, p, s)
+        if the_plan is None or (the_plan.cost >= the_plan.direct_cost and not self.force):
+            self.method[kind] = "direct"
+            one = Radiator(self.points, self.k, self.device, block=self.direct.block)
+            one.add_packed(src, kind)
+            return one.sums_of(kind)
+        self.method[kind] = _describe(the_plan, p, s)
+        assert self.domain is not None
+        G = multilevel.leaf_grids(_segments(kind), src, the_plan, self.domain, self.k, self.device)
+        for child in range(the_plan.leaf, the_plan.stop, -1):
+            G = multilevel.aggregate(G, child, the_plan, self.domain, self.k, p, self.device)
+        if self.cache is not None:
+            self.cache[key] = (the_plan, G)
+        return multilevel.to_targets(G, the_plan, self.u, self.points, self.k, p, self.device)
+
+    def field(self, kinds: tuple[str, ...] | None = None) -> NDArray[np.complex128]:
+        """E (n, 3) complex (V/m) of everything added so far (or of the ``kinds`` named)."""
+        chosen = [kind for kind in self.sources if kinds is None or kind in kinds]
+        if not chosen:
+            return np.zeros((self.n, 3), dtype=np.complex128)
+        return field_of({kind: self.sums_of(kind) for kind in chosen}, self.k)
+
+
+def _describe(the_plan: multilevel.Plan, p: int, s: float) -> str:
+    return f"fast (levels {the_plan.stop}..{the_plan.leaf}, p {p}, s {s:g})"
+
+
+def _inside(own: Domain, domain: Domain | None) -> bool:
+    """Whether the points' own domain lies within ``domain`` (same sphere, box inside)."""
+    if domain is None:
+        return False
+    same = np.allclose(own.centre, domain.centre, rtol=0, atol=1e-9 * domain.radius) and \
+        abs(own.radius - domain.radius) <= 1e-9 * domain.radius
+    b, d = own.box, domain.box
+    return bool(same and b[0] >= d[0] and b[1] <= d[1] and b[2] >= d[2] and b[3] <= d[3])
+
+
+def make_radiator(points: ArrayLike, k: float, device: str | None = "cpu", block: int | None = None,
+                  radiator: str = "fast", tol: float = DEFAULT_TOL, centre: ArrayLike | None = None,
+                  domain: Domain | None = None, cache: dict | None = None,
+                  force: bool = False) -> Radiator | FastRadiator:
+    """A radiator of the chosen method: ``fast`` (multilevel where cheaper, else direct; needs
+    ``centre``, the targets' sphere centre; ``force``: multilevel whatever the cost estimate,
+    for tests and benchmarks) or ``direct`` (the reference sum)."""
+    if radiator not in RADIATORS:
+        raise RaysimError(f"unknown radiator {radiator!r}: use one of {', '.join(RADIATORS)}")
+    if radiator == "direct" or centre is None:
+        return Radiator(points, k, device, block=block)
+    return FastRadiator(points, k, device, block=block, tol=tol, centre=centre, domain=domain, cache=cache,
+                        force=force)

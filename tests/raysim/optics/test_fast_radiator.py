@@ -1,0 +1,151 @@
+"""The fast (multilevel) radiator against the direct sum (issue 31).
+
+A scaled dish (D 10 m, F 3.3 m) at 1 GHz (about 33 wavelengths across) radiating to a sphere of
+1 m about the focus: the quadtree has five levels, so leaves, aggregation and the stop level all
+run. The reference is the direct sum (:class:`raysim.optics.radiator.Radiator`), an independent
+implementation of the same sum.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from raysim.errors import RaysimError
+from raysim.maps.sphere import SphereGrid
+from raysim.optics.fast.chart import domain_of
+from raysim.optics.fast.radiator import FastRadiator, make_radiator
+from raysim.optics.radiator import Radiator, _kinds
+
+D, F, R = 10.0, 3.3, 1.0
+K = 2 * np.pi * 1e9 / 299792458.0
+CENTRE = (0.0, 0.0, F)
+
+
+def _dish_positions(spacing: float) -> np.ndarray:
+    x = np.arange(-D / 2, D / 2, spacing)
+    X, Y = np.meshgrid(x, x)
+    inside = X**2 + Y**2 < (D / 2) ** 2
+    X, Y = X[inside], Y[inside]
+    return np.column_stack([X, Y, (X**2 + Y**2) / (4 * F)])
+
+
+def _elements(kind: str, seed: int = 1) -> np.ndarray:
+    """Elements of ``kind`` on the dish: a focused (phase from the focus) smooth moment for the
+    dipole rows, random smooth values in every other row."""
+    rows = _kinds()[kind].rows
+    pos = _dish_positions(np.pi / K)  # half a wavelength apart
+    if kind in ("fringe", "diffraction"):  # edge elements: on the rim
+        a = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+        pos = np.column_stack([D / 2 * np.cos(a), D / 2 * np.sin(a), np.full_like(a, D**2 / (16 * F))])
+    rng = np.random.default_rng(seed)
+    phase = np.exp(-1j * K * np.linalg.norm(pos - np.array(CENTRE), axis=1))
+    src = rng.normal(size=(rows, len(pos))) * 0.1
+    src[:3] = pos.T
+    src[3:6] = np.outer([1.0, 0.3, 0.1], phase.real) * (1 + 0.1 * src[3:6])
+    src[6:9] = np.outer([1.0, 0.3, 0.1], phase.imag) * (1 + 0.1 * src[6:9])
+    return np.ascontiguousarray(src)
+
+
+def _grid_points(n_theta: int = 24, n_phi: int = 48) -> np.ndarray:
+    return SphereGrid(R, n_theta, n_phi).points(F).reshape(-1, 3)
+
+
+def _scan_points(n: int = 500, seed: int = 2) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    theta, phi = np.arccos(rng.uniform(0.0, 1.0, n)), rng.uniform(0, 2 * np.pi, n)
+    dirs = np.column_stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), -np.cos(theta)])
+    return np.array(CENTRE) + R * dirs
+
+
+def _direct(points: np.ndarray, src: np.ndarray, kind: str) -> np.ndarray:
+    r = Radiator(points, K)
+    r.add_packed(src, kind)
+    return r.sums_of(kind)
+
+
+def _fast(points: np.ndarray, src: np.ndarray, kind: str, tol: float, **kw) -> tuple[np.ndarray, str]:
+    r = FastRadiator(points, K, tol=tol, centre=CENTRE, force=True, **kw)
+    r.add_packed(src, kind)
+    return r.sums_of(kind), r.method[kind]
+
+
+def _rel_rms(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.sqrt(np.sum((a - b) ** 2) / np.sum(b**2)))
+
+
+@pytest.mark.parametrize("kind", ["electric", "magnetic", "fringe", "shift"])
+def test_every_kind_within_tolerance(kind: str) -> None:
+    pts = _grid_points()
+    src = _elements(kind)
+    ref = _direct(pts, src, kind)
+    assert np.all(np.isfinite(ref))
+    out, method = _fast(pts, src, kind, 1e-6)
+    assert method.startswith("fast")
+    assert _rel_rms(out, ref) < 1e-6
+
+
+def test_error_shrinks_with_tolerance_on_scan_points() -> None:
+    pts = _scan_points()
+    src = _elements("electric")
+    ref = _direct(pts, src, "electric")
+    errors = [_rel_rms(_fast(pts, src, "electric", tol)[0], ref) for tol in (1e-2, 1e-4, 1e-7)]
+    assert errors[0] < 1e-2 and errors[1] < 1e-4 and errors[2] < 1e-7
+    assert errors[2] < errors[1] < errors[0]
+
+
+def test_a_block_of_points_gives_the_same_bits() -> None:
+    pts = _grid_points()
+    src = _elements("electric")
+    domain = domain_of(pts, CENTRE)
+    whole, _ = _fast(pts, src, "electric", 1e-6, domain=domain)
+    block, _ = _fast(pts[100:333], src, "electric", 1e-6, domain=domain)
+    assert np.array_equal(block, whole[100:333])
+
+
+def test_diffraction_elements_take_the_direct_sum() -> None:
+    """go+edge's elements integrate along edge segments: not point sources, so direct."""
+    pts = _grid_points(6, 12)
+    src = _elements("diffraction")
+    out, method = _fast(pts, src, "diffraction", 1e-6)
+    assert method == "direct"
+    assert np.array_equal(out, _direct(pts, src, "diffraction"))
+
+
+def test_points_off_the_sphere_take_the_direct_sum() -> None:
+    pts = _grid_points(6, 12) * np.linspace(0.9, 1.1, 72)[:, None]
+    src = _elements("electric")
+    out, method = _fast(pts, src, "electric", 1e-6)
+    assert method == "direct"
+    assert np.array_equal(out, _direct(pts, src, "electric"))
+
+
+def test_make_radiator_refuses_an_unknown_method() -> None:
+    with pytest.raises(RaysimError, match="unknown radiator"):
+        make_radiator(_grid_points(2, 4), K, radiator="fmm", centre=CENTRE)
+    with pytest.raises(RaysimError, match="tolerance"):
+        FastRadiator(_grid_points(2, 4), K, tol=0.0, centre=CENTRE)
+
+
+def test_jacobian_jvp_through_the_fast_radiator_is_the_transpose_of_the_direct_vjp() -> None:
+    """The PO Jacobian's JVP (shift elements) by the fast sum: equal to the direct JVP to the
+    tolerance, and <J v, w> = <v, J^T w> with the direct VJP to the tolerance."""
+    from raysim.optics import po_jacobian
+    from raysim.optics.illumination import Illumination
+    from raysim.surface.mesh import paraboloid
+
+    dish = paraboloid(D, F, 1.0)
+    wave = Illumination.plane_wave(1e9, (0, 0, -1), (1, 0, 0))
+    elements = po_jacobian.surface_elements(dish, wave, 1.5, "cpu")
+    rng = np.random.default_rng(4)
+    n = len(elements.r)
+    dz, hx, hy = (rng.standard_normal(n) * 1e-3 for _ in range(3))
+    pts = _grid_points(12, 24)
+    direct = po_jacobian.jvp(elements, pts, dz, hx, hy)
+    fast = po_jacobian.jvp(elements, pts, dz, hx, hy, radiator="fast", tol=1e-6, centre=CENTRE, force=True)
+    assert np.sqrt(np.sum(np.abs(fast - direct) ** 2) / np.sum(np.abs(direct) ** 2)) < 1e-6
+    w = rng.standard_normal((len(pts), 3)) + 1j * rng.standard_normal((len(pts), 3))
+    gz, gx, gy = po_jacobian.vjp(elements, pts, w)
+    lhs = float(np.real(np.sum(np.conj(w) * fast)))
+    rhs = float(gz @ dz + gx @ hx + gy @ hy)
+    assert abs(lhs - rhs) <= 1e-6 * abs(rhs)
