@@ -60,6 +60,9 @@ def correction_figure(x: np.ndarray, layout, actuators, correction, blocked: np.
     """Figure: the map before (terms removed), the predicted surface after (one colour scale) and
     the commands as dots coloured by their value, panel outlines and actuators on each."""
     fig = backend.figure(size)
+    # equal-aspect maps: the constrained layout sizes the boxes before the aspect shrinks them
+    # and puts the titles above the canvas; the compressed layout is made for fixed aspects
+    fig.set_layout_engine("compressed")
     axes = fig.subplots(1, 3)
     before, after = correction.before.copy(), correction.after.copy()
     if blocked is not None:
