@@ -21,6 +21,7 @@ independent tilts only partly observable (about 0.7 correlation on scenes/panels
 from __future__ import annotations
 
 import csv
+import io
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -28,6 +29,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from raysim.files import write_text
 from solver.aperture import ApertureGrid
 from solver.errors import SolverError
 
@@ -120,14 +122,9 @@ PANEL_COLUMNS = ("panel_id", "ring", "centre_x_m", "centre_y_m", "tilt_x_urad", 
 
 def write_panel_csv(rows: list[dict], path: str | os.PathLike[str]) -> Path:
     """Write the adjustment table (tilts urad = dz/dx, dz/dy; pistons left out, unobservable)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", newline="", encoding="utf-8") as fh:
-        writer = csv.DictWriter(fh, fieldnames=PANEL_COLUMNS, extrasaction="ignore")
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: f"{v:.3f}" if isinstance(v, float) else v
-                             for k, v in row.items()})
-    os.replace(tmp, path)
-    return path
+    text = io.StringIO(newline="")
+    writer = csv.DictWriter(text, fieldnames=PANEL_COLUMNS, extrasaction="ignore")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: f"{v:.3f}" if isinstance(v, float) else v for k, v in row.items()})
+    return write_text(path, text.getvalue())

@@ -19,6 +19,7 @@ import typer
 from rich.console import Console
 
 from raysim.cli.common import out, output_path
+from raysim.files import write_text
 
 # the widest table printed off a terminal (characters); wider tables would be cut past it
 OFF_TERMINAL_WIDTH = 10_000
@@ -88,7 +89,4 @@ def write_json(path: str | None, command: str, title: str, records: list[dict[st
         sys.stdout.write(text)
         sys.stdout.flush()
         return
-    target = Path(path).expanduser()
-    partial = target.with_name(f".{target.name}.partial")
-    partial.write_text(text, encoding="utf-8")
-    partial.replace(target)
+    write_text(Path(path).expanduser(), text)
