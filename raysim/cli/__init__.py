@@ -84,21 +84,18 @@ def main(argv: list[str] | None = None) -> None:
     try:
         code = command.main(args=args, prog_name="raysim", standalone_mode=False)
     except RaysimError as exc:
-        if _received:  # an error the interrupt itself caused
-            _interrupted(args, _received[0] == signal.SIGTERM)
+        _if_interrupted(args)  # an error the interrupt itself caused
         say_error(str(exc))
         sys.exit(2)
     except OSError as exc:
-        if _received:
-            _interrupted(args, _received[0] == signal.SIGTERM)
+        _if_interrupted(args)
         name = f"{exc.filename}: " if exc.filename else ""
         say_error(f"{name}{exc.strerror or exc}")
         sys.exit(2)
     except KeyboardInterrupt as exc:
         _interrupted(args, isinstance(exc, Terminated))
     except Exception as exc:
-        if _received:
-            _interrupted(args, _received[0] == signal.SIGTERM)
+        _if_interrupted(args)
         if type(exc).__name__ == "Abort":  # Ctrl-C while the framework parsed or prompted
             _interrupted(args, isinstance(exc.__context__, Terminated))
         if type(exc).__name__ == "NoArgsIsHelpError":  # help was shown
@@ -107,9 +104,14 @@ def main(argv: list[str] | None = None) -> None:
             raise
         say_error(error_line(exc))
         sys.exit(2)
+    _if_interrupted(args)
+    sys.exit(code if isinstance(code, int) else 0)
+
+
+def _if_interrupted(args: list[str]) -> None:
+    """End the command as interrupted when a signal arrived during it (whatever it raised)."""
     if _received:
         _interrupted(args, _received[0] == signal.SIGTERM)
-    sys.exit(code if isinstance(code, int) else 0)
 
 
 def _interrupted(args: list[str], terminated: bool) -> None:
