@@ -189,6 +189,10 @@ class WaveForward(WaveModel):
     probe : what reads the field (:meth:`raysim.maps.probe.Probe.power`, the field taken to
         arrive on the probe's boresight, as the simulation's wave methods read it).
     obstacles : an :class:`raysim.surface.obstacles.ObstacleMesh` in the beam, or None.
+    radiator, radiator_tol : the sum of the elements' fields (``fast``, the multilevel sum where
+        it is cheaper, or ``direct``) and the fast sum's relative accuracy
+        (:func:`raysim.optics.fast.radiator.make_radiator`); the model's fields and its
+        Jacobian's products (:class:`solver.jacobian.WaveJacobian`) both use them.
     """
 
     frequency_hz: float
@@ -200,6 +204,8 @@ class WaveForward(WaveModel):
     device: str | None = "cpu"
     probe: Probe = IDEAL
     obstacles: Any = None
+    radiator: str = "fast"
+    radiator_tol: float = 1e-6
     calls: int = field(default=0, compare=False)
     seconds: float = field(default=0.0, compare=False)
     _ideal: OrderedDict = field(default_factory=OrderedDict, init=False, repr=False, compare=False)
@@ -310,7 +316,8 @@ class WaveForward(WaveModel):
         spw = self.samples_per_wavelength
         job = ForwardJob("", float(D), float(F), float(self.face_m), float(self.frequency_hz),
                          float(self.polarization), spw, self.ptd, sphere, str(self.device or "cpu"),
-                         surface, obstacles=self.obstacles)
+                         surface, obstacles=self.obstacles, radiator=self.radiator,
+                         radiator_tol=float(self.radiator_tol))
         return replace(job, key=job.fingerprint())
 
 
@@ -391,6 +398,8 @@ class ForwardJob:
     surface: tuple | None
     threads: int = 1
     obstacles: Any = None
+    radiator: str = "fast"
+    radiator_tol: float = 1e-6
 
     @property
     def n_points(self) -> int:
@@ -399,7 +408,7 @@ class ForwardJob:
     def fingerprint(self) -> str:
         h = hashlib.sha256(repr((self.D, self.F, self.face_m, self.frequency_hz, self.polarization,
                                  self.samples_per_wavelength, self.ptd, self.sphere,
-                                 self.device)).encode())
+                                 self.device, self.radiator, self.radiator_tol)).encode())
         if self.obstacles is not None:
             h.update(self.obstacles.digest().encode())
         for grid in self.surface or ():
@@ -427,18 +436,23 @@ class ForwardJob:
                              self.surface)
         spw = po.DEFAULT_SAMPLES_PER_WAVELENGTH if self.samples_per_wavelength is None \
             else self.samples_per_wavelength
-        sources = Sources(reflector, self.wave(), spw, "rim" if self.ptd else None, device, keep)
-        return _ForwardContext(sources, self.sphere.points(self.F).reshape(-1, 3))
+        from raysim.optics.fast.chart import domain_of
+
+        sources = Sources(reflector, self.wave(), spw, "rim" if self.ptd else None, device, keep,
+                          radiator=self.radiator, tol=self.radiator_tol)
+        points = self.sphere.points(self.F).reshape(-1, 3)
+        # the whole grid's chart domain: every block is summed on the same grids (same bits)
+        return _ForwardContext(sources, points, domain_of(points, (0.0, 0.0, self.F)))
 
 
 class _ForwardContext:
     """A forward job's elements in one process (:class:`raysim.simulate.BlockContext`)."""
 
-    def __init__(self, sources, points: NDArray[np.float64]) -> None:
-        self.sources, self.points = sources, points
+    def __init__(self, sources, points: NDArray[np.float64], domain: Any = None) -> None:
+        self.sources, self.points, self.domain = sources, points, domain
 
     def evaluate(self, lo: int, hi: int, progress: Progress | None = None):
-        out = self.sources.radiate(self.points[lo:hi], progress)
+        out = self.sources.radiate(self.points[lo:hi], progress, domain=self.domain)
         arrays = {"po": out.sums["electric"]}
         if "fringe" in out.sums:
             arrays["edges"] = out.sums["fringe"]
@@ -455,9 +469,11 @@ class _ForwardContext:
 
 def forward_for(model: str, attrs: dict, device: str | None = "cpu",
                 samples_per_wavelength: float | None = None,
-                obstacles: Any = None) -> tuple[ForwardModel, str]:
+                obstacles: Any = None, radiator: str = "fast",
+                radiator_tol: float = 1e-6) -> tuple[ForwardModel, str]:
     """The forward model named ``model`` for a scan with FieldMap attributes ``attrs`` and
-    ``obstacles`` (the scan's ObstacleMesh, or None) in the beam.
+    ``obstacles`` (the scan's ObstacleMesh, or None) in the beam; ``radiator``,
+    ``radiator_tol``: the PO / PO + PTD models' sum (:class:`WaveForward`).
 
     Returns the model and a one-line description for the SurfaceMap.
     """
@@ -482,7 +498,8 @@ def forward_for(model: str, attrs: dict, device: str | None = "cpu",
     wave = kind(frequency, polarization,
                 total=str(attrs.get("field", "scattered")) == "total",
                 ptd=model == "po+ptd", samples_per_wavelength=samples_per_wavelength,
-                device=device, probe=probe, obstacles=obstacles)
+                device=device, probe=probe, obstacles=obstacles, radiator=radiator,
+                radiator_tol=radiator_tol)
     return wave, wave.describe() + _with_obstacles(obstacles)
 
 

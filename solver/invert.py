@@ -75,8 +75,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
            max_harmonics: int = boundary.MAX_HARMONICS, model: str | None = None,
            weights: str = "auto", progress: Progress | None = None,
            refine_method: str = "defect", gauss_newton: GaussNewtonOptions | None = None,
-           log: Callable[[str], None] | None = None,
-           options: InvertOptions | None = None) -> xr.Dataset:
+           log: Callable[[str], None] | None = None, radiator: str = "fast",
+           radiator_tol: float = 1e-6, options: InvertOptions | None = None) -> xr.Dataset:
     """Recover the surface deformation from a FieldMap; return a SurfaceMap.
 
     Parameters
@@ -119,6 +119,9 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         :mod:`solver.gauss_newton`) or ``auto`` (Gauss-Newton where it is affordable and the
         model allows it: :func:`solver.gauss_newton.choose_method`).
     gauss_newton : :class:`solver.gauss_newton.GaussNewtonOptions` (None: the defaults).
+    radiator, radiator_tol : how a PO / PO + PTD model sums its elements' fields, in its
+        fields and its Jacobian's products: ``fast`` (default: the multilevel sum where it is
+        cheaper, relative RMS accuracy ``radiator_tol``) or ``direct`` (the reference sum).
     log : optional ``log(line)`` of each Gauss-Newton step (misfit, update, time).
     options : all the settings above at once; when given, it replaces the keyword settings
         (``truth``, ``progress`` and ``log`` stay separate: they are not settings of the method).
@@ -128,14 +131,15 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         solver=solver, N=N, rim=rim, remove=remove, refine_iterations=refine_iterations,
         gain=gain, iterations=iterations, omega=omega, tol=tol, forward=forward, device=device,
         uncertainty_samples=uncertainty_samples, seed=seed, max_harmonics=max_harmonics,
-        model=model, weights=weights, refine_method=refine_method, gauss_newton=gauss_newton)
+        model=model, weights=weights, refine_method=refine_method, gauss_newton=gauss_newton,
+        radiator=radiator, radiator_tol=radiator_tol)
     scan = Scan.from_fieldmap(field)
     grid = solver_grid(scan.D, opts.N)
     if opts.rim is not None:
         boundary.check_targets(opts.rim, grid.a)
     data = measured_fa(scan, resolve_gain(opts.gain, str(scan.attrs.get("method", ""))))
     chosen = choose_model(scan.attrs, opts.refine_iterations, opts.model, opts.forward, opts.device,
-                          scan.obstacles)
+                          scan.obstacles, opts.radiator, opts.radiator_tol)
     method, why = choose_method(opts.refine_method, chosen.forward, scan, opts.refine_iterations)
     weighted = opts.weights == "amplitude" or (opts.weights == "auto" and chosen.wave)
     weight = amplitude_weight(scan.intensity_ideal, scan.sphere, scan.F,

@@ -131,6 +131,7 @@ class WaveJacobian:
 
         self.model, self.sphere, self.grid = model, sphere, grid
         self.points = sphere.points(F).reshape(-1, 3)
+        self.focus = (0.0, 0.0, float(F))  # the sphere's centre: the fast radiator's chart
         self.shape = (sphere.n_theta, sphere.n_phi)
         surface = (grid.x, grid.y, extend_outside(grid, delta))
         self.wave = model.job(sphere, F, D, surface).wave()
@@ -190,7 +191,8 @@ class WaveJacobian:
 
         points = self._at(self.points)
         dz, hx, hy = self.samples.apply(v_in)
-        dE = po_jacobian.jvp(self.elements, points, dz, hx, hy, self.model.device)
+        dE = po_jacobian.jvp(self.elements, points, dz, hx, hy, self.model.device,
+                             radiator=self.model.radiator, tol=self.model.radiator_tol, centre=self.focus)
         if self.edges is not None:
             from raysim.optics import ptd_jacobian
 

@@ -11,6 +11,7 @@ import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+from raysim.optics.fast.radiator import RADIATORS
 from solver import boundary
 from solver.aperture import MIN_N
 from solver.equation import GAIN_MODES
@@ -37,7 +38,8 @@ def _integer(name: str, value: object, lo: int, hi: int) -> None:
 def check_options(*, solver: str | None = None, N: int | None = None, refine: int | None = None,
                   gain: str | None = None, iterations: int | None = None,
                   remove: str | Sequence[str] | None = None, model: str | None = None,
-                  refine_method: str | None = None, blocks: bool = False) -> None:
+                  refine_method: str | None = None, blocks: bool = False, radiator: str | None = None,
+                  radiator_tol: float | None = None) -> None:
     """Refuse inversion options outside their choices or bounds (None: not given).
 
     ``blocks``: the wave model's fields are to run in blocks on Dask (--scheduler, --workers),
@@ -58,6 +60,10 @@ def check_options(*, solver: str | None = None, N: int | None = None, refine: in
     if refine_method is not None and refine_method not in REFINE_METHODS:
         raise SolverError(f"unknown refine method {refine_method!r}: choose one of "
                           f"{', '.join(REFINE_METHODS)}")
+    if radiator is not None and radiator not in RADIATORS:
+        raise SolverError(f"unknown radiator {radiator!r}: choose one of {', '.join(RADIATORS)}")
+    if radiator_tol is not None and not (isinstance(radiator_tol, numbers.Real) and 0 < radiator_tol < 1):
+        raise SolverError(f"--radiator-tol must lie in (0, 1), got {radiator_tol!r}")
     if refine_method == "gauss-newton" and blocks:
         raise SolverError(IN_PROCESS)
     parse_terms(remove)
@@ -88,11 +94,14 @@ class InvertOptions:
     weights: str = "auto"
     refine_method: str = "defect"
     gauss_newton: GaussNewtonOptions | None = None
+    radiator: str = "fast"
+    radiator_tol: float = 1e-6
 
     def __post_init__(self) -> None:
         check_options(solver=self.solver, N=self.N, refine=self.refine_iterations, gain=self.gain,
                       iterations=self.iterations, remove=self.remove, model=self.model,
-                      refine_method=self.refine_method)
+                      refine_method=self.refine_method, radiator=self.radiator,
+                      radiator_tol=self.radiator_tol)
         if self.weights not in WEIGHTS:
             raise SolverError(f"unknown weights {self.weights!r}: choose one of {', '.join(WEIGHTS)}")
         if self.rim is not None and self.solver == "fft":

@@ -64,12 +64,13 @@ class ModelChoice:
 
 def choose_model(attrs: dict, iterations: int, model: str | None,
                  forward: ForwardModel | Forward | None, device: str | None,
-                 obstacles: Any = None) -> ModelChoice:
+                 obstacles: Any = None, radiator: str = "fast", radiator_tol: float = 1e-6) -> ModelChoice:
     """The caller's ``forward``, else the ``model`` named, else the data's (FieldMap attrs).
 
     A caller's model says what physics it is through its ``name`` (go, po, po+ptd; a plain
     function is wrapped as ``caller``, :func:`solver.forward.as_model`). A model made here
-    puts the scan's ``obstacles`` (an ObstacleMesh, or None) in its beam.
+    puts the scan's ``obstacles`` (an ObstacleMesh, or None) in its beam and sums a wave
+    model's elements with ``radiator`` (``fast`` or ``direct``, to ``radiator_tol``).
     """
     data_method = str(attrs.get("method", ""))
     if forward is not None:
@@ -78,7 +79,8 @@ def choose_model(attrs: dict, iterations: int, model: str | None,
     if iterations == 0:
         return ModelChoice(None, "none", "refine 0", "none (no refinement)")
     name = model or model_for_method(data_method)
-    forward, description = forward_for(name, attrs, device, obstacles=obstacles)
+    forward, description = forward_for(name, attrs, device, obstacles=obstacles, radiator=radiator,
+                                       radiator_tol=radiator_tol)
     return ModelChoice(forward, name, "requested" if model else
                        f"from the data's method {data_method!r}", description)
 

@@ -39,7 +39,8 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
                panels_csv: str | os.PathLike[str] | None = None, model: str | None = None,
                progress: Progress | None = None, refine_method: str = "defect",
                gauss_newton: GaussNewtonOptions | None = None,
-               log: Callable[[str], None] | None = None) -> xr.Dataset:
+               log: Callable[[str], None] | None = None, radiator: str = "fast",
+               radiator_tol: float = 1e-6) -> xr.Dataset:
     """Invert the FieldMap at ``field_path`` and write the SurfaceMap to ``output``.
 
     Options as :func:`solver.invert.invert`; ``rim_csv`` is a CSV ``x,y,dz`` (m) of rim
@@ -47,7 +48,7 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
     scene has panels); ``model`` names the refinement's forward model (None: from the data's
     method); ``progress(stage, fraction)`` follows the refinement; ``refine_method``,
     ``gauss_newton`` (its steps and LSQR iterations) and ``log(line)`` (each Gauss-Newton step)
-    as :func:`solver.invert.invert`. Nothing is
+    and ``radiator``, ``radiator_tol`` as :func:`solver.invert.invert`. Nothing is
     written when an input is bad.
     """
     field = load_fieldmap(field_path)
@@ -61,7 +62,7 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
     result = invert(field, solver=solver, N=N, rim=rim, remove=remove,
                     refine_iterations=refine, gain=gain, iterations=iterations, device=device,
                     model=model, progress=progress, refine_method=refine_method,
-                    gauss_newton=gauss_newton, log=log)
+                    gauss_newton=gauss_newton, log=log, radiator=radiator, radiator_tol=radiator_tol)
     result.attrs["source_fieldmap"] = str(field_path)
     surface.save(result, output)
     if layout is not None:

@@ -361,6 +361,9 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["invert", "f.nc", "-o", "o.nc", "--rim", "rim_text.csv"], "row 2 is not three numbers"),
         (["invert", "f.nc", "-o", "rim_centre.csv", "--rim", "rim_centre.csv"], "is the rim-target file"),
         (["invert", "f.nc", "-o", "o.nc", "--panels-csv", "f.nc"], "is the FieldMap"),
+        # issue 31: the fast radiator's options on the refinement's model
+        (["invert", "f.nc", "-o", "o.nc", "--radiator", "fmm"], "unknown radiator 'fmm'"),
+        (["invert", "f.nc", "-o", "o.nc", "--radiator-tol", "0"], "--radiator-tol must lie in (0, 1)"),
     ],
     "render": [
         (["render", "missing.nc", "-o", "o.png"], "missing.nc"),
@@ -394,6 +397,9 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["check", "dish_mm.stl", "-o", "rep_new", "--frequency", "1e9"], "not a dish in metres"),
         (["check", "scene.toml", "-o", "user_folder"], "holds files that are not a raysim check"),
         (["check", "scene.toml", "-o", "notes.txt"], "exists and is not a folder"),
+        # issue 31: the fast radiator's options
+        (["check", "scene.toml", "-o", "rep_new", "--radiator", "fmm"], "unknown radiator 'fmm'"),
+        (["check", "scene.toml", "-o", "rep_new", "--radiator-tol", "1.5"], "--radiator-tol must lie in (0, 1)"),
     ],
     "paper": [
         (["paper", "--scale", "1e7"], "--scale must lie in (0, 50]"),

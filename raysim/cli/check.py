@@ -41,6 +41,12 @@ def check(
                                      help="Model of the wave-aware refinement: auto (the data's own), "
                                           "go+edge, po, po+ptd, none."),
     device: str = typer.Option("cpu", "--device", help="Warp device: cpu or cuda."),
+    radiator: str = typer.Option(
+        "fast", "--radiator",
+        help="PO + PTD's sums (wave engine, wave models, and the engine rule's cost): fast (the "
+             "multilevel sum where cheaper) or direct (the reference sum)."),
+    radiator_tol: float = typer.Option(1e-6, "--radiator-tol",
+                                       help="Relative RMS accuracy of the fast radiator."),
     sphere_radius: float | None = typer.Option(None, "--sphere-radius",
                                                help="Mesh only: probe-sphere radius R (m), default 0.3 F."),
     focal_length: float | None = typer.Option(None, "--focal-length",
@@ -69,7 +75,8 @@ def check(
                                rms=rms_um * 1e-6, seed=seed, gap_m=gap_m, wave=wave,
                                grid=parse_grid(sphere), N=grid, refine=refine,
                                refine_model=refine_model, device=device, sphere_radius=sphere_radius,
-                               focal_length=focal_length, resolution=resolution, progress=report)
+                               focal_length=focal_length, resolution=resolution, progress=report,
+                               radiator=radiator, radiator_tol=radiator_tol)
     rows, title = summary_rows(ds), "GO against the wave engine"
     write_json(json_path, "check", title, _records(ds), rows, verdict=verdict_lines(ds),
                page=str(page))

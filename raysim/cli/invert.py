@@ -49,6 +49,13 @@ def invert_command(
              "cell in eight (every 2nd theta ring, every 4th phi column; each iteration about eight "
              "times cheaper), their step still judged on all cells (default 0; fewer than "
              "--gn-steps)."),
+    radiator: str = typer.Option(
+        "fast", "--radiator",
+        help="po, po+ptd model: fast (the multilevel sum of the elements' fields, in the model's "
+             "fields and Gauss-Newton's Jacobian, where its cost estimate beats the direct sum) "
+             "or direct (the reference sum)."),
+    radiator_tol: float = typer.Option(
+        1e-6, "--radiator-tol", help="po, po+ptd model: relative RMS accuracy of the fast radiator."),
     panels_csv: Path | None = typer.Option(None, help="Write the per-panel adjustment table."),
     gain: str = typer.Option(
         "auto", help="auto (known for simulated data, estimated for a measured scan), known "
@@ -73,7 +80,8 @@ def invert_command(
     gauss_newton = GaussNewtonOptions(**{k: v for k, v in given.items() if v is not None})
     check_options(solver=solver, N=grid, refine=refine, gain=gain, iterations=iterations,
                   remove=remove, model=model, refine_method=refine_method,
-                  blocks=bool(scheduler) or workers is not None)
+                  blocks=bool(scheduler) or workers is not None, radiator=radiator,
+                  radiator_tol=radiator_tol)
     inputs = [("FieldMap", field), ("rim-target file", rim)]
     output_path(output, inputs)
     if panels_csv is not None:
@@ -89,7 +97,7 @@ def invert_command(
                                 refine=refine, gain=gain, iterations=iterations, device=device,
                                 panels_csv=panels_csv, model=model, progress=report,
                                 refine_method=refine_method, gauss_newton=gauss_newton,
-                                log=note)
+                                log=note, radiator=radiator, radiator_tol=radiator_tol)
     for line in summary(result):
         say(line)
     say(f"wrote {output}")

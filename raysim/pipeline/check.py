@@ -50,7 +50,8 @@ def check(source: str | os.PathLike[str], *, frequencies: list[float] | None = N
           gap_m: float | None = None, wave: str = "auto", grid: tuple[int, int] | None = None,
           N: int = 256, refine: int = 3, refine_model: str = "auto", device: str = "cpu",
           sphere_radius: float | None = None, focal_length: float | None = None,
-          resolution: float | None = None, progress: Progress | None = None) -> xr.Dataset:
+          resolution: float | None = None, progress: Progress | None = None,
+          radiator: str = "fast", radiator_tol: float = 1e-6) -> xr.Dataset:
     """Compare GO with a wave engine on ``source`` at each frequency; return the check dataset.
 
     Parameters
@@ -70,11 +71,14 @@ def check(source: str | os.PathLike[str], *, frequencies: list[float] | None = N
     device : Warp device (``cpu``, ``cuda``) for every engine and model.
     resolution : GO triangle edge (m) of a generated dish (default the scene's).
     progress : ``progress(stage, fraction)``, over the whole check.
+    radiator, radiator_tol : how PO + PTD sum their elements' fields, in the wave engine, the
+        wave models of the inversions and the engine rule's cost (``fast`` or ``direct``; as
+        :func:`raysim.simulate`).
     """
     from solver.options import check_options
 
     say = progress or silent
-    check_options(N=N, refine=refine)
+    check_options(N=N, refine=refine, radiator=radiator, radiator_tol=radiator_tol)
     if refine_model not in REFINE_MODELS:
         raise CheckError(f"unknown --refine-model {refine_model!r}: use one of {', '.join(REFINE_MODELS)}")
     dish = inputs.load_dish(source, sphere_radius=sphere_radius, focal_length=focal_length,
@@ -82,13 +86,13 @@ def check(source: str | os.PathLike[str], *, frequencies: list[float] | None = N
     freqs = inputs.frequencies_of(dish, frequencies)
     dish = inputs.with_gap(inputs.with_grid(dish, grid), gap_m)
     dish, truth, described = inputs.choose_deformation(dish, deformation, rms, seed)
-    engines = [inputs.choose_wave(dish, f, wave, device) for f in freqs]
+    engines = [inputs.choose_wave(dish, f, wave, device, radiator) for f in freqs]
     _check_runs(dish, freqs, engines, device)
     results = []
     for k, f in enumerate(freqs):
         part = within(say, k / len(freqs), (k + 1) / len(freqs), f"{f / 1e9:g} GHz")
         results.append(_one_frequency(dish, f, engines[k], truth, N, refine, refine_model,
-                                      device, part))
+                                      device, part, (radiator, radiator_tol)))
     say("done", 1.0)
     return _dataset(dish, freqs, results, described, source)
 
@@ -103,8 +107,10 @@ def _check_runs(dish: inputs.Dish, freqs, engines, device: str) -> None:
 
 
 def _one_frequency(dish: inputs.Dish, f: float, engine: tuple[str, str], truth, N: int, refine: int,
-                   refine_model: str, device: str, say: Progress) -> dict:
-    """GO and the wave engine at ``f``, the maps' differences, the three inversions."""
+                   refine_model: str, device: str, say: Progress,
+                   radiator: tuple[str, float] = ("fast", 1e-6)) -> dict:
+    """GO and the wave engine at ``f``, the maps' differences, the three inversions;
+    ``radiator``: (name, tolerance) of the wave engine's and the wave models' sums."""
     from raysim.simulate import simulate
 
     method, why = engine
@@ -115,7 +121,8 @@ def _one_frequency(dish: inputs.Dish, f: float, engine: tuple[str, str], truth, 
     seconds["go"] = time.perf_counter() - start
     start = time.perf_counter()
     wave = simulate(dish.wave.with_overrides(f), method=method, device=device,
-                    progress=within(say, 0.1, 0.55, method))
+                    progress=within(say, 0.1, 0.55, method), radiator=radiator[0],
+                    radiator_tol=radiator[1])
     seconds["wave"] = time.perf_counter() - start
     sphere = dish.go.sphere
     use = usable(sphere, dish.D, dish.F)[:, None] & np.ones((1, sphere.n_phi), bool)
@@ -136,7 +143,7 @@ def _one_frequency(dish: inputs.Dish, f: float, engine: tuple[str, str], truth, 
         lo = 0.55 + 0.15 * i
         say(f"inverting ({name.replace('_', ' ')})", lo)
         start = time.perf_counter()
-        out["surfaces"][name] = _invert(field, model_name, truth, N, refine, device,
+        out["surfaces"][name] = _invert(field, model_name, truth, N, refine, device, radiator,
                                         within(say, lo, lo + 0.15, f"inverting ({name})"))
         seconds[f"invert_{name}"] = time.perf_counter() - start
         out["models"][name] = model_name
@@ -144,11 +151,11 @@ def _one_frequency(dish: inputs.Dish, f: float, engine: tuple[str, str], truth, 
 
 
 def _invert(field: xr.Dataset, model: str, truth, N: int, refine: int, device: str,
-            say: Progress) -> xr.Dataset:
+            radiator: tuple[str, float], say: Progress) -> xr.Dataset:
     from solver.invert import invert
 
     return invert(field, N=N, refine_iterations=refine, model=model, truth=truth, device=device,
-                  progress=say)
+                  progress=say, radiator=radiator[0], radiator_tol=radiator[1])
 
 
 # --- the dataset ---------------------------------------------------------------------------

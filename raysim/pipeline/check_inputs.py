@@ -6,14 +6,17 @@ in m, frequencies in Hz, angles in rad. Every defect a user can cause raises
 :class:`CheckError` with one line, before any simulation starts.
 
 The engine rule (:func:`choose_wave`): PO + PTD (rim) is the reference wave engine wherever its
-cost is affordable, the number of source-point pairs (quadrature samples of both reflectors
-times the sphere's points) within :data:`PO_PAIR_BUDGET` for the device; above it, go+edge.
+cost is affordable: the cost of its sums (quadrature samples of both reflectors radiated to the
+sphere's points) as the chosen radiator runs them, in direct pair evaluations
+(:func:`raysim.optics.fast.radiator.estimated_cost` for the fast radiator, samples times points
+for the direct sum), within :data:`PO_PAIR_BUDGET` for the device, and its samples within
+simulate's memory cap; above either, go+edge.
 docs/engines.md has the measured accuracies behind it: go+edge agrees with PO + PTD to 0.02 to
 0.6 % in the ideal intensity everywhere, and in FA to 1.6 to 4.7 % of FA's RMS once the
 dish is a few hundred wavelengths across (paper dish at 3 GHz, 25 m dish at 1 and 3 GHz), but
-only to 21 to 59 % on the paper's dish at 0.3 and 1 GHz, where PO + PTD is affordable (5e9
-pairs at 0.3 GHz, 90 x 360). So the rule never takes go+edge where it is known to be poor
-unless the budget forces it, and the result says which engine ran and why.
+only to 21 to 59 % on the paper's dish at 0.3 and 1 GHz, where PO + PTD is affordable. So the
+rule never takes go+edge where it is known to be poor unless the budget forces it, and the
+result says which engine ran and why.
 """
 
 from __future__ import annotations
@@ -34,7 +37,8 @@ MESH_SUFFIXES = (".stl", ".ply", ".obj", ".glb", ".gltf", ".off")
 WAVE_CHOICES = ("auto", "po", "po+ptd", "go+edge")
 DEFORMATIONS = ("auto", "scene", "mix")
 DEFAULT_RMS_M = 100e-6
-PO_PAIR_BUDGET = {"cpu": 1.2e10, "cuda": 1e12}  # source-point pairs: minutes on 2 cores / a GPU
+PO_PAIR_BUDGET = {"cpu": 1.2e10, "cuda": 1e12}  # pair evaluations: minutes on 2 cores / a GPU
+PLAN_SUBSET = 1 << 21  # sample positions at most that plan the fast radiator's tree for the rule
 WAVE_FACE_M = 4.0  # quadrature faces of the wave data (the refinement's PO model uses 5 m)
 SPHERE_RADIUS_OF_F = 0.3  # a mesh's probe sphere by default: R = 0.3 F (the paper's 10 / 33)
 MAX_FREQUENCIES = 12
@@ -263,14 +267,30 @@ def gap_width(dish: Dish) -> float:
 
 
 # --- the wave engine ------------------------------------------------------------------------
-def wave_pairs(dish: Dish, frequency_hz: float, n_points: int) -> float:
-    """PO's source-point pairs at ``frequency_hz``: quadrature samples of the ideal and the
-    deformed reflector (the same count) times the sphere's points."""
+def wave_cost(dish: Dish, frequency_hz: float, radiator: str = "fast") -> tuple[float, float, int]:
+    """(cost, direct, samples): PO's sums at ``frequency_hz`` for the ideal and the deformed
+    reflector (the same sample count) to the sphere's points, as ``radiator`` runs them and as
+    the direct sum would, in direct pair evaluations, and the samples of one reflector."""
+    from raysim.optics.fast.radiator import estimated_cost
     from raysim.optics.po import DEFAULT_SAMPLES_PER_WAVELENGTH
+    from raysim.simulate import MAX_PO_SAMPLES
     from raysim.surface.quadrature import plan
 
     wavelength = 299_792_458.0 / frequency_hz
-    return 2.0 * plan(_wave_ideal(dish), wavelength, DEFAULT_SAMPLES_PER_WAVELENGTH).n_samples * n_points
+    quad = plan(_wave_ideal(dish), wavelength, DEFAULT_SAMPLES_PER_WAVELENGTH)
+    n = quad.n_samples
+    sphere = dish.wave.sphere
+    points = sphere.points(dish.F).reshape(-1, 3)
+    direct = 2.0 * n * len(points)
+    if radiator == "direct" or n > MAX_PO_SAMPLES:
+        return direct, direct, n
+    # the plan needs the samples' positions only; an even subset of at most PLAN_SUBSET of them
+    # gives the tree's extents (the costs are counted for all n)
+    stride = max(1, n // PLAN_SUBSET)
+    positions = np.concatenate([c.points[::stride] for c in quad.chunks()])
+    cost, _ = estimated_cost(positions, points, 2.0 * math.pi / wavelength, (0.0, 0.0, dish.F),
+                             count=n)
+    return 2.0 * cost, direct, n
 
 
 _IDEAL: dict[tuple, object] = {}
@@ -287,17 +307,23 @@ def _wave_ideal(dish: Dish):
     return _IDEAL[key]
 
 
-def choose_wave(dish: Dish, frequency_hz: float, wave: str, device: str) -> tuple[str, str]:
+def choose_wave(dish: Dish, frequency_hz: float, wave: str, device: str,
+                radiator: str = "fast") -> tuple[str, str]:
     """(method, why) of the wave engine at ``frequency_hz`` (the rule of this module's
-    docstring); ``wave`` other than ``auto`` forces that engine."""
+    docstring, for sums run by ``radiator``); ``wave`` other than ``auto`` forces that engine."""
+    from raysim.simulate import MAX_PO_SAMPLES
+
     if wave not in WAVE_CHOICES:
         raise CheckError(f"unknown --wave {wave!r}: use one of {', '.join(WAVE_CHOICES)}")
     if wave != "auto":
         return wave, "forced by --wave"
-    sphere = dish.wave.sphere
-    pairs = wave_pairs(dish, frequency_hz, sphere.n_theta * sphere.n_phi)
+    cost, direct, samples = wave_cost(dish, frequency_hz, radiator)
+    if samples > MAX_PO_SAMPLES:
+        return "go+edge", (f"PO + PTD would need {samples:.2g} samples per reflector (memory cap "
+                           f"{MAX_PO_SAMPLES:.0e}): go+edge, whose cost does not grow as f^2")
     budget = PO_PAIR_BUDGET["cuda" if str(device).startswith("cuda") else "cpu"]
-    if pairs <= budget:
-        return "po+ptd", f"PO + PTD affordable: {pairs:.2g} source-point pairs (budget {budget:.2g})"
-    return "go+edge", (f"PO + PTD would need {pairs:.2g} source-point pairs (budget {budget:.2g}): "
+    how = "direct" if radiator == "direct" else f"{radiator} radiator, direct {direct:.2g}"
+    if cost <= budget:
+        return "po+ptd", f"PO + PTD affordable: {cost:.2g} pair evaluations ({how}; budget {budget:.2g})"
+    return "go+edge", (f"PO + PTD would need {cost:.2g} pair evaluations ({how}; budget {budget:.2g}): "
                        "go+edge, whose cost does not grow as f^2")

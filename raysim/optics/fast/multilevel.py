@@ -27,11 +27,11 @@ from raysim.optics import runtime
 from raysim.optics.fast import tree as quadtree
 from raysim.optics.fast.chart import Axis, Domain, axis_for, from_chart, lagrange
 
-#: relative costs, in direct pair evaluations, of the steps' inner operations (measured roughly
-#: on the CPU: a pair about 20 ns a core, a BLAS complex multiply-add well under 1 ns, an
-#: elementwise numpy complex operation about 2 ns, a complex exponential about 30 ns)
-COST_BLAS = 0.03
-COST_NUMPY = 0.1
+#: costs of the steps' inner operations in units of one direct pair evaluation (the leaf kernel
+#: runs the direct sum's pair function), measured on two CPU cores (paper's dish, 0.3 GHz):
+#: a p-point stencil term (six real multiply-adds, as the interpolation kernels run them) about
+#: a third of a pair; a phase factor exp(j k r) from the table about one and a half
+COST_STENCIL = 0.33
 COST_EXP = 1.5
 MEMORY_BYTES = 3e9  # the largest level's grids (two levels are held at once), at most
 MIN_LEAF = 8  # elements per non-empty leaf on average, at least
@@ -64,10 +64,12 @@ def _axes(level: quadtree.Level, domain: Domain, k: float, s: float, p: int) -> 
 
 
 def plan(positions: NDArray[np.float64], domain: Domain, k: float, p: int, s: float,
-         max_depth: int = 12) -> Plan | None:
+         max_depth: int = 12, count: int | None = None) -> Plan | None:
     """The cheapest (leaf, stop) levels for elements at ``positions`` (n, 3) m, or None when no
-    level is separated from the targets."""
-    n = len(positions)
+    level is separated from the targets. ``count``: the number of elements when ``positions``
+    is an even subset of them (a cost estimate: the tree and the costs are those of ``count``
+    elements, the clusters' extents those of the subset)."""
+    n = len(positions) if count is None else int(count)
     depth = 0
     while depth < max_depth and n / (4 ** (depth + 1)) >= MIN_LEAF:
         depth += 1
@@ -86,18 +88,23 @@ def plan(positions: NDArray[np.float64], domain: Domain, k: float, p: int, s: fl
                     > MEMORY_BYTES:
                 break
             if stop < leaf:  # one more aggregation step, level stop + 1 -> stop
-                cu, cv = axes[stop + 1]
-                pu, pv = axes[stop]
-                C1 = len(levels[stop + 1].keys)
-                cost += C1 * 3 * (pu.n * cu.n * cv.n + pu.n * pv.n * cv.n) * COST_BLAS
-                cost += C1 * pu.n * pv.n * (COST_EXP + 3 * COST_NUMPY)
-            final = len(levels[stop].keys) * M * (3 * p * p * COST_NUMPY + COST_EXP)
+                cost += _aggregation_cost(len(levels[stop + 1].keys), axes[stop + 1], axes[stop], p)
+            final = len(levels[stop].keys) * M * (p * p * COST_STENCIL + COST_EXP)
             if best is None or cost + final < best[0]:
                 best = (cost + final, leaf, stop)
     if best is None:
         return None
     ok_axes = [a if a is not None else (Axis(0.0, 1.0, 1), Axis(0.0, 1.0, 1)) for a in axes]
     return Plan(order, levels, best[1], best[2], ok_axes, best[0], direct)
+
+
+def _aggregation_cost(children: int, child: tuple[Axis, Axis], parent: tuple[Axis, Axis], p: int) -> float:
+    """Pair-equivalents of one aggregation step as :func:`aggregate` runs it: a p-point stencil
+    along u for every (parent u, child v) node of each child, one along v for every parent node
+    of each child, and two phase factors per parent node and child."""
+    cv, (pu, pv) = child[1], parent
+    stencils = children * p * (pu.n * cv.n + pu.n * pv.n)
+    return stencils * COST_STENCIL + 2.0 * children * pu.n * pv.n * COST_EXP
 
 
 def _grid_points(axes: tuple[Axis, Axis], domain: Domain) -> NDArray[np.float64]:

@@ -170,6 +170,25 @@ def _inside(own: Domain, domain: Domain | None) -> bool:
     return bool(same and b[0] >= d[0] and b[1] <= d[1] and b[2] >= d[2] and b[3] <= d[3])
 
 
+def estimated_cost(positions: ArrayLike, points: ArrayLike, k: float, centre: ArrayLike,
+                   tol: float = DEFAULT_TOL, count: int | None = None) -> tuple[float, float]:
+    """(cost, direct): what summing point elements at ``positions`` (n, 3) m to ``points``
+    (m, 3) m costs the fast radiator (the cheaper of its multilevel plan and the direct sum, as
+    :class:`FastRadiator` chooses) and the direct sum, both in direct pair evaluations.
+    ``centre``: the targets' sphere centre (m); ``k`` rad/m; ``count``: the number of elements
+    when ``positions`` are an even subset of them. Plans only: nothing is summed."""
+    pos = np.ascontiguousarray(np.asarray(positions, dtype=np.float64).reshape(-1, 3))
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    n = len(pos) if count is None else int(count)
+    direct = float(n) * len(pts)
+    domain = domain_of(pts, centre)
+    if domain is None or len(pos) == 0:
+        return direct, direct
+    p, s = choose_order(tol / 2.0)
+    the_plan = multilevel.plan(pos, domain, k, p, s, count=n)
+    return (direct if the_plan is None else min(the_plan.cost, direct)), direct
+
+
 def make_radiator(points: ArrayLike, k: float, device: str | None = "cpu", block: int | None = None,
                   radiator: str = "fast", tol: float = DEFAULT_TOL, centre: ArrayLike | None = None,
                   domain: Domain | None = None, cache: dict | None = None,
