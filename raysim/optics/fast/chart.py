@@ -1,9 +1,18 @@
-"""The chart of a target sphere and the Lagrange interpolation the fast radiator runs on it.
+"""The target sphere's angles, its spectral grids, and the Lagrange interpolation of the last step.
 
-Targets lie on a sphere of radius R (m) about a centre c0 (reflector frame, the focus). The
-chart is stereographic from the pole +z: dir = (P - c0) / R, u = (dir_x, dir_y) / (1 - dir_z),
-so theta = 0 (dir = -z, towards the dish) is u = 0 and theta = 90 deg is |u| = 1; it is smooth
-everywhere except at dir = +z. On the sphere |dP| = R |du| * 2 / (1 + |u|^2) <= 2 R |du|.
+Targets lie on a sphere of radius R (m) about a centre c0 (reflector frame, the focus). Angles
+as the sphere grid's (docs/conventions.md): theta between P - c0 and -z (0 faces the dish),
+phi = atan2(y, x); P = c0 + R (sin theta cos phi, sin theta sin phi, -cos theta).
+
+Why a double-covered torus: that formula gives the same point for (theta, phi) and
+(2 pi - theta, phi + pi), so a smooth function on the sphere, read on the whole square
+[0, 2 pi)^2 of angles, is 2 pi-periodic in both. When its spherical-harmonic degree stays below
+L, its 2-D Fourier series has no frequency of modulus L or more along either angle, so an
+n x n grid with n > 2 L holds it exactly and zero-padding its spectrum interpolates it to any
+finer grid (the standard device of fast multipole codes on the sphere; e.g. Chew, Jin,
+Michielssen and Song, *Fast and Efficient Algorithms in Computational Electromagnetics*, 2001,
+ch. 3). Rows theta_i > pi repeat rows 2 pi - theta_i shifted by half a turn in phi, so only the
+rows 0 <= theta_i <= pi are ever computed.
 """
 
 from __future__ import annotations
@@ -13,63 +22,161 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+import scipy.fft as sfft
 from numpy.typing import ArrayLike, NDArray
 
-#: the largest |u| (theta about 150 deg) the fast radiator charts; beyond, the direct sum runs
-U_LIMIT = 3.75
+#: threads of the FFTs (the machine's cores, as Warp's CPU launches use)
+FFT_WORKERS = -1
 
 
 @dataclass(frozen=True)
 class Domain:
-    """Where a radiator's targets may lie: the sphere (``centre`` (3,) m, ``radius`` m), the
-    chart box ``box`` (u0 low, u0 high, u1 low, u1 high) and ``count``, the number of targets
-    of the whole job. Blocks of one job given the same Domain give bit-identical fields."""
+    """Where a radiator's targets lie: the sphere (``centre`` (3,) m, ``radius`` m) and
+    ``count``, the number of targets of the whole job (its cost estimates use it). When the
+    job's targets are every pair of a set of polar angles ``thetas`` and azimuths ``phis``
+    (rad, ascending; a sphere grid, or a subgrid of one), they are recorded: the last step then
+    evaluates the stop level's series on that grid exactly. Blocks of one job given the same
+    Domain give bit-identical fields."""
 
     centre: tuple[float, float, float]
     radius: float
-    box: tuple[float, float, float, float]
     count: int
+    thetas: tuple[float, ...] | None = None
+    phis: tuple[float, ...] | None = None
+
+    @property
+    def tensor(self) -> bool:
+        return self.thetas is not None and self.phis is not None
 
 
-def to_chart(points: ArrayLike, centre: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(u (n, 2), distance (n,) m) of ``points`` (n, 3) about ``centre``."""
-    d = np.asarray(points, dtype=np.float64).reshape(-1, 3) - np.asarray(centre, dtype=np.float64)
-    r = np.linalg.norm(d, axis=1)
-    # 1 - dir_z written without cancellation near the pole at -z: r - d_z
-    denom = r - d[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = d[:, :2] / denom[:, None]
-    return u, r
-
-
-def from_chart(u: ArrayLike, centre: ArrayLike, radius: float) -> NDArray[np.float64]:
-    """Points (n, 3) m on the sphere at chart coordinates ``u`` (n, 2)."""
-    u = np.asarray(u, dtype=np.float64).reshape(-1, 2)
-    rho = np.sum(u * u, axis=1)
-    dirs = np.column_stack([2 * u[:, 0], 2 * u[:, 1], rho - 1.0]) / (1.0 + rho)[:, None]
-    return np.asarray(centre, dtype=np.float64) + radius * dirs
+#: angles closer than this (rad) are one row or one column of a tensor grid
+ANGLE_TOL = 1e-9
 
 
 def domain_of(points: ArrayLike, centre: ArrayLike, rel: float = 1e-9) -> Domain | None:
-    """The Domain of ``points`` about ``centre``; None when they are not on one sphere or reach
-    beyond :data:`U_LIMIT` on the chart."""
+    """The Domain of ``points`` (n, 3) m about ``centre``; None when they are not on one
+    sphere about it (within ``rel`` of its radius)."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(pts) == 0:
         return None
-    u, r = to_chart(pts, centre)
+    r = np.linalg.norm(pts - np.asarray(centre, dtype=np.float64), axis=1)
     R = float(np.median(r))
-    if not R > 0 or np.max(np.abs(r - R)) > rel * R or not np.all(np.isfinite(u)):
-        return None
-    if np.max(np.abs(u)) > U_LIMIT:
+    if not R > 0 or not np.all(np.isfinite(r)) or np.max(np.abs(r - R)) > rel * R:
         return None
     c = tuple(float(x) for x in np.asarray(centre, dtype=np.float64))
-    box = (float(u[:, 0].min()), float(u[:, 0].max()), float(u[:, 1].min()), float(u[:, 1].max()))
-    return Domain(c, R, box, len(pts))  # type: ignore[arg-type]
+    thetas, phis = _tensor(to_angles(pts, centre))
+    return Domain(c, R, len(pts), thetas, phis)  # type: ignore[arg-type]
+
+
+def _tensor(angles: NDArray[np.float64]) -> tuple[tuple[float, ...] | None, tuple[float, ...] | None]:
+    """(thetas, phis) when ``angles`` (n, 2) are every pair of them once, else (None, None)."""
+    rows, i = _levels(angles[:, 0])
+    cols, j = _levels(angles[:, 1])
+    if len(rows) * len(cols) != len(angles) or len(np.unique(i * len(cols) + j)) != len(angles):
+        return None, None
+    return tuple(float(x) for x in rows), tuple(float(x) for x in cols)
+
+
+def _levels(x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The distinct values of ``x`` (ascending; values within :data:`ANGLE_TOL` are one) and the
+    index of each element's value."""
+    order = np.argsort(x, kind="stable")
+    new = np.r_[True, np.diff(x[order]) > ANGLE_TOL]
+    index = np.empty(len(x), dtype=np.int64)
+    index[order] = np.cumsum(new) - 1
+    return x[order][new], index
+
+
+def tensor_index(angles: NDArray[np.float64], domain: Domain) -> NDArray[np.int64] | None:
+    """The flat index i * len(phis) + j of each target's (theta_i, phi_j) in ``domain``'s
+    tensor grid; None when a target is not on it."""
+    if not domain.tensor:
+        return None
+    out = []
+    for column, values in ((0, domain.thetas), (1, domain.phis)):
+        v = np.asarray(values)
+        i = np.clip(np.searchsorted(v, angles[:, column]), 1, max(len(v) - 1, 1))
+        i = np.where(np.abs(v[i - 1] - angles[:, column]) <= np.abs(v[np.minimum(i, len(v) - 1)]
+                                                                      - angles[:, column]), i - 1, i)
+        i = np.minimum(i, len(v) - 1)
+        if np.any(np.abs(v[i] - angles[:, column]) > ANGLE_TOL):
+            return None
+        out.append(i)
+    return out[0] * len(domain.phis) + out[1]  # type: ignore[arg-type]
+
+
+def to_angles(points: ArrayLike, centre: ArrayLike) -> NDArray[np.float64]:
+    """(theta, phi) (n, 2) rad of ``points`` (n, 3) about ``centre``: theta in [0, pi], phi in
+    [0, 2 pi)."""
+    d = np.asarray(points, dtype=np.float64).reshape(-1, 3) - np.asarray(centre, dtype=np.float64)
+    theta = np.arctan2(np.hypot(d[:, 0], d[:, 1]), -d[:, 2])
+    phi = np.mod(np.arctan2(d[:, 1], d[:, 0]), 2.0 * np.pi)
+    return np.column_stack([theta, phi])
+
+
+def grid_points(n: int, domain: Domain, rows: int | None = None) -> NDArray[np.float64]:
+    """Points (rows * n, 3) m of the n x n angle grid theta_i = phi_i = 2 pi i / n, rows
+    0 .. rows - 1 (default: every row); row-major (theta, then phi)."""
+    t = 2.0 * np.pi * np.arange(n) / n
+    th, ph = np.meshgrid(t[: (n if rows is None else rows)], t, indexing="ij")
+    s = np.sin(th)
+    d = np.stack([s * np.cos(ph), s * np.sin(ph), -np.cos(th)], axis=-1).reshape(-1, 3)
+    return np.asarray(domain.centre) + domain.radius * d
+
+
+def half_rows(n: int) -> int:
+    """The rows theta_i <= pi of an n x n grid (n even): the ones a leaf computes."""
+    return n // 2 + 1
+
+
+def mirror(half: NDArray[np.complex128], n: int) -> NDArray[np.complex128]:
+    """The whole (..., n, n, c) grid from its rows 0 .. n/2 (..., n/2 + 1, n, c): row
+    n - i is row i shifted by half a turn in phi (the same points)."""
+    full = np.empty((*half.shape[:-3], n, n, half.shape[-1]), dtype=half.dtype)
+    h = n // 2
+    full[..., : h + 1, :, :] = half
+    rows = half[..., 1:h, :, :][..., ::-1, :, :]  # rows h - 1 .. 1 become rows h + 1 .. n - 1
+    full[..., h + 1:, :, :] = np.roll(rows, h, axis=-2)
+    return full
+
+
+def resample(G: NDArray[np.complex128], m: int) -> NDArray[np.complex128]:
+    """The periodic grids ``G`` (..., n, n, c) on the finer m x m grid (m >= n, even n):
+    spectra zero-padded. The Nyquist row and column are dropped (a grid chosen by
+    :func:`size_for` holds nothing there)."""
+    n = G.shape[-2]
+    if m == n:
+        return G
+    S = sfft.fft2(G, axes=(-3, -2), workers=FFT_WORKERS)
+    h = n // 2
+    out = np.zeros((*G.shape[:-3], m, m, G.shape[-1]), dtype=np.complex128)
+    for src_u, dst_u in ((slice(0, h), slice(0, h)), (slice(n - h + 1, n), slice(m - h + 1, m))):
+        for src_v, dst_v in ((slice(0, h), slice(0, h)), (slice(n - h + 1, n), slice(m - h + 1, m))):
+            out[..., dst_u, dst_v, :] = S[..., src_u, src_v, :]
+    out = sfft.ifft2(out, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=True)
+    out *= (m * m) / (n * n)
+    return out
+
+
+def degree_for(bandwidth: float, digits: float) -> float:
+    """The harmonic degree L that holds a field of phase bandwidth ``bandwidth`` (rad per rad
+    of angle) to about 10^-digits: an excess bandwidth of the multipole rule's form (Song and
+    Chew: c d^(2/3) (k a)^(1/3)) plus a floor of d for the amplitude's own variation; the
+    constant 1.2 is measured (tests/raysim/optics/test_fast_radiator.py keeps it honest)."""
+    return bandwidth + 1.2 * digits ** (2.0 / 3.0) * max(bandwidth, 1.0) ** (1.0 / 3.0) + digits
+
+
+def size_for(degree: float) -> int:
+    """An even, FFT-friendly n > 2 * degree (+ 2 for the dropped Nyquist row)."""
+    n = sfft.next_fast_len(2 * math.ceil(degree) + 2)
+    while n % 2:
+        n = sfft.next_fast_len(n + 1)
+    return n
 
 
 @dataclass(frozen=True)
 class Axis:
-    """A uniform 1-D grid of the chart: ``n`` nodes ``start + i h``."""
+    """A uniform 1-D grid: ``n`` nodes ``start + i h``."""
 
     start: float
     h: float
@@ -78,16 +185,6 @@ class Axis:
     @property
     def nodes(self) -> NDArray[np.float64]:
         return self.start + self.h * np.arange(self.n)
-
-
-def axis_for(lo: float, hi: float, h: float, p: int) -> Axis:
-    """Nodes of spacing ``h`` covering [lo, hi] with p nodes of margin each side, so that every
-    point of [lo, hi], and of a finer grid's own p / 2-node margin, has a centred p-point
-    stencil inside the grid."""
-    m = p
-    cells = max(1, math.ceil((hi - lo) / h - 1e-9))
-    centre = 0.5 * (lo + hi)
-    return Axis(centre - 0.5 * cells * h - m * h, h, cells + 2 * m + 1)
 
 
 def lagrange(x: ArrayLike, axis: Axis, p: int) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
@@ -118,15 +215,15 @@ def lagrange_error(p: int, s: float) -> float:
     return float(np.max(np.abs(approx - np.exp(1j * x))))
 
 
-def choose_order(tol: float) -> tuple[int, float]:
-    """(p, s): the cheapest stencil and oversampling whose measured error is below ``tol``."""
-    best: tuple[float, int, float] | None = None
-    for p in (4, 6, 8, 10, 12, 14, 16, 20, 24):
-        for s in (1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0):
-            if lagrange_error(p, s) <= tol:
-                cost = (5 * s + p) ** 2 + p * p  # grid nodes ~ (s W B / pi + 2 p)^2; targets ~ p^2
-                if best is None or cost < best[0]:
-                    best = (cost, p, s)
-    if best is None:
-        return 24, 6.0
-    return best[1], best[2]
+#: the last step's refinements the plan may choose (the stop level's grids are refined this many
+#: times before the targets are interpolated locally)
+OVERSAMPLINGS = (4, 6, 8)
+
+
+def stencil_for(tol: float, oversampling: int) -> int:
+    """The smallest even stencil p whose Lagrange error, on a grid refined ``oversampling``
+    times above the Nyquist rate, is below ``tol``."""
+    for p in range(4, 26, 2):
+        if lagrange_error(p, float(oversampling)) <= tol:
+            return p
+    return 26

@@ -1,115 +1,149 @@
-"""The multilevel sum (Boag's MLPO idea) for one kind of element, on the chart of a target sphere.
+"""The multilevel sum (Boag's MLPO idea) for one kind of element, on spectral grids of the sphere.
 
 For a cluster of elements with centre c, F_c(P) = E_c(P) exp(+j k |P - c|) is smooth on the
-target sphere: its phase changes with the chart coordinate u at most B = 2 R (k a + 1) / r_min
-rad per unit (a the cluster's radius, r_min its least distance to the sphere; the +1 bounds the
-amplitude's change). Each level samples every cluster's F_c on one uniform chart grid of
-spacing pi / (B s) over the whole target box (s the oversampling), so one pair of Lagrange
-matrices serves every cluster of a level:
+target sphere (radius R about c0): its phase changes by at most B = k a R / r_min rad per rad of
+angle (a the cluster's radius, r_min its least distance to the sphere), so it holds on an n x n
+grid of the double-covered angles (:mod:`raysim.optics.fast.chart`) with n a little over 2 B.
+One n per level (its widest cluster's), so every cluster of a level shares one grid:
 
-1. leaves: F_c at the leaf grid's nodes by the kind's own pair function (segmented kernel);
-2. up the tree: each child's grid interpolated to its parent's finer grid, re-phased by
-   exp(+j k (|P - c_parent| - |P - c_child|)) and summed (fixed order: bit-reproducible);
-3. at the stop level: every cluster interpolated to the targets, times exp(-j k |P - c|).
+1. leaves: F_c at the grid's nodes with theta <= pi by the kind's own pair function (segmented
+   kernel), the other rows by the sphere's symmetry;
+2. up the tree: each child's grid refined to its parent's n by zero-padding its spectrum,
+   re-phased by exp(+j k (|P - c_parent| - |P - c_child|)) and summed in order
+   (bit-reproducible);
+3. at the stop level, times exp(-j k |P - c|) and summed over the clusters: on a tensor grid
+   of targets (a sphere grid, or a block of one) each cluster's Fourier series evaluated
+   exactly on the whole grid by two matrix products; elsewhere each grid refined a few times
+   (the plan's ``oversampling``) and interpolated to the targets by p x p Lagrange.
 
 All sums are the raw sums of :mod:`raysim.optics.kernels.radiation` (before the prefactor).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+import scipy.fft as sfft
 from numpy.typing import NDArray
 
 from raysim.optics import runtime
 from raysim.optics.fast import tree as quadtree
-from raysim.optics.fast.chart import Axis, Domain, axis_for, from_chart, lagrange
+from raysim.optics.fast.chart import (
+    FFT_WORKERS,
+    OVERSAMPLINGS,
+    Axis,
+    Domain,
+    degree_for,
+    grid_points,
+    half_rows,
+    lagrange,
+    mirror,
+    resample,
+    size_for,
+    stencil_for,
+    tensor_index,
+)
 
 #: costs of the steps' inner operations in units of one direct pair evaluation (the leaf kernel
 #: runs the direct sum's pair function), measured on two CPU cores (paper's dish, 0.3 GHz):
-#: a p-point stencil term (six real multiply-adds, as the interpolation kernels run them) about
-#: a third of a pair; a phase factor exp(j k r) from the table about one and a half
+#: a p-point stencil term (six real multiply-adds) about a third of a pair; a phase factor
+#: exp(j k r) about one and a half; a complex FFT about a tenth of a pair per point and
+#: halving; an elementwise numpy complex operation about a tenth
 COST_STENCIL = 0.33
 COST_EXP = 1.5
-MEMORY_BYTES = 3e9  # the largest level's grids (two levels are held at once), at most
+COST_FFT = 0.1
+COST_NUMPY = 0.1
+COST_BLAS = 0.05  # a complex multiply-add in a matrix product
+MEMORY_BYTES = 3e9  # one level's grids (two levels are held at once), at most
+CHUNK_BYTES = 2.5e8  # refined grids held at once while aggregating or interpolating
 MIN_LEAF = 8  # elements per non-empty leaf on average, at least
-AMPLITUDE = 6.0  # rad per unit of 2 R / r_min: the amplitude's and near-field terms' change
+FALLBACK_STENCIL = stencil_for(1e-9, OVERSAMPLINGS[-1])  # a stray target of a tensor plan
 
 
 @dataclass(frozen=True)
 class Plan:
-    """The chosen tree: ``leaf`` and ``stop`` levels, every level's chart axes, and the cost
-    estimates (pair evaluations) of this plan and of the direct sum."""
+    """The chosen tree: ``leaf`` and ``stop`` levels, every level's grid size ``sizes[l]``
+    (n x n), the last step's refinement ``oversampling`` and stencil ``p`` (both 0: the
+    exact series on the domain's tensor grid), and the cost estimates (pair evaluations) of
+    this plan and of the direct sum."""
 
     order: NDArray[np.int64]
     levels: list[quadtree.Level]
     leaf: int
     stop: int
-    axes: list[tuple[Axis, Axis]]
+    sizes: list[int]
+    oversampling: int
+    p: int
     cost: float
     direct_cost: float
 
 
-def _axes(level: quadtree.Level, domain: Domain, k: float, s: float, p: int) -> tuple[Axis, Axis] | None:
+def _size(level: quadtree.Level, domain: Domain, k: float, digits: float) -> int | None:
     R = domain.radius
     r_min = np.linalg.norm(level.centres - np.asarray(domain.centre), axis=1) - R - level.radii
     if np.any(r_min <= 0.05 * R):
         return None  # a cluster touches the target sphere: not separated
-    B = float(np.max(2.0 * R * (k * level.radii + AMPLITUDE) / r_min))
-    h = np.pi / (B * s)
-    box = domain.box
-    return axis_for(box[0], box[1], h, p), axis_for(box[2], box[3], h, p)
+    B = float(np.max(k * level.radii * R / r_min))
+    return size_for(degree_for(B, digits))
 
 
-def plan(positions: NDArray[np.float64], domain: Domain, k: float, p: int, s: float,
-         max_depth: int = 12, count: int | None = None) -> Plan | None:
-    """The cheapest (leaf, stop) levels for elements at ``positions`` (n, 3) m, or None when no
-    level is separated from the targets. ``count``: the number of elements when ``positions``
-    is an even subset of them (a cost estimate: the tree and the costs are those of ``count``
-    elements, the clusters' extents those of the subset)."""
+def _fft_cost(n: int) -> float:
+    return 3.0 * n * n * max(math.log2(n), 1.0) * COST_FFT
+
+
+def plan(positions: NDArray[np.float64], domain: Domain, k: float, tol: float,
+         last: tuple[tuple[int, int], ...], max_depth: int = 12, count: int | None = None) -> Plan | None:
+    """The cheapest (leaf, stop, last step) for elements at ``positions`` (n, 3) m, each
+    level's step held to about ``tol``; None when no level is separated from the targets.
+    ``last``: the (oversampling, stencil p) pairs the last step may use. ``count``: the number
+    of elements when ``positions`` is an even subset of them (a cost estimate: the tree and the
+    costs are those of ``count`` elements, the clusters' extents those of the subset)."""
     n = len(positions) if count is None else int(count)
+    digits = -math.log10(tol)
     depth = 0
     while depth < max_depth and n / (4 ** (depth + 1)) >= MIN_LEAF:
         depth += 1
     order, levels = quadtree.build(positions, depth)
-    axes = [_axes(level, domain, k, s, p) for level in levels]
+    sizes = [_size(level, domain, k, digits) for level in levels]
     M = domain.count
     direct = float(n) * M
-    best: tuple[float, int, int] | None = None
+    best: tuple[float, int, int, int, int] | None = None
     for leaf in range(depth + 1):
-        if axes[leaf] is None:
+        nl = sizes[leaf]
+        if nl is None:
             continue
-        nodes = axes[leaf][0].n * axes[leaf][1].n
+        nodes = half_rows(nl) * nl
         cost = float(n) * nodes + len(levels[leaf].keys) * nodes * COST_EXP
         for stop in range(leaf, -1, -1):
-            if axes[stop] is None or 48.0 * len(levels[stop].keys) * axes[stop][0].n * axes[stop][1].n \
-                    > MEMORY_BYTES:
+            ns = sizes[stop]
+            if ns is None or 48.0 * len(levels[stop].keys) * ns * ns > MEMORY_BYTES:
                 break
             if stop < leaf:  # one more aggregation step, level stop + 1 -> stop
-                cost += _aggregation_cost(len(levels[stop + 1].keys), axes[stop + 1], axes[stop], p)
-            final = len(levels[stop].keys) * M * (p * p * COST_STENCIL + COST_EXP)
-            if best is None or cost + final < best[0]:
-                best = (cost + final, leaf, stop)
+                child = sizes[stop + 1]
+                assert child is not None
+                cost += len(levels[stop + 1].keys) * (_fft_cost(child) + _fft_cost(ns)
+                                                      + ns * ns * (COST_EXP + 4 * COST_NUMPY))
+            for u, p in ((0, 0),) if domain.tensor else last:
+                final = len(levels[stop].keys) * _last_cost(ns, u, p, domain)
+                if best is None or cost + final < best[0]:
+                    best = (cost + final, leaf, stop, u, p)
     if best is None:
         return None
-    ok_axes = [a if a is not None else (Axis(0.0, 1.0, 1), Axis(0.0, 1.0, 1)) for a in axes]
-    return Plan(order, levels, best[1], best[2], ok_axes, best[0], direct)
+    return Plan(order, levels, best[1], best[2], [s or 0 for s in sizes], best[3], best[4], best[0],
+                direct)
 
 
-def _aggregation_cost(children: int, child: tuple[Axis, Axis], parent: tuple[Axis, Axis], p: int) -> float:
-    """Pair-equivalents of one aggregation step as :func:`aggregate` runs it: a p-point stencil
-    along u for every (parent u, child v) node of each child, one along v for every parent node
-    of each child, and two phase factors per parent node and child."""
-    cv, (pu, pv) = child[1], parent
-    stencils = children * p * (pu.n * cv.n + pu.n * pv.n)
-    return stencils * COST_STENCIL + 2.0 * children * pu.n * pv.n * COST_EXP
-
-
-def _grid_points(axes: tuple[Axis, Axis], domain: Domain) -> NDArray[np.float64]:
-    U, V = np.meshgrid(axes[0].nodes, axes[1].nodes, indexing="ij")
-    return from_chart(np.column_stack([U.ravel(), V.ravel()]), domain.centre, domain.radius)
+def _last_cost(n: int, u: int, p: int, domain: Domain) -> float:
+    """Pair-equivalents of the last step for one cluster of grid size n: refinement u and
+    stencil p, or (u = 0) the series on the domain's tensor grid."""
+    M = domain.count
+    if u == 0:
+        R = len(domain.thetas or ())
+        return _fft_cost(n) + 3.0 * (R * n * n + M * n) * COST_BLAS + M * (COST_EXP + 2 * COST_NUMPY)
+    return _fft_cost(u * n) + M * (p * p * COST_STENCIL + COST_EXP)
 
 
 def _arr(a: NDArray, device: str, dtype: Any = None) -> Any:
@@ -118,75 +152,141 @@ def _arr(a: NDArray, device: str, dtype: Any = None) -> Any:
 
 
 def leaf_grids(segments: Any, src: NDArray[np.float64], the_plan: Plan, domain: Domain, k: float,
-               device: str) -> NDArray[np.float64]:
-    """F_c of every leaf cluster on the leaf level's grid: (C, nu * nv, 6) Re x, y, z, Im x, y, z.
+               device: str) -> NDArray[np.complex128]:
+    """F_c of every leaf cluster on the leaf level's grid: (C, n, n, 3) complex.
     ``segments``: the kind's pair of kernels from :func:`raysim.optics.kernels.radiation.segment_kernel`."""
     wp = runtime.init()
     from raysim.optics.kernels import radiation
 
     level = the_plan.levels[the_plan.leaf]
-    au, av = the_plan.axes[the_plan.leaf]
-    nodes = _grid_points((au, av), domain)
+    n = the_plan.sizes[the_plan.leaf]
+    nodes = grid_points(n, domain, half_rows(n))
     n_nodes = len(nodes)
     tile = 4 if device == "cpu" else 1  # as the direct radiator: four nodes a thread on the CPU
     n_pad = -(-n_nodes // tile) * tile  # pad with copies of the last node
     padded = np.vstack([nodes, np.repeat(nodes[-1:], n_pad - n_nodes, axis=0)])
     C = len(level.keys)
-    out = wp.zeros((C * n_pad, 6), dtype=wp.float64, device=device)
+    out = wp.empty((C * n_pad, 6), dtype=wp.float64, device=device)
     runtime.launch(segments[1] if tile == 4 else segments[0], C * n_pad // tile, [
         _arr(padded.T, device), _arr(level.begins.astype(np.int32), device, wp.int32),
         _arr(level.ends.astype(np.int32), device, wp.int32), _arr(level.centres, device), n_pad,
         _arr(src[:, the_plan.order], device), k, 1.0 / k,
         _arr(radiation.cis_table(), device, wp.vec2d), out], device, min_chunk=16)
-    return np.ascontiguousarray(out.numpy().reshape(C, n_pad, 6)[:, :n_nodes])
+    half = out.numpy().view(np.complex128).reshape(C, n_pad, 3)[:, :n_nodes]
+    return mirror(half.reshape(C, half_rows(n), n, 3), n)
 
 
-def aggregate(G: NDArray[np.float64], child: int, the_plan: Plan, domain: Domain, k: float, p: int,
-              device: str) -> NDArray[np.float64]:
-    """The parent level's grids (C0, nu * nv, 6) from the child level's ``G`` (C1, ..., 6):
-    separable Lagrange interpolation (u, then v), re-phasing, children summed in order."""
+def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Domain, k: float,
+              device: str) -> NDArray[np.complex128]:
+    """The parent level's grids (C0, n, n, 3) from the child level's ``G`` (C1, nc, nc, 3):
+    spectra zero-padded (whole families at a time), re-phased and summed in order."""
     wp = runtime.init()
     from raysim.optics.kernels import fast, radiation
 
     low, up = the_plan.levels[child], the_plan.levels[child - 1]
-    cu, cv = the_plan.axes[child]
-    pu, pv = the_plan.axes[child - 1]
-    iu, wu = lagrange(pu.nodes, cu, p)
-    iv, wv = lagrange(pv.nodes, cv, p)
-    C1, C0 = len(low.keys), len(up.keys)
-    half = wp.zeros((C1, pu.n * cv.n, 6), dtype=wp.float64, device=device)
-    runtime.launch(fast.interpolate_u, C1 * pu.n * cv.n, [
-        _arr(G, device), cv.n, p, _arr(iu.astype(np.int32), device, wp.int32), _arr(wu, device), half],
-        device, min_chunk=256)
+    n = the_plan.sizes[child - 1]
+    nodes = _arr(grid_points(n, domain), device)
+    table = _arr(radiation.cis_table(), device, wp.vec2d)
+    C0 = len(up.keys)
     first = np.searchsorted(low.parent, np.arange(C0 + 1)).astype(np.int32)
-    out = wp.zeros((C0, pu.n * pv.n, 6), dtype=wp.float64, device=device)
-    runtime.launch(fast.interpolate_v_merge, C0 * pu.n * pv.n, [
-        half, cv.n, p, _arr(iv.astype(np.int32), device, wp.int32), _arr(wv, device),
-        _arr(first, device, wp.int32), _arr(low.centres, device), _arr(up.centres, device),
-        _arr(_grid_points((pu, pv), domain), device), k,
-        _arr(radiation.cis_table(), device, wp.vec2d), out], device, min_chunk=256)
-    return out.numpy()
+    out = np.empty((C0, n, n, 3), dtype=np.complex128)
+    per = max(1, int(CHUNK_BYTES // (48 * n * n * 2)))  # children refined at once
+    q = 0
+    while q < C0:  # whole families at a time, so each parent is summed in one place
+        q1 = q + 1
+        while q1 < C0 and first[q1 + 1] - first[q] <= per:
+            q1 += 1
+        c0, c1 = int(first[q]), int(first[q1])
+        fine = resample(G[c0:c1], n).view(np.float64).reshape(-1, 6)
+        part = wp.empty(((q1 - q) * n * n, 6), dtype=wp.float64, device=device)
+        runtime.launch(fast.rephase_merge, (q1 - q) * n * n, [
+            _arr(fine, device), n * n, _arr(first[q:q1 + 1], device, wp.int32),
+            _arr(low.centres, device), _arr(up.centres[q:q1], device), nodes, k, table, part],
+            device, min_chunk=256)
+        out[q:q1] = part.numpy().view(np.complex128).reshape(q1 - q, n, n, 3)
+        q = q1
+    return out
 
 
-def to_targets(G: NDArray[np.complex128], the_plan: Plan, u: NDArray[np.float64],
-               points: NDArray[np.float64], k: float, p: int, device: str) -> NDArray[np.float64]:
-    """The raw sums (M, 6) at the targets (chart ``u`` (M, 2), ``points`` (M, 3) m) from the
-    stop level's grids; one thread per target (a block of targets gives the same bits)."""
+def target_axis(n: int, p: int) -> Axis:
+    """The axis of a refined grid of n nodes over [0, 2 pi), seen padded by p periodic nodes
+    each side (so every target's stencil is centred; the kernel wraps the indices)."""
+    h = 2.0 * np.pi / n
+    return Axis(-p * h, h, n + 2 * p)
+
+
+def to_targets(G: NDArray[np.complex128], the_plan: Plan, angles: NDArray[np.float64],
+               points: NDArray[np.float64], k: float, device: str, domain: Domain,
+               store: dict | None = None) -> NDArray[np.float64]:
+    """The raw sums (M, 6) at the targets (``angles`` (M, 2) theta, phi rad; ``points`` (M, 3)
+    m, on ``domain``'s sphere) from the stop level's grids ``G``. ``store``: where the sums on
+    the whole tensor grid are kept between blocks (the owner's cache). Every target's value is
+    the same whatever block it comes in."""
+    if the_plan.oversampling == 0:
+        index = tensor_index(angles, domain)
+        if index is not None:
+            store = {} if store is None else store
+            if "grid" not in store:
+                store["grid"] = grid_sums(G, the_plan, domain, k)
+            return store["grid"][index]
+        # a target off the tensor grid: the general last step, at its finest setting
+        the_plan = replace(the_plan, oversampling=OVERSAMPLINGS[-1], p=FALLBACK_STENCIL)
+    return interpolated(G, the_plan, angles, points, k, device)
+
+
+def grid_sums(G: NDArray[np.complex128], the_plan: Plan, domain: Domain, k: float) -> NDArray[np.float64]:
+    """The raw sums (R * Q, 6) on ``domain``'s whole tensor grid (R thetas x Q phis, row-major):
+    each cluster's Fourier series (its grid's FFT, the Nyquist row and column dropped) summed
+    at the grid's angles by two matrix products, times exp(-j k |P - c|), clusters summed."""
+    level = the_plan.levels[the_plan.stop]
+    n = G.shape[1]
+    h = n // 2
+    keep = np.r_[0:h, n - h + 1:n]
+    freqs = np.r_[0:h, -(h - 1):0]
+    thetas, phis = np.asarray(domain.thetas), np.asarray(domain.phis)
+    E_theta = np.exp(1j * np.outer(thetas, freqs))  # (R, n - 1)
+    E_phi_T = np.exp(1j * np.outer(freqs, phis))  # (n - 1, Q)
+    R, Q = len(thetas), len(phis)
+    s = np.sin(thetas)[:, None]
+    dirs = np.stack([s * np.cos(phis)[None, :], s * np.sin(phis)[None, :],
+                     -np.cos(thetas)[:, None] * np.ones((1, Q))], axis=-1).reshape(-1, 3)
+    points = np.asarray(domain.centre) + domain.radius * dirs
+    total = np.zeros((R * Q, 3), dtype=np.complex128)
+    per = max(1, int(CHUNK_BYTES // (16 * 3 * R * Q * 2)))
+    for c0 in range(0, len(G), per):
+        c1 = min(c0 + per, len(G))
+        S = sfft.fft2(G[c0:c1], axes=(1, 2), workers=FFT_WORKERS)[:, keep][:, :, keep] / (n * n)
+        V = E_theta @ np.moveaxis(S, 3, 1) @ E_phi_T  # (c, 3, R, Q)
+        V = np.moveaxis(V.reshape(c1 - c0, 3, R * Q), 1, 2)
+        r = np.sqrt(np.sum((points[None, :, :] - level.centres[c0:c1, None, :]) ** 2, axis=-1))
+        V *= np.exp(-1j * k * r)[:, :, None]
+        total += V.sum(axis=0)
+    return np.concatenate([total.real, total.imag], axis=1)
+
+
+def interpolated(G: NDArray[np.complex128], the_plan: Plan, angles: NDArray[np.float64],
+                 points: NDArray[np.float64], k: float, device: str) -> NDArray[np.float64]:
+    """The raw sums (M, 6) at any targets: each stop grid refined ``the_plan.oversampling``
+    times and interpolated by p x p Lagrange; one thread per target, clusters in a fixed order
+    (a block of targets gives the same bits)."""
     wp = runtime.init()
     from raysim.optics.kernels import fast, radiation
 
     level = the_plan.levels[the_plan.stop]
-    au, av = the_plan.axes[the_plan.stop]
-    iu, wu = lagrange(u[:, 0], au, p)
-    iv, wv = lagrange(u[:, 1], av, p)
-    grids = G
-
-    def arr(a: NDArray, dtype: Any = None) -> Any:
-        return _arr(a, device, dtype)
-
-    out = wp.zeros((len(u), 6), dtype=wp.float64, device=device)
-    runtime.launch(fast.interpolate_targets, len(u), [
-        arr(grids), av.n, p, arr(iu.astype(np.int32), wp.int32), arr(iv.astype(np.int32), wp.int32),
-        arr(wu), arr(wv), arr(level.centres), arr(points), k,
-        arr(radiation.cis_table(), wp.vec2d), out], device, min_chunk=16)
+    p = the_plan.p
+    m = the_plan.oversampling * G.shape[1]
+    axis = target_axis(m, p)
+    iu, wu = lagrange(angles[:, 0], axis, p)
+    iv, wv = lagrange(angles[:, 1], axis, p)
+    args = [_arr(iu - p, device, wp.int32), _arr(iv - p, device, wp.int32), _arr(wu, device),
+            _arr(wv, device)]
+    pts, table = _arr(points, device), _arr(radiation.cis_table(), device, wp.vec2d)
+    out = wp.zeros((len(angles), 6), dtype=wp.float64, device=device)
+    per = max(1, int(CHUNK_BYTES // (48 * m * m * 2)))
+    for c0 in range(0, len(G), per):
+        c1 = min(c0 + per, len(G))
+        fine = resample(G[c0:c1], m).view(np.float64)  # (c, m, m, 6): (Re, Im) pairs
+        runtime.launch(fast.interpolate_targets, len(angles), [
+            _arr(fine, device), p, *args, _arr(level.centres[c0:c1], device), pts, k, table, out],
+            device, min_chunk=16)
     return out.numpy()

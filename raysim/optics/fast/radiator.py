@@ -3,8 +3,8 @@
 Elements added under a kind are kept (sources change nothing until a field is read); the first
 :meth:`FastRadiator.sums_of` of a kind plans a tree (:mod:`raysim.optics.fast.multilevel`),
 compares its estimated cost with the direct sum's and runs the cheaper; ``method`` records
-which ran per kind. Targets that are not on one sphere about ``centre`` (or that reach past
-the chart's limit) always take the direct sum. ``pairs`` counts the element-point pairs the
+which ran per kind. Targets that are not on one sphere about ``centre`` always take the direct
+sum. ``pairs`` counts the element-point pairs the
 direct sum would have evaluated, so ``rate()`` is an equivalent rate.
 """
 
@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from raysim.errors import RaysimError
 from raysim.optics.fast import multilevel
-from raysim.optics.fast.chart import Domain, choose_order, domain_of, to_chart
+from raysim.optics.fast.chart import OVERSAMPLINGS, Domain, domain_of, stencil_for, to_angles
 from raysim.optics.radiator import Radiator, field_of
 from raysim.progress import Progress
 
@@ -72,15 +72,15 @@ class FastRadiator:
         self.force = force
         self.cache = cache
         self.domain = domain
-        self.u: NDArray[np.float64] | None = None
+        self.angles: NDArray[np.float64] | None = None
         if centre is not None and self.n:
             own = domain_of(self.points, centre)
             if own is not None and domain is None:
                 self.domain = own
-            if own is None or not _inside(own, self.domain):
+            if own is None or not _same_sphere(own, self.domain):
                 self.domain = None
             if self.domain is not None:
-                self.u = to_chart(self.points, self.domain.centre)[0]
+                self.angles = to_angles(self.points, self.domain.centre)
         elif centre is None:
             self.domain = None
         self.sources: dict[str, list[NDArray[np.float64]]] = {}
@@ -125,28 +125,30 @@ class FastRadiator:
 
     def _run(self, kind: str, src: NDArray[np.float64]) -> NDArray[np.float64]:
         the_plan = None
-        p, s = choose_order(self.tol / 2.0)  # measured: the field errs about 10x below the table
         # the kept grids belong to these very elements: keyed on their bytes, not their count
         key = (kind, self.domain, self.tol, hashlib.blake2b(src.tobytes(), digest_size=16).digest())
         if self.cache is not None and key in self.cache:
-            the_plan, G = self.cache[key]
-            self.method[kind] = _describe(the_plan, p, s)
-            return multilevel.to_targets(G, the_plan, self.u, self.points, self.k, p, self.device)
-        if self.domain is not None and self.u is not None and kind in FAST_KINDS:
-            the_plan = multilevel.plan(np.ascontiguousarray(src[:3].T), self.domain, self.k, p, s)
+            the_plan, G, store = self.cache[key]
+            self.method[kind] = _describe(the_plan)
+            return multilevel.to_targets(G, the_plan, self.angles, self.points, self.k, self.device,
+                                         self.domain, store)
+        if self.domain is not None and self.angles is not None and kind in FAST_KINDS:
+            the_plan = plan_for(np.ascontiguousarray(src[:3].T), self.domain, self.k, self.tol)
         if the_plan is None or (the_plan.cost >= the_plan.direct_cost and not self.force):
             self.method[kind] = "direct"
             one = Radiator(self.points, self.k, self.device, block=self.direct.block)
             one.add_packed(src, kind)
             return one.sums_of(kind)
-        self.method[kind] = _describe(the_plan, p, s)
-        assert self.domain is not None
+        self.method[kind] = _describe(the_plan)
+        assert self.domain is not None and self.angles is not None
         G = multilevel.leaf_grids(_segments(kind), src, the_plan, self.domain, self.k, self.device)
         for child in range(the_plan.leaf, the_plan.stop, -1):
-            G = multilevel.aggregate(G, child, the_plan, self.domain, self.k, p, self.device)
+            G = multilevel.aggregate(G, child, the_plan, self.domain, self.k, self.device)
+        store: dict = {}
         if self.cache is not None:
-            self.cache[key] = (the_plan, G)
-        return multilevel.to_targets(G, the_plan, self.u, self.points, self.k, p, self.device)
+            self.cache[key] = (the_plan, G, store)
+        return multilevel.to_targets(G, the_plan, self.angles, self.points, self.k, self.device,
+                                     self.domain, store)
 
     def field(self, kinds: tuple[str, ...] | None = None) -> NDArray[np.complex128]:
         """E (n, 3) complex (V/m) of everything added so far (or of the ``kinds`` named)."""
@@ -156,18 +158,29 @@ class FastRadiator:
         return field_of({kind: self.sums_of(kind) for kind in chosen}, self.k)
 
 
-def _describe(the_plan: multilevel.Plan, p: int, s: float) -> str:
-    return f"fast (levels {the_plan.stop}..{the_plan.leaf}, p {p}, s {s:g})"
+def plan_for(positions: NDArray[np.float64], domain: Domain, k: float, tol: float,
+             count: int | None = None) -> multilevel.Plan | None:
+    """The multilevel plan of elements at ``positions`` (n, 3) m for relative accuracy ``tol``:
+    each of the sum's interpolation steps (one per level and the last) is held to a share of
+    it, and the last step's stencil to a quarter."""
+    last = tuple((u, stencil_for(tol / 4.0, u)) for u in OVERSAMPLINGS)
+    steps = 8  # the tree's levels at most, in practice, plus the last step
+    return multilevel.plan(positions, domain, k, tol / steps, last, count=count)
 
 
-def _inside(own: Domain, domain: Domain | None) -> bool:
-    """Whether the points' own domain lies within ``domain`` (same sphere, box inside)."""
+def _describe(the_plan: multilevel.Plan) -> str:
+    sizes = f"{the_plan.sizes[the_plan.stop]}..{the_plan.sizes[the_plan.leaf]}"
+    last = "series on the grid" if the_plan.oversampling == 0 else \
+        f"x{the_plan.oversampling} p {the_plan.p}"
+    return f"fast (levels {the_plan.stop}..{the_plan.leaf}, grids {sizes}, last {last})"
+
+
+def _same_sphere(own: Domain, domain: Domain | None) -> bool:
+    """Whether the points' own domain lies on ``domain``'s sphere."""
     if domain is None:
         return False
-    same = np.allclose(own.centre, domain.centre, rtol=0, atol=1e-9 * domain.radius) and \
-        abs(own.radius - domain.radius) <= 1e-9 * domain.radius
-    b, d = own.box, domain.box
-    return bool(same and b[0] >= d[0] and b[1] <= d[1] and b[2] >= d[2] and b[3] <= d[3])
+    return bool(np.allclose(own.centre, domain.centre, rtol=0, atol=1e-9 * domain.radius)
+                and abs(own.radius - domain.radius) <= 1e-9 * domain.radius)
 
 
 def estimated_cost(positions: ArrayLike, points: ArrayLike, k: float, centre: ArrayLike,
@@ -184,8 +197,7 @@ def estimated_cost(positions: ArrayLike, points: ArrayLike, k: float, centre: Ar
     domain = domain_of(pts, centre)
     if domain is None or len(pos) == 0:
         return direct, direct
-    p, s = choose_order(tol / 2.0)
-    the_plan = multilevel.plan(pos, domain, k, p, s, count=n)
+    the_plan = plan_for(pos, domain, k, tol, count=n)
     return (direct if the_plan is None else min(the_plan.cost, direct)), direct
 
 

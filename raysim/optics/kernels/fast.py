@@ -1,8 +1,9 @@
 """Warp kernels of the fast radiator (:mod:`raysim.optics.fast`): the stop level to the targets.
 
-Each target t sums, over the clusters c of the stop level, the p x p Lagrange interpolation of
-the cluster's chart grid (phase of its centre taken out) times exp(-j k |P_t - c|). One thread
-per target, clusters in a fixed order: a target's value never depends on the other targets.
+Each target t adds, over the clusters c given (a chunk of the stop level), the p x p Lagrange
+interpolation of the cluster's refined grid (phase of its centre taken out) times
+exp(-j k |P_t - c|) to ``out[t]``. One thread per target, clusters and chunks in a fixed order:
+a target's value never depends on the other targets.
 """
 
 from __future__ import annotations
@@ -17,111 +18,74 @@ wp.set_module_options({"enable_backward": False})
 
 @wp.kernel
 def interpolate_targets(
-    grids: wp.array3d(dtype=wp.float64),  # (C, nu * nv, 6): Re x, y, z, Im x, y, z
-    nv: int,
+    grids: wp.array4d(dtype=wp.float64),  # (C, m, m, 6): complex x, y, z as (Re, Im) pairs
     p: int,
-    iu: wp.array(dtype=wp.int32),
-    iv: wp.array(dtype=wp.int32),
+    iu: wp.array(dtype=wp.int32),  # (M,) first stencil node along theta (may be < 0: wraps)
+    iv: wp.array(dtype=wp.int32),  # (M,) along phi
     wu: wp.array2d(dtype=wp.float64),  # (M, p)
     wv: wp.array2d(dtype=wp.float64),
     centres: wp.array2d(dtype=wp.float64),  # (C, 3) m
     points: wp.array2d(dtype=wp.float64),  # (M, 3) m
     k: wp.float64,
     table: wp.array(dtype=wp.vec2d),
-    out: wp.array2d(dtype=wp.float64),  # (M, 6)
+    out: wp.array2d(dtype=wp.float64),  # (M, 6): Re x, y, z, Im x, y, z, added to
     offset: int,
 ):
     t = wp.tid() + offset
+    m = grids.shape[1]
     P = wp.vec3d(points[t, 0], points[t, 1], points[t, 2])
     total = vec6d()
     for c in range(grids.shape[0]):
         acc = vec6d()
         for a in range(p):
-            row = (iu[t] + a) * nv + iv[t]
+            row = ((iu[t] + a) % m + m) % m  # the grids are periodic in both angles
             inner = vec6d()
             for b in range(p):
+                col = ((iv[t] + b) % m + m) % m
                 w = wv[t, b]
                 for q in range(6):
-                    inner[q] = inner[q] + w * grids[c, row + b, q]
+                    inner[q] = inner[q] + w * grids[c, row, col, q]
             acc += wu[t, a] * inner
+        # acc holds (Re x, Im x, Re y, Im y, Re z, Im z)
         d = P - wp.vec3d(centres[c, 0], centres[c, 1], centres[c, 2])
         e = cis(k * wp.sqrt(wp.dot(d, d)), table)  # exp(-j k r) = e[0] - j e[1]
-        total += vec6d(e[0] * acc[0] + e[1] * acc[3], e[0] * acc[1] + e[1] * acc[4],
-                       e[0] * acc[2] + e[1] * acc[5], e[0] * acc[3] - e[1] * acc[0],
-                       e[0] * acc[4] - e[1] * acc[1], e[0] * acc[5] - e[1] * acc[2])
+        total += vec6d(e[0] * acc[0] + e[1] * acc[1], e[0] * acc[2] + e[1] * acc[3],
+                       e[0] * acc[4] + e[1] * acc[5], e[0] * acc[1] - e[1] * acc[0],
+                       e[0] * acc[3] - e[1] * acc[2], e[0] * acc[5] - e[1] * acc[4])
     for q in range(6):
-        out[t, q] = total[q] * F64_ONE
+        out[t, q] = out[t, q] + total[q] * F64_ONE
 
 
 @wp.kernel
-def interpolate_u(
-    grids: wp.array3d(dtype=wp.float64),  # (C, nu_child * nv_child, 6) child grids
-    nv: int,
-    p: int,
-    iu: wp.array(dtype=wp.int32),  # (nu_parent,) first child node of each parent u-node
-    wu: wp.array2d(dtype=wp.float64),  # (nu_parent, p)
-    out: wp.array3d(dtype=wp.float64),  # (C, nu_parent * nv_child, 6)
-    offset: int,
-):
-    """Child grids interpolated along u to the parent's u-nodes (one thread per output row)."""
-    t = wp.tid() + offset
-    n_rows = iu.shape[0] * nv
-    c = t // n_rows
-    r = t - c * n_rows
-    i = r // nv
-    j = r - i * nv
-    acc = vec6d()
-    for a in range(p):
-        w = wu[i, a]
-        src = (iu[i] + a) * nv + j
-        for q in range(6):
-            acc[q] = acc[q] + w * grids[c, src, q]
-    for q in range(6):
-        out[c, r, q] = acc[q]
-
-
-@wp.kernel
-def interpolate_v_merge(
-    half: wp.array3d(dtype=wp.float64),  # (C_child, nu_parent * nv_child, 6) from interpolate_u
-    nv_child: int,
-    p: int,
-    iv: wp.array(dtype=wp.int32),  # (nv_parent,)
-    wv: wp.array2d(dtype=wp.float64),  # (nv_parent, p)
-    first: wp.array(dtype=wp.int32),  # (C_parent + 1,) children of parent q: first[q]..first[q+1]-1
-    child_centres: wp.array2d(dtype=wp.float64),  # (C_child, 3) m
-    parent_centres: wp.array2d(dtype=wp.float64),  # (C_parent, 3) m
-    nodes: wp.array2d(dtype=wp.float64),  # (nu_parent * nv_parent, 3) m: the parent grid's points
+def rephase_merge(
+    fine: wp.array2d(dtype=wp.float64),  # (children * n_nodes, 6): refined child grids, complex pairs
+    n_nodes: int,
+    first: wp.array(dtype=wp.int32),  # (parents + 1,): children of parent q are first[q]..first[q+1]-1
+    child_centres: wp.array2d(dtype=wp.float64),  # (children, 3) m
+    parent_centres: wp.array2d(dtype=wp.float64),  # (parents, 3) m
+    nodes: wp.array2d(dtype=wp.float64),  # (n_nodes, 3) m: the parent grid's points
     k: wp.float64,
     table: wp.array(dtype=wp.vec2d),
-    out: wp.array3d(dtype=wp.float64),  # (C_parent, nu_parent * nv_parent, 6)
+    out: wp.array2d(dtype=wp.float64),  # (parents * n_nodes, 6): complex pairs
     offset: int,
 ):
-    """The parent grids: each child's u-interpolated grid along v, re-phased by
-    exp(+j k (|P - c_parent| - |P - c_child|)), summed over the children in order."""
+    """The parent grids: each child's refined grid times exp(+j k (|P - c_parent| - |P - c_child|)),
+    summed over the children in order (one thread per parent node)."""
     t = wp.tid() + offset
-    n_nodes = nodes.shape[0]
-    nv = iv.shape[0]
-    qp = t // n_nodes
-    node = t - qp * n_nodes
-    i = node // nv
-    j = node - i * nv
+    q = t // n_nodes
+    node = t - q * n_nodes
     P = wp.vec3d(nodes[node, 0], nodes[node, 1], nodes[node, 2])
-    dp = P - wp.vec3d(parent_centres[qp, 0], parent_centres[qp, 1], parent_centres[qp, 2])
-    ep = cis(k * wp.sqrt(wp.dot(dp, dp)), table)  # exp(+j k r_parent) = ep[0] + j ep[1]
+    r_parent = wp.length(P - wp.vec3d(parent_centres[q, 0], parent_centres[q, 1], parent_centres[q, 2]))
     total = vec6d()
-    for c in range(first[qp], first[qp + 1]):
-        acc = vec6d()
-        for b in range(p):
-            w = wv[j, b]
-            src = i * nv_child + iv[j] + b
-            for q in range(6):
-                acc[q] = acc[q] + w * half[c, src, q]
-        dc = P - wp.vec3d(child_centres[c, 0], child_centres[c, 1], child_centres[c, 2])
-        ec = cis(k * wp.sqrt(wp.dot(dc, dc)), table)
-        # exp(j k (r_p - r_c)) = ep * conj(ec)
-        pr = ep[0] * ec[0] + ep[1] * ec[1]
-        pi = ep[1] * ec[0] - ep[0] * ec[1]
-        total += vec6d(pr * acc[0] - pi * acc[3], pr * acc[1] - pi * acc[4], pr * acc[2] - pi * acc[5],
-                       pr * acc[3] + pi * acc[0], pr * acc[4] + pi * acc[1], pr * acc[5] + pi * acc[2])
-    for q in range(6):
-        out[qp, node, q] = total[q]
+    base = first[0]
+    for c in range(first[q], first[q + 1]):
+        r_child = wp.length(P - wp.vec3d(child_centres[c, 0], child_centres[c, 1], child_centres[c, 2]))
+        e = cis(k * (r_parent - r_child), table)  # exp(+j k (r_p - r_c)) = e[0] + j e[1]
+        row = (c - base) * n_nodes + node
+        for a in range(3):
+            re = fine[row, 2 * a]
+            im = fine[row, 2 * a + 1]
+            total[2 * a] = total[2 * a] + e[0] * re - e[1] * im
+            total[2 * a + 1] = total[2 * a + 1] + e[0] * im + e[1] * re
+    for a in range(6):
+        out[t, a] = total[a]

@@ -231,6 +231,18 @@ def adjoint_kernel(load: Any, pair: Any) -> Any:
     return adjoint
 
 
+@wp.func
+def store_complex(E: wp.array2d(dtype=wp.float64), t: int, v: vec6d):
+    """Row t of ``E`` from v (Re x, y, z, Im x, y, z) as three complex numbers in numpy's
+    complex128 layout (Re x, Im x, Re y, Im y, Re z, Im z)."""
+    E[t, 0] = v[0]
+    E[t, 1] = v[3]
+    E[t, 2] = v[1]
+    E[t, 3] = v[4]
+    E[t, 4] = v[2]
+    E[t, 5] = v[5]
+
+
 def segment_kernel(load: Any, pair: Any) -> tuple[Any, Any]:
     """The leaf sums of the fast radiator for one kind of element (same ``load`` and ``pair``):
     ``(radiate_segments, radiate_segments4)``, one node or four nodes per thread.
@@ -239,7 +251,8 @@ def segment_kernel(load: Any, pair: Any) -> tuple[Any, Any]:
     ``t % n_nodes`` of leaf ``t // n_nodes`` and sums the leaf's elements
     ``begins[leaf]..ends[leaf]-1`` of ``src``, raw (before the kind's prefactor) as
     :func:`radiation_kernels` does for one point, times exp(+j k |P - centres[leaf]|) (the
-    phase of the leaf's centre taken out), into ``E[t]`` (n_leaves * n_nodes, 6).
+    phase of the leaf's centre taken out), into ``E[t]`` (n_leaves * n_nodes, 6) as three
+    complex numbers (Re x, Im x, Re y, Im y, Re z, Im z: numpy's complex128 layout).
     """
 
     @wp.kernel(module="unique")
@@ -264,9 +277,7 @@ def segment_kernel(load: Any, pair: Any) -> tuple[Any, Any]:
         for s in range(begins[leaf], ends[leaf]):
             acc += pair(p, load(src, s), k, k_inv, table)
         d = p - wp.vec3d(centres[leaf, 0], centres[leaf, 1], centres[leaf, 2])
-        v = times(acc, cis(k * wp.sqrt(wp.dot(d, d)), table))
-        for c in range(6):
-            E[t, c] = v[c]
+        store_complex(E, t, times(acc, cis(k * wp.sqrt(wp.dot(d, d)), table)))
 
     @wp.kernel(module="unique")
     def radiate_segments4(
@@ -302,14 +313,9 @@ def segment_kernel(load: Any, pair: Any) -> tuple[Any, Any]:
             a1 += pair(p1, e, k, k_inv, table)
             a2 += pair(p2, e, k, k_inv, table)
             a3 += pair(p3, e, k, k_inv, table)
-        v0 = times(a0, cis(wp.length(p0 - c) * k, table))
-        v1 = times(a1, cis(wp.length(p1 - c) * k, table))
-        v2 = times(a2, cis(wp.length(p2 - c) * k, table))
-        v3 = times(a3, cis(wp.length(p3 - c) * k, table))
-        for q in range(6):
-            E[t, q] = v0[q]
-            E[t + 1, q] = v1[q]
-            E[t + 2, q] = v2[q]
-            E[t + 3, q] = v3[q]
+        store_complex(E, t, times(a0, cis(wp.length(p0 - c) * k, table)))
+        store_complex(E, t + 1, times(a1, cis(wp.length(p1 - c) * k, table)))
+        store_complex(E, t + 2, times(a2, cis(wp.length(p2 - c) * k, table)))
+        store_complex(E, t + 3, times(a3, cis(wp.length(p3 - c) * k, table)))
 
     return radiate_segments, radiate_segments4
