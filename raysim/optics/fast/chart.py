@@ -158,6 +158,33 @@ def resample(G: NDArray[np.complex128], m: int) -> NDArray[np.complex128]:
     return out
 
 
+def restrict(X: NDArray[np.complex128], n: int) -> NDArray[np.complex128]:
+    """The transpose of :func:`resample` (m x m -> n x n): weights on the fine grid taken back to
+    the coarse one (both DFT matrices are symmetric, so the transpose of zero-padding the
+    spectrum is truncating it, between the same two transforms swapped)."""
+    m = X.shape[-2]
+    if m == n:
+        return X
+    T = sfft.ifft2(X, axes=(-3, -2), workers=FFT_WORKERS)
+    h = n // 2
+    S = np.zeros((*X.shape[:-3], n, n, X.shape[-1]), dtype=np.complex128)
+    for src_u, dst_u in ((slice(0, h), slice(0, h)), (slice(m - h + 1, m), slice(n - h + 1, n))):
+        for src_v, dst_v in ((slice(0, h), slice(0, h)), (slice(m - h + 1, m), slice(n - h + 1, n))):
+            S[..., dst_u, dst_v, :] = T[..., src_u, src_v, :]
+    S = sfft.fft2(S, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=True)
+    S *= (m * m) / (n * n)
+    return S
+
+
+def fold(full: NDArray[np.complex128], n: int) -> NDArray[np.complex128]:
+    """The transpose of :func:`mirror`: weights on the whole (..., n, n, c) grid gathered onto
+    its rows 0 .. n/2 (..., n/2 + 1, n, c)."""
+    h = n // 2
+    half = full[..., : h + 1, :, :].copy()
+    half[..., 1:h, :, :] += np.roll(full[..., h + 1:, :, :], -h, axis=-2)[..., ::-1, :, :]
+    return half
+
+
 def degree_for(bandwidth: float, digits: float) -> float:
     """The harmonic degree L that holds a field of phase bandwidth ``bandwidth`` (rad per rad
     of angle) to about 10^-digits: an excess bandwidth of the multipole rule's form (Song and

@@ -229,8 +229,7 @@ def to_targets(G: NDArray[np.complex128], the_plan: Plan, angles: NDArray[np.flo
             if "grid" not in store:
                 store["grid"] = grid_sums(G, the_plan, domain, k)
             return store["grid"][index]
-        # a target off the tensor grid: the general last step, at its finest setting
-        the_plan = replace(the_plan, oversampling=OVERSAMPLINGS[-1], p=FALLBACK_STENCIL)
+        the_plan = general_last_step(the_plan)  # a target off the tensor grid
     return interpolated(G, the_plan, angles, points, k, device)
 
 
@@ -247,21 +246,37 @@ def grid_sums(G: NDArray[np.complex128], the_plan: Plan, domain: Domain, k: floa
     E_theta = np.exp(1j * np.outer(thetas, freqs))  # (R, n - 1)
     E_phi_T = np.exp(1j * np.outer(freqs, phis))  # (n - 1, Q)
     R, Q = len(thetas), len(phis)
-    s = np.sin(thetas)[:, None]
-    dirs = np.stack([s * np.cos(phis)[None, :], s * np.sin(phis)[None, :],
-                     -np.cos(thetas)[:, None] * np.ones((1, Q))], axis=-1).reshape(-1, 3)
-    points = np.asarray(domain.centre) + domain.radius * dirs
-    total = np.zeros((R * Q, 3), dtype=np.complex128)
+    points = tensor_points(domain)
+    r_all = np.sqrt(np.sum((points[None, :, :] - level.centres[:, None, :]) ** 2, axis=-1))
+    total = np.zeros((R, 3, Q), dtype=np.complex128)
+    nk = len(keep)
     per = max(1, int(CHUNK_BYTES // (16 * 3 * R * Q * 2)))
     for c0 in range(0, len(G), per):
         c1 = min(c0 + per, len(G))
+        c = c1 - c0
         S = sfft.fft2(G[c0:c1], axes=(1, 2), workers=FFT_WORKERS)[:, keep][:, :, keep] / (n * n)
-        V = E_theta @ np.moveaxis(S, 3, 1) @ E_phi_T  # (c, 3, R, Q)
-        V = np.moveaxis(V.reshape(c1 - c0, 3, R * Q), 1, 2)
-        r = np.sqrt(np.sum((points[None, :, :] - level.centres[c0:c1, None, :]) ** 2, axis=-1))
-        V *= np.exp(-1j * k * r)[:, :, None]
-        total += V.sum(axis=0)
+        # two plain matrix products (one BLAS call each): theta first, then phi
+        A = np.ascontiguousarray(np.transpose(S, (1, 0, 3, 2))).reshape(nk, c * 3 * nk)
+        W = (E_theta @ A).reshape(R * c * 3, nk) @ E_phi_T  # (R * c * 3, Q)
+        phase = np.exp(-1j * k * r_all[c0:c1]).reshape(c, R, Q).transpose(1, 0, 2)  # (R, c, Q)
+        total += np.sum(W.reshape(R, c, 3, Q) * phase[:, :, None, :], axis=1)
+    total = np.moveaxis(total, 1, 2).reshape(R * Q, 3)
     return np.concatenate([total.real, total.imag], axis=1)
+
+
+def tensor_points(domain: Domain) -> NDArray[np.float64]:
+    """The points (R * Q, 3) m of ``domain``'s tensor grid, row-major (theta, then phi)."""
+    thetas, phis = np.asarray(domain.thetas), np.asarray(domain.phis)
+    s = np.sin(thetas)[:, None]
+    dirs = np.stack([s * np.cos(phis)[None, :], s * np.sin(phis)[None, :],
+                     -np.cos(thetas)[:, None] * np.ones((1, len(phis)))], axis=-1).reshape(-1, 3)
+    return np.asarray(domain.centre) + domain.radius * dirs
+
+
+def general_last_step(the_plan: Plan) -> Plan:
+    """``the_plan`` with the general last step (refined grid, Lagrange) at its finest setting:
+    for a target off the tensor grid a plan was made for."""
+    return replace(the_plan, oversampling=OVERSAMPLINGS[-1], p=FALLBACK_STENCIL)
 
 
 def interpolated(G: NDArray[np.complex128], the_plan: Plan, angles: NDArray[np.float64],

@@ -129,7 +129,7 @@ class FastRadiator:
         key = (kind, self.domain, self.tol, hashlib.blake2b(src.tobytes(), digest_size=16).digest())
         if self.cache is not None and key in self.cache:
             the_plan, G, store = self.cache[key]
-            self.method[kind] = _describe(the_plan)
+            self.method[kind] = describe(the_plan)
             return multilevel.to_targets(G, the_plan, self.angles, self.points, self.k, self.device,
                                          self.domain, store)
         if self.domain is not None and self.angles is not None and kind in FAST_KINDS:
@@ -139,7 +139,7 @@ class FastRadiator:
             one = Radiator(self.points, self.k, self.device, block=self.direct.block)
             one.add_packed(src, kind)
             return one.sums_of(kind)
-        self.method[kind] = _describe(the_plan)
+        self.method[kind] = describe(the_plan)
         assert self.domain is not None and self.angles is not None
         G = multilevel.leaf_grids(_segments(kind), src, the_plan, self.domain, self.k, self.device)
         for child in range(the_plan.leaf, the_plan.stop, -1):
@@ -168,7 +168,8 @@ def plan_for(positions: NDArray[np.float64], domain: Domain, k: float, tol: floa
     return multilevel.plan(positions, domain, k, tol / steps, last, count=count)
 
 
-def _describe(the_plan: multilevel.Plan) -> str:
+def describe(the_plan: multilevel.Plan) -> str:
+    """One line naming the plan's levels, grid sizes and last step (FieldMap ``radiator_ran``)."""
     sizes = f"{the_plan.sizes[the_plan.stop]}..{the_plan.sizes[the_plan.leaf]}"
     last = "series on the grid" if the_plan.oversampling == 0 else \
         f"x{the_plan.oversampling} p {the_plan.p}"
