@@ -62,9 +62,25 @@ def _stencil(first: NDArray[np.int64], p: int) -> NDArray[np.int64]:
     return first[:, None] + np.arange(p)[None, :]
 
 
+def _phase(points: NDArray[np.float64], values: NDArray[np.float64], centres: NDArray[np.float64],
+           sign: float, k: float, device: str) -> Any:
+    """exp(sign j k |P_t - c|) values[c or 0, t] for every centre c (C, M, 6), a Warp array;
+    ``values`` numpy or Warp (C or 1, M, 6)."""
+    wp = runtime.init()
+    from raysim.optics.kernels import fast_adjoint, radiation
+
+    out = wp.empty((len(centres), len(points), 6), dtype=wp.float64, device=device)
+    runtime.launch(fast_adjoint.phase_rows, len(centres) * len(points), [
+        _arr(points, device), values if isinstance(values, wp.array) else _arr(values, device),
+        _arr(centres, device), sign, k,
+        _arr(radiation.cis_table(), device, wp.vec2d), out], device, min_chunk=1024)
+    return out
+
+
 def _stop_weights(b: NDArray[np.complex128], the_plan: multilevel.Plan, u: NDArray[np.float64],
-                  points: NDArray[np.float64], k: float, p: int, device: str) -> NDArray[np.float64]:
-    """beta of every stop cluster on the stop grid (C, nu * nv, 6): step 1 (module docs)."""
+                  points: NDArray[np.float64], k: float, p: int, device: str) -> Any:
+    """beta of every stop cluster on the stop grid (C, nu * nv, 6), a Warp array: step 1
+    (module docs)."""
     wp = runtime.init()
     from raysim.optics.kernels import fast_adjoint
 
@@ -78,21 +94,20 @@ def _stop_weights(b: NDArray[np.complex128], the_plan: multilevel.Plan, u: NDArr
     w2 = (wu[:, :, None] * wv[:, None, :]).reshape(m, p * p)
     n_nodes = au.n * av.n
     indptr, rows, weights = _transposed_csr(cols, w2, n_nodes)
-    r = np.linalg.norm(points[None, :, :] - level.centres[:, None, :], axis=2)  # (C, M) m
-    phased = _split(np.exp(-1j * k * r)[:, :, None] * b[None, :, :])  # (C, M, 6)
     C = len(level.keys)
+    phased = _phase(points, _split(b)[None], level.centres, -1.0, k, device)  # (C, M, 6)
     out = wp.zeros((C, n_nodes, 6), dtype=wp.float64, device=device)
     runtime.launch(fast_adjoint.anterpolate_targets, C * n_nodes, [
-        _arr(phased, device), _arr(indptr, device, wp.int32), _arr(rows, device, wp.int32),
-        _arr(weights, device), out],
-        device, min_chunk=256)
-    return out.numpy()
+        phased, _arr(indptr, device, wp.int32), _arr(rows, device, wp.int32),
+        _arr(weights, device), out], device, min_chunk=256)
+    return out
 
 
-def disaggregate(beta: NDArray[np.float64], child: int, the_plan: multilevel.Plan, domain: Any, k: float,
-                 p: int, device: str) -> NDArray[np.float64]:
-    """The child level's weights (C1, nu * nv, 6) from the parent level's ``beta`` (C0, ..., 6):
-    the transpose of :func:`raysim.optics.fast.multilevel.aggregate` (step 2, module docs)."""
+def disaggregate(beta: Any, child: int, the_plan: multilevel.Plan, domain: Any, k: float, p: int,
+                 device: str) -> Any:
+    """The child level's weights (C1, nu * nv, 6) from the parent level's ``beta`` (C0, ..., 6),
+    Warp arrays: the transpose of :func:`raysim.optics.fast.multilevel.aggregate` (step 2,
+    module docs)."""
     wp = runtime.init()
     from raysim.optics.kernels import fast_adjoint, radiation
 
@@ -104,7 +119,7 @@ def disaggregate(beta: NDArray[np.float64], child: int, the_plan: multilevel.Pla
     C1 = len(low.keys)
     half = wp.zeros((C1, pu.n * cv.n, 6), dtype=wp.float64, device=device)
     runtime.launch(fast_adjoint.rephase_anterpolate_v, C1 * pu.n, [
-        _arr(beta, device), _arr(low.parent.astype(np.int32), device, wp.int32),
+        beta, _arr(low.parent.astype(np.int32), device, wp.int32),
         _arr(low.centres, device), _arr(up.centres, device),
         _arr(multilevel._grid_points((pu, pv), domain), device), cv.n, p,
         _arr(iv.astype(np.int32), device, wp.int32), _arr(wv, device), k,
@@ -114,10 +129,10 @@ def disaggregate(beta: NDArray[np.float64], child: int, the_plan: multilevel.Pla
     runtime.launch(fast_adjoint.anterpolate_u, C1 * cu.n * cv.n, [
         half, cv.n, _arr(indptr, device, wp.int32), _arr(rows, device, wp.int32),
         _arr(weights, device), out], device, min_chunk=256)
-    return out.numpy()
+    return out
 
 
-def leaf_sums(kernel: Any, src: NDArray[np.float64], beta: NDArray[np.float64], the_plan: multilevel.Plan,
+def leaf_sums(kernel: Any, src: NDArray[np.float64], beta: Any, the_plan: multilevel.Plan,
               domain: Any, k: float, rows_out: int, device: str) -> NDArray[np.float64]:
     """Step 3 (module docs): (rows_out, n) per element, in the elements' own order.
     ``kernel``: from :func:`raysim.optics.kernels.radiation.segment_adjoint_kernel`."""
@@ -129,14 +144,12 @@ def leaf_sums(kernel: Any, src: NDArray[np.float64], beta: NDArray[np.float64], 
     nodes = multilevel._grid_points(axes, domain)
     n_nodes = len(nodes)
     # the leaf centre's phase put back once per (leaf, node), not once per element
-    r = np.linalg.norm(nodes[None, :, :] - level.centres[:, None, :], axis=2)
-    z = (beta[..., :3] + 1j * beta[..., 3:]) * np.exp(1j * k * r)[:, :, None]
-    weights = _split(z).reshape(-1, 6)
+    weights = _phase(nodes, beta, level.centres, 1.0, k, device)
     leaf_of = np.repeat(np.arange(len(level.keys)), level.ends - level.begins).astype(np.int32)
     n = src.shape[1]
     out = wp.zeros((8, n), dtype=wp.float64, device=device)
     runtime.launch(kernel, n, [
-        _arr(nodes.T, device), _arr(leaf_of, device, wp.int32), _arr(weights, device), n_nodes,
+        _arr(nodes.T, device), _arr(leaf_of, device, wp.int32), weights.reshape((-1, 6)), n_nodes,
         _arr(src[:, the_plan.order], device), k, 1.0 / k,
         _arr(radiation.cis_table(), device, wp.vec2d), out], device, min_chunk=16)
     acc = out.numpy()[:rows_out]

@@ -118,3 +118,34 @@ def anterpolate_u(
             acc[q] = acc[q] + w * half[c, src, q]
     for q in range(6):
         out[c, node, q] = acc[q]
+
+
+@wp.kernel
+def phase_rows(
+    points: wp.array2d(dtype=wp.float64),  # (M, 3) m
+    values: wp.array3d(dtype=wp.float64),  # (C or 1, M, 6): one set per cluster, or one for all
+    centres: wp.array2d(dtype=wp.float64),  # (C, 3) m
+    sign: wp.float64,  # -1: exp(-j k r) (targets); +1: exp(+j k r) (a leaf centre's phase put back)
+    k: wp.float64,
+    table: wp.array(dtype=wp.vec2d),
+    out: wp.array3d(dtype=wp.float64),  # (C, M, 6)
+    offset: int,
+):
+    """out[c, t] = exp(sign j k |P_t - c|) values[c or 0, t]: one thread per (cluster, point)."""
+    t = wp.tid() + offset
+    m = points.shape[0]
+    c = t // m
+    i = t - c * m
+    cv = c
+    if values.shape[0] == 1:
+        cv = 0
+    d = wp.vec3d(points[i, 0], points[i, 1], points[i, 2]) - wp.vec3d(centres[c, 0], centres[c, 1],
+                                                                      centres[c, 2])
+    e = cis(k * wp.length(d), table)
+    er = e[0]
+    ei = sign * e[1]
+    for q in range(3):
+        vr = values[cv, i, q]
+        vi = values[cv, i, q + 3]
+        out[c, i, q] = er * vr - ei * vi
+        out[c, i, q + 3] = er * vi + ei * vr
