@@ -122,3 +122,23 @@ def test_an_unknown_radiator_is_refused(elements, points, weights) -> None:
 
     with pytest.raises(RaysimError, match="unknown radiator"):
         po_jacobian.vjp(elements, points[:4], weights[:4], radiator="fmm", centre=CENTRE)
+
+
+def test_fringe_vjp_through_the_fast_radiator(points) -> None:
+    """The rim's PTD fringe VJP (six shifted copies of each edge element, central differences)
+    by the transposed multilevel sum against the direct one."""
+    from raysim.optics import ptd_jacobian
+    from raysim.optics.illumination import Illumination
+    from raysim.surface.mesh import paraboloid
+
+    wave = Illumination.plane_wave(1e9, (0, 0, -1), (1, 0, 0))
+    state = ptd_jacobian.edge_state(paraboloid(D, F, 1.0), wave)
+    rng = np.random.default_rng(5)
+    c = rng.standard_normal((len(points), 3)) + 1j * rng.standard_normal((len(points), 3))
+    direct = ptd_jacobian.vjp(state, wave, points, c)
+    info: dict = {}
+    fast = ptd_jacobian.vjp(state, wave, points, c, radiator="fast", tol=1e-6, centre=CENTRE, force=True,
+                            info=info)
+    assert info["method"].startswith("fast")
+    for a, b in zip(fast, direct, strict=True):
+        assert _rel_rms(a, b) < 1e-6
