@@ -34,6 +34,9 @@ from raysim.optics.fast import multilevel
 from raysim.optics.fast.chart import Axis, choose_order, domain_of, lagrange, to_chart
 from raysim.optics.fast.radiator import DEFAULT_TOL
 
+#: bytes of phased target weights held at once by the stop step (clusters taken in chunks)
+PHASED_BYTES = 2.5e8
+
 
 def _arr(a: NDArray, device: str, dtype: Any = None) -> Any:
     wp = runtime.init()
@@ -95,11 +98,17 @@ def _stop_weights(b: NDArray[np.complex128], the_plan: multilevel.Plan, u: NDArr
     n_nodes = au.n * av.n
     indptr, rows, weights = _transposed_csr(cols, w2, n_nodes)
     C = len(level.keys)
-    phased = _phase(points, _split(b)[None], level.centres, -1.0, k, device)  # (C, M, 6)
     out = wp.zeros((C, n_nodes, 6), dtype=wp.float64, device=device)
-    runtime.launch(fast_adjoint.anterpolate_targets, C * n_nodes, [
-        phased, _arr(indptr, device, wp.int32), _arr(rows, device, wp.int32),
-        _arr(weights, device), out], device, min_chunk=256)
+    csr = [_arr(indptr, device, wp.int32), _arr(rows, device, wp.int32), _arr(weights, device)]
+    b6 = _arr(_split(b)[None], device)
+    # the phased weights of a few clusters at a time: all of them at once would hold C x M
+    # complex 3-vectors (over a gigabyte at 1 GHz on the paper's grid)
+    step = max(1, int(PHASED_BYTES // (48 * max(m, 1))))
+    for c0 in range(0, C, step):
+        c1 = min(C, c0 + step)
+        phased = _phase(points, b6, level.centres[c0:c1], -1.0, k, device)  # (c1 - c0, M, 6)
+        runtime.launch(fast_adjoint.anterpolate_targets, (c1 - c0) * n_nodes, [phased, *csr, out[c0:c1]],
+                       device, min_chunk=256)
     return out
 
 
