@@ -125,13 +125,22 @@ def jvp(elements: SurfaceElements, points: ArrayLike, dz: ArrayLike, dhx: ArrayL
 
 
 def vjp(elements: SurfaceElements, points: ArrayLike, c: ArrayLike, device: str | None = "cpu",
-        block: int | None = None) -> tuple[NDArray, NDArray, NDArray]:
+        block: int | None = None, radiator: str = "direct", tol: float = DEFAULT_TOL,
+        centre: ArrayLike | None = None, force: bool = False,
+        info: dict | None = None) -> tuple[NDArray, NDArray, NDArray]:
     """Gradients (n_samples,) of Re sum_P conj(c(P)) . dE(P) in dz_s, dhx_s and dhy_s.
 
-    ``c`` (n_points, 3) complex weights on the field at ``points`` (m).
+    ``c`` (n_points, 3) complex weights on the field at ``points`` (m). ``radiator="fast"``
+    with ``centre`` (the sphere's centre, m): the transposed multilevel sum
+    (:func:`raysim.optics.fast.adjoint.transposed_sum`, tolerance ``tol``, ``force`` as
+    :func:`raysim.optics.fast.radiator.make_radiator`), where its rules choose it; otherwise
+    the direct transposed sum. ``info``, when given, receives ``method``.
     """
+    from raysim.optics.fast.radiator import RADIATORS
     from raysim.optics.kernels import po_derivative, radiation
 
+    if radiator not in RADIATORS:
+        raise RaysimError(f"unknown radiator {radiator!r}: use one of {', '.join(RADIATORS)}")
     wp = runtime.init()
     dev = runtime.resolve_device(device)
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -141,18 +150,27 @@ def vjp(elements: SurfaceElements, points: ArrayLike, c: ArrayLike, device: str 
     sources = np.vstack([elements.r.T, elements.m.real.T, elements.m.imag.T,
                          np.repeat(-Z_HAT[:, None], n, axis=1)])
     start = time.perf_counter()
-    field_arr = wp.array(np.ascontiguousarray(np.vstack([pts.T, b.real.T, b.imag.T])),
-                         dtype=wp.float64, device=dev)
-    src = wp.array(np.ascontiguousarray(sources), dtype=wp.float64, device=dev)
-    out = wp.zeros((po_derivative.ADJOINT_OUT, n), dtype=wp.float64, device=dev)
-    table = wp.array(radiation.cis_table(), dtype=wp.vec2d, device=dev)
-    step = int(block or (2048 if dev == "cpu" else 16384))
-    for begin in range(0, len(pts), step):
-        end = min(begin + step, len(pts))
-        runtime.launch(po_derivative.adjoint_sum, n,
-                       [field_arr, src, begin, end, elements.k, 1.0 / elements.k, table, out],
-                       dev, min_chunk=16)
-    acc = out.numpy()
+    acc = None
+    if radiator == "fast" and centre is not None:
+        from raysim.optics.fast import adjoint
+
+        acc = adjoint.transposed_sum(po_derivative.segments_adjoint, sources, pts, b, elements.k,
+                                     centre, dev, tol=tol, force=force, info=info)
+    if acc is None:
+        if info is not None:
+            info["method"] = "direct"
+        field_arr = wp.array(np.ascontiguousarray(np.vstack([pts.T, b.real.T, b.imag.T])),
+                             dtype=wp.float64, device=dev)
+        src = wp.array(np.ascontiguousarray(sources), dtype=wp.float64, device=dev)
+        out = wp.zeros((po_derivative.ADJOINT_OUT, n), dtype=wp.float64, device=dev)
+        table = wp.array(radiation.cis_table(), dtype=wp.vec2d, device=dev)
+        step = int(block or (2048 if dev == "cpu" else 16384))
+        for begin in range(0, len(pts), step):
+            end = min(begin + step, len(pts))
+            runtime.launch(po_derivative.adjoint_sum, n,
+                           [field_arr, src, begin, end, elements.k, 1.0 / elements.k, table, out],
+                           dev, min_chunk=16)
+        acc = out.numpy()
     U = (acc[0:3] + 1j * acc[3:6]).T
     S = acc[6] + 1j * acc[7]
     elements.seconds["vjp"] = elements.seconds.get("vjp", 0.0) + time.perf_counter() - start

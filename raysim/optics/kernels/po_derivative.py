@@ -41,6 +41,7 @@ from raysim.optics.kernels.radiation import (
     electric_bracket,
     green,
     radiation_kernels,
+    segment_adjoint_kernel,
     segment_kernel,
     times,
     vec6d,
@@ -171,3 +172,6 @@ def fringe_adjoint_pair(P: wp.vec3d, bre: wp.vec3d, bim: wp.vec3d, e: EdgeElemen
 
 adjoint_sum = adjoint_kernel(load_adjoint, adjoint_pair)
 fringe_adjoint = adjoint_kernel(load_edge, fringe_adjoint_pair)
+# the same pairs summed over each leaf's chart grid: the fast radiator's transposed sum
+segments_adjoint = segment_adjoint_kernel(load_adjoint, adjoint_pair)
+segments_fringe_adjoint = segment_adjoint_kernel(load_edge, fringe_adjoint_pair)

@@ -319,3 +319,43 @@ def segment_kernel(load: Any, pair: Any) -> tuple[Any, Any]:
         store_complex(E, t + 3, times(a3, cis(wp.length(p3 - c) * k, table)))
 
     return radiate_segments, radiate_segments4
+
+
+def segment_adjoint_kernel(load: Any, pair: Any) -> Any:
+    """The leaf step of the fast radiator's transposed sum for one kind of element (the
+    ``load`` and ``pair`` of :func:`adjoint_kernel`): one thread per element.
+
+    Every leaf sees the same ``nodes`` (3, n_nodes) field points (m). Element s (in leaf order)
+    belongs to leaf ``leaf_of[s]`` and sums ``pair(P_n, b_n, element)`` over that leaf's nodes,
+    b_n = ``weights[leaf * n_nodes + n]`` (Re 3, Im 3): the leaf's anterpolated weights with the
+    leaf centre's phase exp(+j k |P_n - c_leaf|) already put back (once per node, by the
+    caller, not once per element). The sum is written to ``out[:, s]`` (8, n_elements).
+    """
+
+    @wp.kernel(module="unique")
+    def adjoint_segments(
+        nodes: wp.array2d(dtype=wp.float64),
+        leaf_of: wp.array(dtype=wp.int32),
+        weights: wp.array2d(dtype=wp.float64),
+        n_nodes: int,
+        src: wp.array2d(dtype=wp.float64),
+        k: wp.float64,
+        k_inv: wp.float64,
+        table: wp.array(dtype=wp.vec2d),
+        out: wp.array2d(dtype=wp.float64),
+        offset: int,
+    ):
+        s = wp.tid() + offset
+        e = load(src, s)
+        base = leaf_of[s] * n_nodes
+        acc = vec8d()
+        for n in range(n_nodes):
+            p = wp.vec3d(nodes[0, n], nodes[1, n], nodes[2, n])
+            row = base + n
+            bre = wp.vec3d(weights[row, 0], weights[row, 1], weights[row, 2])
+            bim = wp.vec3d(weights[row, 3], weights[row, 4], weights[row, 5])
+            acc += pair(p, bre, bim, e, k, k_inv, table)
+        for c in range(8):
+            out[c, s] = acc[c]
+
+    return adjoint_segments
