@@ -66,8 +66,8 @@ def direct_rate(points: int) -> float:
 
     wave = po.Illumination.plane_wave(0.3e9, (0, 0, -1), (1, 0, 0))
     dish = paraboloid(110.0, 33.0, 5.0)
-    src = np.concatenate([s.numpy() for s in po.po_elements(dish, wave, plan(dish, wave.wavelength, po.DEFAULT_SAMPLES_PER_WAVELENGTH))],
-                         axis=1)
+    quad = plan(dish, wave.wavelength, po.DEFAULT_SAMPLES_PER_WAVELENGTH)
+    src = np.concatenate([s.numpy() for s in po.po_elements(dish, wave, quad)], axis=1)
     pts = SphereGrid(10.0, 90, 360).points(33.0).reshape(-1, 3)
     pts = pts[np.linspace(0, len(pts) - 1, points).astype(int)]
     Radiator(pts[:8], wave.k).add_packed(src[:, :64], "electric")  # compile or load the kernels

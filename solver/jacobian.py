@@ -221,11 +221,12 @@ class WaveJacobian:
         weights = self._at(np.asarray(y, dtype=np.float64).reshape(-1))
         c = 2.0 * weights[:, None] * self._reading()
         points = self._at(self.points)
-        g = po_jacobian.vjp(self.elements, points, c, self.model.device)
+        fast = {"radiator": self.model.radiator, "tol": self.model.radiator_tol, "centre": self.focus}
+        g = po_jacobian.vjp(self.elements, points, c, self.model.device, **fast)
         out = self.samples.transpose(*g)
         if self.edges is not None:
             from raysim.optics import ptd_jacobian
 
-            g = ptd_jacobian.vjp(self.edges, self.wave, points, c, self.model.device)
+            g = ptd_jacobian.vjp(self.edges, self.wave, points, c, self.model.device, **fast)
             out = out + self.edge_samples.transpose(*g)
         return out

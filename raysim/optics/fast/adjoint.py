@@ -8,16 +8,21 @@ exp(-j k |P - s_j|) as the forward pair does (:func:`raysim.optics.kernels.radia
 out_j is linear in b, no conjugation). By reciprocity this is the plain transpose of the same
 chain, run from the targets down to the elements on the same plan:
 
-1. stop level: beta_c(n) = sum_t W(t, n) exp(-j k |P_t - c|) b_t, W the Lagrange weights that
-   ``to_targets`` interpolates with (anterpolation);
-2. down the tree: beta_child(n_c) = sum_{n_p} w(n_p -> n_c) exp(+j k (|P_np - c_p| - |P_np - c_c|))
-   beta_parent(n_p): the parent re-phased per child, then the transposed v- and u-interpolation;
-3. leaves: out_j = sum_n K_j(P_n) exp(+j k |P_n - c_leaf|) beta_leaf(n) over the leaf's own grid
-   nodes P_n (a segmented adjoint kernel, thread per element).
+1. stop level, the transpose of the last step: each cluster's weights exp(-j k |P_t - c|) b_t
+   taken back to its Fourier coefficients (on a tensor grid of targets, the same two matrix
+   products transposed; elsewhere, the Lagrange weights scattered onto the refined grid and the
+   refinement transposed), then to its grid by the (symmetric) DFT;
+2. down the tree: each child's weights are its parent's, times
+   exp(+j k (|P - c_parent| - |P - c_child|)), taken back to the child's grid by the transpose
+   of the zero-padding refinement (:func:`raysim.optics.fast.chart.restrict`);
+3. leaves: the mirrored rows folded back onto the rows theta <= pi, the leaf centre's phase
+   exp(+j k |P_n - c_leaf|) put back, and out_j = sum_n K_j(P_n) beta_leaf(n) over the leaf's
+   own nodes P_n (a segmented adjoint kernel, a thread per element).
 
-The interpolation errors are the forward's (same plan, same (p, s) = choose_order(tol / 2)), so
-the gradients agree with the direct transposed sum to about the forward's tolerance. Every step
-is a gather or a thread-owned row: the same bits on every run.
+Same plan as the forward (:func:`raysim.optics.fast.radiator.plan_for`), so the gradients agree
+with the direct transposed sum to about the forward's tolerance. Every step is a matrix
+product, an FFT, a sparse product or a thread-owned row in a fixed order: the same bits on
+every run.
 """
 
 from __future__ import annotations
@@ -26,16 +31,29 @@ import time
 from typing import Any
 
 import numpy as np
+import scipy.fft as sfft
 from numpy.typing import ArrayLike, NDArray
 from scipy import sparse
 
+from raysim.errors import RaysimError
 from raysim.optics import runtime
 from raysim.optics.fast import multilevel
-from raysim.optics.fast.chart import Axis, choose_order, domain_of, lagrange, to_chart
-from raysim.optics.fast.radiator import DEFAULT_TOL
+from raysim.optics.fast.chart import (
+    FFT_WORKERS,
+    Domain,
+    domain_of,
+    fold,
+    grid_points,
+    half_rows,
+    lagrange,
+    restrict,
+    tensor_index,
+    to_angles,
+)
+from raysim.optics.fast.radiator import DEFAULT_TOL, describe, plan_for
 
-#: bytes of phased target weights held at once by the stop step (clusters taken in chunks)
-PHASED_BYTES = 2.5e8
+#: bytes of weights held at once per step (clusters taken in chunks)
+CHUNK_BYTES = 2.5e8
 
 
 def _arr(a: NDArray, device: str, dtype: Any = None) -> Any:
@@ -43,127 +61,124 @@ def _arr(a: NDArray, device: str, dtype: Any = None) -> Any:
     return wp.array(np.ascontiguousarray(a), dtype=dtype or wp.float64, device=device)
 
 
-def _split(z: NDArray[np.complex128]) -> NDArray[np.float64]:
-    """Complex (..., 3) as float64 (..., 6): Re x, y, z, Im x, y, z."""
-    return np.ascontiguousarray(np.concatenate([z.real, z.imag], axis=-1))
+def _spectrum_to_grid(S_adj: NDArray[np.complex128], n: int) -> NDArray[np.complex128]:
+    """The transpose of "grid -> its kept Fourier coefficients" (fft2 / n^2, the Nyquist row and
+    column dropped): coefficients (c, n - 1, n - 1, 3) -> grid weights (c, n, n, 3). The DFT
+    matrix is symmetric, so the transpose is the same DFT of the zero-filled coefficients."""
+    h = n // 2
+    keep = np.r_[0:h, n - h + 1:n]
+    full = np.zeros((S_adj.shape[0], n, n, 3), dtype=np.complex128)
+    full[:, keep[:, None], keep[None, :]] = S_adj
+    return sfft.fft2(full, axes=(1, 2), workers=FFT_WORKERS, overwrite_x=True) / (n * n)
 
 
-def _transposed_csr(cols: NDArray[np.int64], w: NDArray[np.float64],
-                    n: int) -> tuple[NDArray[np.int32], NDArray[np.int32], NDArray[np.float64]]:
-    """The transpose, as CSR (indptr (n + 1,), rows, weights), of the interpolation matrix whose
-    row r has the weights ``w[r]`` (q,) at the columns ``cols[r]`` (q,) of ``n``: for each
-    column (a coarse node), the rows (targets or finer nodes) that read it, in ascending order."""
-    m, q = w.shape
-    rows = np.repeat(np.arange(m), q)
-    csc = sparse.csr_matrix((w.ravel(), (rows, cols.ravel())), shape=(m, n)).tocsc()
-    csc.sort_indices()  # rows ascending within each node: a fixed summation order
-    return csc.indptr.astype(np.int32), csc.indices.astype(np.int32), csc.data.astype(np.float64)
-
-
-def _stencil(first: NDArray[np.int64], p: int) -> NDArray[np.int64]:
-    """The p node indices first .. first + p - 1 of each row (m, p)."""
-    return first[:, None] + np.arange(p)[None, :]
-
-
-def _phase(points: NDArray[np.float64], values: NDArray[np.float64], centres: NDArray[np.float64],
-           sign: float, k: float, device: str) -> Any:
-    """exp(sign j k |P_t - c|) values[c or 0, t] for every centre c (C, M, 6), a Warp array;
-    ``values`` numpy or Warp (C or 1, M, 6)."""
-    wp = runtime.init()
-    from raysim.optics.kernels import fast_adjoint, radiation
-
-    out = wp.empty((len(centres), len(points), 6), dtype=wp.float64, device=device)
-    runtime.launch(fast_adjoint.phase_rows, len(centres) * len(points), [
-        _arr(points, device), values if isinstance(values, wp.array) else _arr(values, device),
-        _arr(centres, device), sign, k,
-        _arr(radiation.cis_table(), device, wp.vec2d), out], device, min_chunk=1024)
-    return out
-
-
-def _stop_weights(b: NDArray[np.complex128], the_plan: multilevel.Plan, u: NDArray[np.float64],
-                  points: NDArray[np.float64], k: float, p: int, device: str) -> Any:
-    """beta of every stop cluster on the stop grid (C, nu * nv, 6), a Warp array: step 1
-    (module docs)."""
-    wp = runtime.init()
-    from raysim.optics.kernels import fast_adjoint
-
+def _tensor_weights(b: NDArray[np.complex128], index: NDArray[np.int64], the_plan: multilevel.Plan,
+                    domain: Domain, k: float) -> NDArray[np.complex128]:
+    """Step 1 on the domain's tensor grid: the transpose of
+    :func:`raysim.optics.fast.multilevel.grid_sums`."""
     level = the_plan.levels[the_plan.stop]
-    au, av = the_plan.axes[the_plan.stop]
-    iu, wu = lagrange(u[:, 0], au, p)
-    iv, wv = lagrange(u[:, 1], av, p)
-    # the 2-D stencil of each target flattened: node (iu + a) * nv + iv + b, weight wu[a] wv[b]
-    m = len(u)
-    cols = (_stencil(iu, p)[:, :, None] * av.n + _stencil(iv, p)[:, None, :]).reshape(m, p * p)
-    w2 = (wu[:, :, None] * wv[:, None, :]).reshape(m, p * p)
-    n_nodes = au.n * av.n
-    indptr, rows, weights = _transposed_csr(cols, w2, n_nodes)
+    n = the_plan.sizes[the_plan.stop]
+    h = n // 2
+    freqs = np.r_[0:h, -(h - 1):0]
+    thetas, phis = np.asarray(domain.thetas), np.asarray(domain.phis)
+    R, Q = len(thetas), len(phis)
+    E_theta_T = np.exp(1j * np.outer(freqs, thetas))  # (nk, R)
+    E_phi = np.exp(1j * np.outer(phis, freqs))  # (Q, nk)
+    B = np.zeros((R * Q, 3), dtype=np.complex128)
+    np.add.at(B, index, b)  # a target twice on the grid counts twice
+    points = multilevel.tensor_points(domain)
+    nk = len(freqs)
     C = len(level.keys)
-    out = wp.zeros((C, n_nodes, 6), dtype=wp.float64, device=device)
-    csr = [_arr(indptr, device, wp.int32), _arr(rows, device, wp.int32), _arr(weights, device)]
-    b6 = _arr(_split(b)[None], device)
-    # the phased weights of a few clusters at a time: all of them at once would hold C x M
-    # complex 3-vectors (over a gigabyte at 1 GHz on the paper's grid)
-    step = max(1, int(PHASED_BYTES // (48 * max(m, 1))))
-    for c0 in range(0, C, step):
-        c1 = min(C, c0 + step)
-        phased = _phase(points, b6, level.centres[c0:c1], -1.0, k, device)  # (c1 - c0, M, 6)
-        runtime.launch(fast_adjoint.anterpolate_targets, (c1 - c0) * n_nodes, [phased, *csr, out[c0:c1]],
-                       device, min_chunk=256)
+    out = np.empty((C, n, n, 3), dtype=np.complex128)
+    per = max(1, int(CHUNK_BYTES // (16 * 3 * R * Q * 2)))
+    for c0 in range(0, C, per):
+        c1 = min(c0 + per, C)
+        c = c1 - c0
+        r = np.sqrt(np.sum((points[None, :, :] - level.centres[c0:c1, None, :]) ** 2, axis=-1))
+        X = (np.exp(-1j * k * r)[:, :, None] * B[None, :, :]).reshape(c, R, Q, 3)
+        # (nk x R) X (R x Q) (Q x nk) per cluster and component, as two plain matrix products
+        A = np.ascontiguousarray(np.transpose(X, (1, 0, 3, 2))).reshape(R, c * 3 * Q)
+        W = (E_theta_T @ A).reshape(nk * c * 3, Q) @ E_phi  # (nk * c * 3, nk)
+        S_adj = np.transpose(W.reshape(nk, c, 3, nk), (1, 0, 3, 2))  # (c, kθ, kφ, 3)
+        out[c0:c1] = _spectrum_to_grid(S_adj, n)
     return out
 
 
-def disaggregate(beta: Any, child: int, the_plan: multilevel.Plan, domain: Any, k: float, p: int,
-                 device: str) -> Any:
-    """The child level's weights (C1, nu * nv, 6) from the parent level's ``beta`` (C0, ..., 6),
-    Warp arrays: the transpose of :func:`raysim.optics.fast.multilevel.aggregate` (step 2,
-    module docs)."""
+def _scattered_weights(b: NDArray[np.complex128], angles: NDArray[np.float64], points: NDArray[np.float64],
+                       the_plan: multilevel.Plan, k: float) -> NDArray[np.complex128]:
+    """Step 1 for any targets: the transpose of :func:`raysim.optics.fast.multilevel.interpolated`
+    (Lagrange weights scattered onto the refined periodic grid, then the refinement transposed)."""
+    level = the_plan.levels[the_plan.stop]
+    n, p = the_plan.sizes[the_plan.stop], the_plan.p
+    m = the_plan.oversampling * n
+    axis = multilevel.target_axis(m, p)
+    iu, wu = lagrange(angles[:, 0], axis, p)
+    iv, wv = lagrange(angles[:, 1], axis, p)
+    rows = np.mod(iu[:, None] - p + np.arange(p)[None, :], m)  # (M, p), wrapped
+    cols = np.mod(iv[:, None] - p + np.arange(p)[None, :], m)
+    M = len(angles)
+    flat = (rows[:, :, None] * m + cols[:, None, :]).reshape(M, p * p)
+    weights = (wu[:, :, None] * wv[:, None, :]).reshape(M, p * p)
+    W_T = sparse.csr_matrix((weights.ravel(), (flat.ravel(), np.repeat(np.arange(M), p * p))),
+                            shape=(m * m, M))  # duplicates summed in a fixed order
+    C = len(level.keys)
+    out = np.empty((C, n, n, 3), dtype=np.complex128)
+    per = max(1, int(CHUNK_BYTES // (48 * m * m * 2)))
+    for c0 in range(0, C, per):
+        c1 = min(c0 + per, C)
+        r = np.sqrt(np.sum((points[None, :, :] - level.centres[c0:c1, None, :]) ** 2, axis=-1))
+        X = np.exp(-1j * k * r)[:, :, None] * b[None, :, :]  # (c, M, 3)
+        fine = (W_T @ np.moveaxis(X, 1, 0).reshape(M, -1)).reshape(m, m, c1 - c0, 3)
+        out[c0:c1] = restrict(np.moveaxis(fine, 2, 0), n)
+    return out
+
+
+def disaggregate(beta: NDArray[np.complex128], child: int, the_plan: multilevel.Plan, domain: Domain,
+                 k: float) -> NDArray[np.complex128]:
+    """The child level's weights (C1, nc, nc, 3) from the parent level's ``beta`` (C0, n, n, 3):
+    step 2 (module docs), the transpose of :func:`raysim.optics.fast.multilevel.aggregate`."""
+    low, up = the_plan.levels[child], the_plan.levels[child - 1]
+    n, nc = the_plan.sizes[child - 1], the_plan.sizes[child]
+    points = grid_points(n, domain)
+    C1 = len(low.keys)
+    out = np.empty((C1, nc, nc, 3), dtype=np.complex128)
+    per = max(1, int(CHUNK_BYTES // (48 * n * n * 2)))
+    for c0 in range(0, C1, per):
+        c1 = min(c0 + per, C1)
+        r_p = np.sqrt(np.sum((points[None] - up.centres[low.parent[c0:c1], None, :]) ** 2, axis=-1))
+        r_c = np.sqrt(np.sum((points[None] - low.centres[c0:c1, None, :]) ** 2, axis=-1))
+        shifted = beta[low.parent[c0:c1]] * np.exp(1j * k * (r_p - r_c)).reshape(c1 - c0, n, n, 1)
+        out[c0:c1] = restrict(shifted, nc)
+    return out
+
+
+def leaf_sums(kernel: Any, src: NDArray[np.float64], beta: NDArray[np.complex128],
+              the_plan: multilevel.Plan, domain: Domain, k: float, device: str) -> NDArray[np.float64]:
+    """Step 3 (module docs): (8, n) per element, in the elements' own order. ``kernel``: from
+    :func:`raysim.optics.kernels.radiation.segment_adjoint_kernel`."""
     wp = runtime.init()
     from raysim.optics.kernels import fast_adjoint, radiation
-
-    low, up = the_plan.levels[child], the_plan.levels[child - 1]
-    cu, cv = the_plan.axes[child]
-    pu, pv = the_plan.axes[child - 1]
-    iu, wu = lagrange(pu.nodes, cu, p)
-    iv, wv = lagrange(pv.nodes, cv, p)
-    C1 = len(low.keys)
-    half = wp.zeros((C1, pu.n * cv.n, 6), dtype=wp.float64, device=device)
-    runtime.launch(fast_adjoint.rephase_anterpolate_v, C1 * pu.n, [
-        beta, _arr(low.parent.astype(np.int32), device, wp.int32),
-        _arr(low.centres, device), _arr(up.centres, device),
-        _arr(multilevel._grid_points((pu, pv), domain), device), cv.n, p,
-        _arr(iv.astype(np.int32), device, wp.int32), _arr(wv, device), k,
-        _arr(radiation.cis_table(), device, wp.vec2d), half], device, min_chunk=4)
-    indptr, rows, weights = _transposed_csr(_stencil(iu, p), wu, cu.n)
-    out = wp.zeros((C1, cu.n * cv.n, 6), dtype=wp.float64, device=device)
-    runtime.launch(fast_adjoint.anterpolate_u, C1 * cu.n * cv.n, [
-        half, cv.n, _arr(indptr, device, wp.int32), _arr(rows, device, wp.int32),
-        _arr(weights, device), out], device, min_chunk=256)
-    return out
-
-
-def leaf_sums(kernel: Any, src: NDArray[np.float64], beta: Any, the_plan: multilevel.Plan,
-              domain: Any, k: float, rows_out: int, device: str) -> NDArray[np.float64]:
-    """Step 3 (module docs): (rows_out, n) per element, in the elements' own order.
-    ``kernel``: from :func:`raysim.optics.kernels.radiation.segment_adjoint_kernel`."""
-    wp = runtime.init()
-    from raysim.optics.kernels import radiation
 
     level = the_plan.levels[the_plan.leaf]
-    axes: tuple[Axis, Axis] = the_plan.axes[the_plan.leaf]
-    nodes = multilevel._grid_points(axes, domain)
+    n = the_plan.sizes[the_plan.leaf]
+    nodes = grid_points(n, domain, half_rows(n))
     n_nodes = len(nodes)
+    half = fold(beta, n).reshape(len(level.keys), n_nodes, 3)
+    split = np.concatenate([half.real, half.imag], axis=-1)  # (C, n_nodes, 6): Re 3, Im 3
+    table = _arr(radiation.cis_table(), device, wp.vec2d)
     # the leaf centre's phase put back once per (leaf, node), not once per element
-    weights = _phase(nodes, beta, level.centres, 1.0, k, device)
+    weights = wp.empty((len(level.keys), n_nodes, 6), dtype=wp.float64, device=device)
+    runtime.launch(fast_adjoint.phase_rows, len(level.keys) * n_nodes, [
+        _arr(nodes, device), _arr(split, device), _arr(level.centres, device), 1.0, k, table, weights],
+        device, min_chunk=1024)
     leaf_of = np.repeat(np.arange(len(level.keys)), level.ends - level.begins).astype(np.int32)
-    n = src.shape[1]
-    out = wp.zeros((8, n), dtype=wp.float64, device=device)
-    runtime.launch(kernel, n, [
+    count = src.shape[1]
+    out = wp.zeros((8, count), dtype=wp.float64, device=device)
+    runtime.launch(kernel, count, [
         _arr(nodes.T, device), _arr(leaf_of, device, wp.int32), weights.reshape((-1, 6)), n_nodes,
-        _arr(src[:, the_plan.order], device), k, 1.0 / k,
-        _arr(radiation.cis_table(), device, wp.vec2d), out], device, min_chunk=16)
-    acc = out.numpy()[:rows_out]
-    result = np.empty_like(acc)
-    result[:, the_plan.order] = acc  # back from leaf order to the elements' order
+        _arr(src[:, the_plan.order], device), k, 1.0 / k, table, out], device, min_chunk=16)
+    result = np.empty((8, count))
+    result[:, the_plan.order] = out.numpy()  # back from leaf order to the elements' order
     return result
 
 
@@ -179,27 +194,34 @@ def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike,
     weights on the targets; ``k`` rad/m. ``info``, when given, receives ``method`` (the plan or
     ``direct``) and ``seconds``.
     """
+    if not 0 < tol < 1:
+        raise RaysimError(f"radiator tolerance must be in (0, 1), got {tol:g}")
     start = time.perf_counter()
     src = np.ascontiguousarray(np.asarray(src, dtype=np.float64))
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     bw = np.asarray(b, dtype=np.complex128).reshape(-1, 3)
     dev = runtime.resolve_device(device)
     the_plan = None
-    p, s = choose_order(tol / 2.0)  # the forward's choice for the same tolerance
     domain = domain_of(pts, centre) if centre is not None and len(pts) and src.shape[1] else None
     if domain is not None:
-        the_plan = multilevel.plan(np.ascontiguousarray(src[:3].T), domain, k, p, s)
+        the_plan = plan_for(np.ascontiguousarray(src[:3].T), domain, k, tol)
     if the_plan is None or (the_plan.cost >= the_plan.direct_cost and not force):
         if info is not None:
             info["method"] = "direct"
         return None
     assert domain is not None
-    u = to_chart(pts, domain.centre)[0]
-    beta = _stop_weights(bw, the_plan, u, pts, k, p, dev)
+    angles = to_angles(pts, domain.centre)
+    index = tensor_index(angles, domain) if the_plan.oversampling == 0 else None
+    if index is not None:
+        beta = _tensor_weights(bw, index, the_plan, domain, k)
+    else:
+        if the_plan.oversampling == 0:  # a tensor plan's stray target: the general last step
+            the_plan = multilevel.general_last_step(the_plan)
+        beta = _scattered_weights(bw, angles, pts, the_plan, k)
     for child in range(the_plan.stop + 1, the_plan.leaf + 1):
-        beta = disaggregate(beta, child, the_plan, domain, k, p, dev)
-    out = leaf_sums(kernel, src, beta, the_plan, domain, k, 8, dev)
+        beta = disaggregate(beta, child, the_plan, domain, k)
+    out = leaf_sums(kernel, src, beta, the_plan, domain, k, dev)
     if info is not None:
-        info["method"] = f"fast (levels {the_plan.stop}..{the_plan.leaf}, p {p}, s {s:g})"
+        info["method"] = describe(the_plan)
         info["seconds"] = time.perf_counter() - start
     return out
