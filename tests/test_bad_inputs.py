@@ -190,6 +190,7 @@ def workspace(tmp_path_factory):
         "spec_typo.toml": SPEC.replace("seed = 1", "sede = 1"),
         "spec_nan.toml": SPEC.replace("rms_um = 10.0", "rms_um = nan"),
         "spec_ghz.toml": SPEC.replace("seed = 1", "seed = 1\nfrequencies_hz = [0.3]"),
+        "spec_radiator.toml": SPEC.replace("seed = 1", 'seed = 1\nradiator = "fmm"'),
         "rig.toml": RIG,
         "rig_no_track.toml": "[limits]\nslider_min_deg = -95.0\n",
         "plan.toml": PLAN,
@@ -403,6 +404,7 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
     ],
     "paper": [
         (["paper", "--scale", "1e7"], "--scale must lie in (0, 50]"),
+        (["paper", "--po", "--radiator", "fmm"], "unknown radiator 'fmm'"),  # issue 31
         (["paper", "--scale", "nan"], "--scale must lie in (0, 50]"),
         (["paper", "--grid", "3"], "must be an integer in 16..4096"),
         (["paper", "--po", "--frequencies", "inf"], "--frequencies must be a finite frequency"),
@@ -425,6 +427,8 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["dataset", "spec.toml", "-o", "existing_file", "--resume"], "is not a Zarr store"),
         (["dataset", "spec.toml", "-o", "spec.toml", "--resume"], "is the dataset spec"),
         (["dataset", "spec.toml", "-o", "d.zarr", "--device", "tpu"], "unknown device 'tpu'"),
+        # issue 31: the spec's radiator
+        (["dataset", "spec_radiator.toml", "-o", "d.zarr"], "'radiator' must be one of"),
     ],
     "scan": [
         (["scan", "missing.toml", "-o", "o.nc", "--simulate", "f.nc"], "no such scan plan file"),

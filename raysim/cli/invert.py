@@ -136,6 +136,10 @@ def paper_command(
     wave_max_ghz: float = typer.Option(0.3, "--wave-max-ghz",
                                        help="--po: highest frequency (GHz) of the PO + PTD model "
                                             "refinement row (about 5 min at 0.3 GHz, grows as f^2)."),
+    radiator: str = typer.Option(
+        "fast", "--radiator",
+        help="--po: the PO + PTD sums of the data and the wave refinement: fast (the multilevel "
+             "sum where cheaper) or direct (the reference sum)."),
     json_path: str | None = json_option(),
 ) -> None:
     """The paper's tables beside raysim's: the GO case (Table 2), or with --po the PO & PTD
@@ -143,13 +147,15 @@ def paper_command(
     from dataclasses import asdict
 
     from raysim.pipeline import paper
+    from solver.options import check_options
 
     check_json_path(json_path)
+    check_options(radiator=radiator)
     if po:
         options = paper.sweep_options(frequencies, coarse_3ghz, N=grid, refine=refine,
                                       wave_max_ghz=wave_max_ghz)
         rows = paper.po_sweep(**options, device=device, fields_dir=fields,
-                              log=lambda line: note(f"paper: {line}"))
+                              log=lambda line: note(f"paper: {line}"), radiator=radiator)
         lines = paper.sweep_lines(rows, N=grid, refine=refine, wave_max_ghz=wave_max_ghz)
     else:
         rows = paper.compare(scale=scale, N=grid, refine=refine, device=device)

@@ -95,7 +95,7 @@ def intensity(spec: DatasetSpec, deformation: Deformation | None, f_index: int,
     reflector = ideal if deformation is None else ideal.deformed(Memo(deformation))
     report("deform", time.perf_counter() - start)
     start = time.perf_counter()
-    values = wave_intensity(scene, reflector, spec.method, device)
+    values = wave_intensity(scene, reflector, spec.method, device, spec.radiator, spec.radiator_tol)
     report("wave", time.perf_counter() - start)
     return values
 
@@ -112,11 +112,13 @@ def ideal_intensity(spec: DatasetSpec, f_index: int, device: str = "cpu") -> np.
     return _IDEALS[key]
 
 
-def wave_intensity(scene, reflector: Reflector, method: str, device: str = "cpu") -> np.ndarray:
+def wave_intensity(scene, reflector: Reflector, method: str, device: str = "cpu", radiator: str = "fast",
+                   tol: float = 1e-6) -> np.ndarray:
     """|E|^2 of ``reflector`` on the scene's sphere by PO (``po``), PO plus the rim's fringe
     field (``po+ptd``) or the geometric wave plus every free edge's diffraction (``go+edge``),
     the scattered field at the cell centres as ``raysim.simulate`` gives it (what the scene's
-    probe reads of it, :func:`raysim.simulate.probe_power`)."""
+    probe reads of it, :func:`raysim.simulate.probe_power`); ``radiator``, ``tol``: PO's and
+    PTD's sums (:func:`raysim.optics.fast.radiator.make_radiator`)."""
     from raysim.optics import goedge, po, ptd
     from raysim.simulate import probe_power
 
@@ -127,9 +129,10 @@ def wave_intensity(scene, reflector: Reflector, method: str, device: str = "cpu"
                                 device=device).E
     elif method in ("po", "po+ptd"):
         E = po.sphere_field(reflector, scene.sphere, wave, po.DEFAULT_SAMPLES_PER_WAVELENGTH,
-                            device).E
+                            device, radiator=radiator, tol=tol).E
         if method == "po+ptd":
-            E = E + ptd.sphere_edge_field(reflector, scene.sphere, wave, "rim", device=device).E
+            E = E + ptd.sphere_edge_field(reflector, scene.sphere, wave, "rim", device=device,
+                                          radiator=radiator, tol=tol).E
     else:  # a method added to raysim.methods needs its branch here
         raise ValueError(f"no wave engine for method {method!r}")
     return probe_power(scene, E)

@@ -38,12 +38,13 @@ from raysim.dataset.models import (
 from raysim.errors import RaysimError
 from raysim.files import find_input
 from raysim.methods import METHODS
+from raysim.optics.fast.radiator import RADIATORS
 from raysim.scene.scene import Scene, check_frequency, parse_scene
 from raysim.simulate import Options, check_method
 from raysim.tomlschema import Table, parse_toml, read_text
 
 DTYPES = ("float64", "float32")
-TOP_KEYS = ("name", "description", "samples", "seed", "method", "frequencies_hz",
+TOP_KEYS = ("name", "description", "samples", "seed", "method", "radiator", "radiator_tol", "frequencies_hz",
             "validation_fraction", "grid_n", "dtype", "scene", "errors", "measurement")
 _COMMON = ("type", "name", "rms_um", "probability")
 _ERROR_KEYS = {
@@ -80,6 +81,8 @@ class DatasetSpec:
     base: Path
     fingerprint: str
     measurement: Measurement | None = None  # the [measurement] effects (raysim.dataset.effects)
+    radiator: str = "fast"  # po, po+ptd: the sum of the elements' fields (fast or direct)
+    radiator_tol: float = 1e-6  # the fast sum's relative accuracy
 
     @cached_property
     def grid(self) -> ApertureGrid:
@@ -129,6 +132,8 @@ def _build(top: Table, text: str, source: str, base: Path) -> DatasetSpec:
     samples = top.integer("samples", lo=1, hi=10_000_000)
     seed = top.integer("seed", lo=0, hi=2**63 - 1)
     method = top.string("method", "go", choices=METHODS)
+    radiator = top.string("radiator", "fast", choices=RADIATORS)
+    radiator_tol = top.number("radiator_tol", 1e-6, lo=0.0, hi=1.0, lo_open=True, hi_open=True)
     freqs = top.raw("frequencies_hz", [scene.source.frequency_hz])
     if not isinstance(freqs, list) or not freqs or not all(
             isinstance(f, int | float) and not isinstance(f, bool) and math.isfinite(f) and f >= 1e6
@@ -158,7 +163,7 @@ def _build(top: Table, text: str, source: str, base: Path) -> DatasetSpec:
         method=method, frequencies=tuple(float(f) for f in freqs), validation_fraction=fraction,
         grid_n=grid_n, dtype=dtype, scene=scene, scene_text=scene_text,
         models=models, text=text, source=source, base=base, fingerprint=fingerprint,
-        measurement=measurement)
+        measurement=measurement, radiator=radiator, radiator_tol=radiator_tol)
 
 
 def _scene_source(top: Table, base: Path) -> tuple[str, dict]:

@@ -331,6 +331,8 @@ def _attributes(spec: DatasetSpec) -> dict[str, Any]:
         "samples": spec.samples,
         "seed": spec.seed,
         "method": spec.method,
+        "radiator": spec.radiator if spec.method in ("po", "po+ptd") else "none",
+        "radiator_tol": spec.radiator_tol,
         "sampling": "cell_mean" if spec.method == "go" else "centre",
         "focal_length": spec.scene.F,
         "diameter": spec.scene.D,

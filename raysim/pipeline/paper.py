@@ -209,19 +209,21 @@ def sweep_lines(rows: list[SweepRow], N: int, refine: int, wave_max_ghz: float) 
 
 
 def po_fieldmap(frequency_hz: float, n_theta: int = 90, n_phi: int = 360, edges: str = "rim",
-                device: str | None = "cpu", progress=None) -> xr.Dataset:
-    """PO + PTD FieldMap of the paper's case at ``frequency_hz`` on an n_theta x n_phi grid."""
+                device: str | None = "cpu", progress=None, radiator: str = "fast") -> xr.Dataset:
+    """PO + PTD FieldMap of the paper's case at ``frequency_hz`` on an n_theta x n_phi grid
+    (``radiator``: as :func:`raysim.simulate`)."""
     from raysim.scene.scene import parse_scene
     from raysim.simulate import simulate
 
     scene = parse_scene(PO_SCENE, source="paper Table 3").with_overrides(frequency_hz, n_theta, n_phi)
-    return simulate(scene, method="po+ptd", edges=edges, device=device, progress=progress)
+    return simulate(scene, method="po+ptd", edges=edges, device=device, progress=progress,
+                    radiator=radiator)
 
 
 def po_sweep(frequencies_hz=TABLE3_FREQUENCIES_HZ, N: int = 256,
              coarse: tuple[int, int] = (90, 36), coarse_from_hz: float = 2e9,
              refine: int = DEFAULT_REFINE, device: str | None = "cpu", fields_dir=None,
-             log=None, wave_max_hz: float = 0.3e9) -> list[SweepRow]:
+             log=None, wave_max_hz: float = 0.3e9, radiator: str = "fast") -> list[SweepRow]:
     """The paper's Table 3 with PO + PTD (rim) data from the project's engines.
 
     Frequencies at or above ``coarse_from_hz`` use the ``coarse`` (n_theta, n_phi) sphere
@@ -230,7 +232,8 @@ def po_sweep(frequencies_hz=TABLE3_FREQUENCIES_HZ, N: int = 256,
     ``fields_dir`` keeps each FieldMap (``paper_poptd_<f>GHz_<grid>.nc``) and reuses it on
     the next run. ``log(line)`` reports progress. The refinement with the PO + PTD model
     (:mod:`solver.wave`) runs at frequencies up to ``wave_max_hz`` only: each of its forwards
-    is a PO run, about a minute at 0.3 GHz on two cores and growing with f^2.
+    is a PO run. ``radiator``: the PO + PTD sums of the data and of that refinement (``fast``
+    or ``direct``, as :func:`raysim.simulate`).
     """
     from pathlib import Path
 
@@ -252,7 +255,7 @@ def po_sweep(frequencies_hz=TABLE3_FREQUENCIES_HZ, N: int = 256,
             say(f"{f / 1e9:g} GHz: read {path}")
         else:
             say(f"{f / 1e9:g} GHz: simulating PO + PTD on {n_theta} x {n_phi} points")
-            field = po_fieldmap(f, n_theta, n_phi, device=device)
+            field = po_fieldmap(f, n_theta, n_phi, device=device, radiator=radiator)
             if path is not None:
                 path.parent.mkdir(parents=True, exist_ok=True)
                 save(field, path)
@@ -263,7 +266,8 @@ def po_sweep(frequencies_hz=TABLE3_FREQUENCIES_HZ, N: int = 256,
                          model="go")
         wave_rms = wave_rrms = None
         if f <= wave_max_hz and refine > 0:
-            wave = invert(field, N=N, truth=truth, device=device, refine_iterations=refine)
+            wave = invert(field, N=N, truth=truth, device=device, refine_iterations=refine,
+                          radiator=radiator)
             wave_rms, wave_rrms = float(wave.attrs["rms_m"]), float(wave.attrs["rrms"])
         paper_rms, paper_rrms = TABLE3.get(f, (None, None))
         rows.append(SweepRow(f, n_theta, n_phi, paper_rms, paper_rrms, float(paper.attrs["rms_m"]),
