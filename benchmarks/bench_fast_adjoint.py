@@ -9,6 +9,17 @@ solver would see it) and with the direct sum, the wall time of each (kernels war
 and the relative RMS difference of the dz and dh_x gradients. ``--curve``: error against
 tolerance at the first frequency (multilevel sum forced). ``--plot``: the times (and the curve)
 as a PNG.
+
+Measured on the shared two-core machine (four runs, its load varying; docs/images/fast_adjoint_vjp.png
+from the last), ``--freqs 0.1 0.3 --curve``, tolerance 1e-6:
+
+| f (GHz) | PO samples | fast VJP (s) | direct VJP (s) | rel. RMS dz / dh_x | plan |
+| --- | --- | --- | --- | --- | --- |
+| 0.1 | 11,074 | 2.5 to 3.8 | 6.4 to 7.4 | 6.6e-9 / 3.9e-9 | levels 3..4, p 14, s 4 |
+| 0.3 | 80,331 | 12.7 to 25.2 | 47.2 to 72.3 | 5.0e-9 / 3.2e-9 | levels 4..5, p 14, s 4 |
+
+Error against tolerance (0.1 GHz, dz gradient): 1.5e-5 at 1e-2, 8.5e-8 at 1e-4, 6.6e-9 at 1e-6,
+1.1e-10 at 1e-8.
 """
 
 from __future__ import annotations
@@ -97,6 +108,7 @@ def main() -> None:
 def plot(path: Path, rows: list, curve: list, grid: tuple[int, int]) -> None:
     """Times of the fast and direct VJP against frequency; the error curve beside, if run."""
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
     fig, axes = plt.subplots(1, 2 if curve else 1, figsize=(10 if curve else 5, 4), squeeze=False,
                              layout="constrained")
@@ -104,11 +116,17 @@ def plot(path: Path, rows: list, curve: list, grid: tuple[int, int]) -> None:
     f = [r[0] for r in rows]
     ax.plot(f, [r[3] for r in rows], "o-", label="direct transposed sum")
     ax.plot(f, [r[2] for r in rows], "s-", label="fast (multilevel) transposed sum")
-    for r in rows:
-        ax.annotate(f"{r[1]:,} samples", (r[0], r[3]), textcoords="offset points", xytext=(4, 4), fontsize=8)
-    ax.set(xscale="log", yscale="log", xlabel="frequency (GHz)", ylabel="wall time (s, two cores)",
+    ax.set(xscale="log", yscale="log", xlabel="frequency (GHz), PO samples",
+           ylabel="wall time (s, two cores)",
            title=f"PO Jacobian VJP, D 110 m dish, {grid[0]} x {grid[1]} points")
-    ax.legend()
+    ax.set_xticks(f, [f"{r[0]:g}\n{r[1]:,}" for r in rows])
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ticks = [t for t in (0.5, 1, 2, 5, 10, 20, 50, 100, 200, 500, 1000)
+             if min(r[2] for r in rows) / 2 <= t <= max(r[3] for r in rows) * 2]
+    ax.set_yticks(ticks, [f"{t:g}" for t in ticks])
+    ax.yaxis.set_minor_formatter(NullFormatter())
+    ax.margins(x=0.15, y=0.15)
+    ax.legend(loc="lower right")
     if curve:
         ax = axes[0, 1]
         ax.loglog([c[0] for c in curve], [c[1] for c in curve], "o-", label="dz gradient")

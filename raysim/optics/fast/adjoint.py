@@ -134,52 +134,56 @@ def _scattered_weights(b: NDArray[np.complex128], angles: NDArray[np.float64], p
 
 
 def disaggregate(beta: NDArray[np.complex128], child: int, the_plan: multilevel.Plan, domain: Domain,
-                 k: float) -> NDArray[np.complex128]:
-    """The child level's weights (C1, nc, nc, 3) from the parent level's ``beta`` (C0, n, n, 3):
-    step 2 (module docs), the transpose of :func:`raysim.optics.fast.multilevel.aggregate`."""
+                 k: float, q_lo: int = 0, q_hi: int | None = None) -> NDArray[np.complex128]:
+    """The weights (C1, nc, nc, 3) of the children of parents q_lo .. q_hi - 1 (level
+    ``child - 1``, whose weights ``beta`` holds in order): step 2 (module docs), the transpose of
+    :func:`raysim.optics.fast.multilevel.aggregate`."""
     low, up = the_plan.levels[child], the_plan.levels[child - 1]
     n, nc = the_plan.sizes[child - 1], the_plan.sizes[child]
     points = grid_points(n, domain)
-    C1 = len(low.keys)
-    out = np.empty((C1, nc, nc, 3), dtype=np.complex128)
+    q_hi = len(up.keys) if q_hi is None else q_hi
+    a, b = the_plan.children(child - 1, q_lo, q_hi)
+    out = np.empty((b - a, nc, nc, 3), dtype=np.complex128)
     per = max(1, int(CHUNK_BYTES // (48 * n * n * 2)))
-    for c0 in range(0, C1, per):
-        c1 = min(c0 + per, C1)
-        r_p = np.sqrt(np.sum((points[None] - up.centres[low.parent[c0:c1], None, :]) ** 2, axis=-1))
+    for c0 in range(a, b, per):
+        c1 = min(c0 + per, b)
+        parents = low.parent[c0:c1]
+        r_p = np.sqrt(np.sum((points[None] - up.centres[parents, None, :]) ** 2, axis=-1))
         r_c = np.sqrt(np.sum((points[None] - low.centres[c0:c1, None, :]) ** 2, axis=-1))
-        shifted = beta[low.parent[c0:c1]] * np.exp(1j * k * (r_p - r_c)).reshape(c1 - c0, n, n, 1)
-        out[c0:c1] = restrict(shifted, nc)
+        shifted = beta[parents - q_lo] * np.exp(1j * k * (r_p - r_c)).reshape(c1 - c0, n, n, 1)
+        out[c0 - a:c1 - a] = restrict(shifted, nc)
     return out
 
 
 def leaf_sums(kernel: Any, src: NDArray[np.float64], beta: NDArray[np.complex128],
-              the_plan: multilevel.Plan, domain: Domain, k: float, device: str) -> NDArray[np.float64]:
-    """Step 3 (module docs): (8, n) per element, in the elements' own order. ``kernel``: from
+              the_plan: multilevel.Plan, domain: Domain, k: float, device: str, lo: int = 0,
+              hi: int | None = None) -> NDArray[np.float64]:
+    """Step 3 (module docs) for leaves lo .. hi - 1 (their weights ``beta``): (8, m) for their
+    elements, in leaf order (``src`` holds every element in leaf order). ``kernel``: from
     :func:`raysim.optics.kernels.radiation.segment_adjoint_kernel`."""
     wp = runtime.init()
     from raysim.optics.kernels import fast_adjoint, radiation
 
-    level = the_plan.levels[the_plan.leaf]
+    full = the_plan.levels[the_plan.leaf]
+    hi = len(full.keys) if hi is None else hi
+    e0, e1 = int(full.begins[lo]), int(full.ends[hi - 1])
     n = the_plan.sizes[the_plan.leaf]
     nodes = grid_points(n, domain, half_rows(n))
     n_nodes = len(nodes)
-    half = fold(beta, n).reshape(len(level.keys), n_nodes, 3)
+    half = fold(beta, n).reshape(hi - lo, n_nodes, 3)
     split = np.concatenate([half.real, half.imag], axis=-1)  # (C, n_nodes, 6): Re 3, Im 3
     table = _arr(radiation.cis_table(), device, wp.vec2d)
     # the leaf centre's phase put back once per (leaf, node), not once per element
-    weights = wp.empty((len(level.keys), n_nodes, 6), dtype=wp.float64, device=device)
-    runtime.launch(fast_adjoint.phase_rows, len(level.keys) * n_nodes, [
-        _arr(nodes, device), _arr(split, device), _arr(level.centres, device), 1.0, k, table, weights],
-        device, min_chunk=1024)
-    leaf_of = np.repeat(np.arange(len(level.keys)), level.ends - level.begins).astype(np.int32)
-    count = src.shape[1]
-    out = wp.zeros((8, count), dtype=wp.float64, device=device)
-    runtime.launch(kernel, count, [
+    weights = wp.empty((hi - lo, n_nodes, 6), dtype=wp.float64, device=device)
+    runtime.launch(fast_adjoint.phase_rows, (hi - lo) * n_nodes, [
+        _arr(nodes, device), _arr(split, device), _arr(full.centres[lo:hi], device), 1.0, k, table,
+        weights], device, min_chunk=1024)
+    leaf_of = np.repeat(np.arange(hi - lo), full.ends[lo:hi] - full.begins[lo:hi]).astype(np.int32)
+    out = wp.zeros((8, e1 - e0), dtype=wp.float64, device=device)
+    runtime.launch(kernel, e1 - e0, [
         _arr(nodes.T, device), _arr(leaf_of, device, wp.int32), weights.reshape((-1, 6)), n_nodes,
-        _arr(src[:, the_plan.order], device), k, 1.0 / k, table, out], device, min_chunk=16)
-    result = np.empty((8, count))
-    result[:, the_plan.order] = out.numpy()  # back from leaf order to the elements' order
-    return result
+        _arr(src[:, e0:e1], device), k, 1.0 / k, table, out], device, min_chunk=16)
+    return out.numpy()
 
 
 def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike, k: float,
@@ -218,9 +222,22 @@ def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike,
         if the_plan.oversampling == 0:  # a tensor plan's stray target: the general last step
             the_plan = multilevel.general_last_step(the_plan)
         beta = _scattered_weights(bw, angles, pts, the_plan, k)
-    for child in range(the_plan.stop + 1, the_plan.leaf + 1):
+    for child in range(the_plan.stop + 1, the_plan.pivot + 1):
         beta = disaggregate(beta, child, the_plan, domain, k)
-    out = leaf_sums(kernel, src, beta, the_plan, domain, k, dev)
+    # below the pivot, one chunk of pivot clusters at a time down to the leaves (as the forward)
+    ordered = np.ascontiguousarray(src[:, the_plan.order])
+    result = np.empty((8, src.shape[1]))
+    pivot, leaf = the_plan.pivot, the_plan.leaf
+    for q0, q1 in multilevel.pivot_chunks(the_plan):
+        part = beta[q0:q1]
+        for child in range(pivot + 1, leaf + 1):
+            part = disaggregate(part, child, the_plan, domain, k, *the_plan.below(pivot, q0, q1, child - 1))
+        lo, hi = the_plan.below(pivot, q0, q1, leaf)
+        levels = the_plan.levels[leaf]
+        result[:, levels.begins[lo]:levels.ends[hi - 1]] = leaf_sums(kernel, ordered, part, the_plan, domain,
+                                                                   k, dev, lo, hi)
+    out = np.empty_like(result)
+    out[:, the_plan.order] = result  # back from leaf order to the elements' order
     if info is not None:
         info["method"] = describe(the_plan)
         info["seconds"] = time.perf_counter() - start

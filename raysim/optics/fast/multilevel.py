@@ -79,6 +79,18 @@ class Plan:
     p: int
     cost: float
     direct_cost: float
+    pivot: int = -1  # the finest level held whole (below it, subtrees are summed one chunk at a time)
+
+    def children(self, level: int, q0: int, q1: int) -> tuple[int, int]:
+        """The clusters of ``level + 1`` whose parents are clusters q0 .. q1 - 1 of ``level``."""
+        parent = self.levels[level + 1].parent
+        return int(np.searchsorted(parent, q0)), int(np.searchsorted(parent, q1))
+
+    def below(self, level: int, q0: int, q1: int, lower: int) -> tuple[int, int]:
+        """The clusters of ``lower`` (finer) under clusters q0 .. q1 - 1 of ``level``."""
+        for upper in range(level, lower):
+            q0, q1 = self.children(upper, q0, q1)
+        return q0, q1
 
 
 def _size(level: quadtree.Level, domain: Domain, k: float, digits: float) -> int | None:
@@ -119,8 +131,10 @@ def plan(positions: NDArray[np.float64], domain: Domain, k: float, tol: float,
         cost = float(n) * nodes + len(levels[leaf].keys) * nodes * COST_EXP
         for stop in range(leaf, -1, -1):
             ns = sizes[stop]
-            if ns is None or 48.0 * len(levels[stop].keys) * ns * ns > MEMORY_BYTES:
+            if ns is None:
                 break
+            if 48.0 * len(levels[stop].keys) * ns * ns > MEMORY_BYTES:
+                continue  # finer levels are summed a subtree at a time, but the stop level is whole
             if stop < leaf:  # one more aggregation step, level stop + 1 -> stop
                 child = sizes[stop + 1]
                 assert child is not None
@@ -132,8 +146,12 @@ def plan(positions: NDArray[np.float64], domain: Domain, k: float, tol: float,
                     best = (cost + final, leaf, stop, u, p)
     if best is None:
         return None
-    return Plan(order, levels, best[1], best[2], [s or 0 for s in sizes], best[3], best[4], best[0],
-                direct)
+    leaf, stop = best[1], best[2]
+    pivot = stop  # the finest level from the stop down whose grids fit whole
+    while pivot < leaf and 48.0 * len(levels[pivot + 1].keys) * (sizes[pivot + 1] or 0) ** 2 <= MEMORY_BYTES:
+        pivot += 1
+    return Plan(order, levels, leaf, stop, [s or 0 for s in sizes], best[3], best[4], best[0], direct,
+                pivot)
 
 
 def _last_cost(n: int, u: int, p: int, domain: Domain) -> float:
@@ -151,35 +169,37 @@ def _arr(a: NDArray, device: str, dtype: Any = None) -> Any:
     return wp.array(np.ascontiguousarray(a), dtype=dtype or wp.float64, device=device)
 
 
-def leaf_grids(segments: Any, src: NDArray[np.float64], the_plan: Plan, domain: Domain, k: float,
-               device: str) -> NDArray[np.complex128]:
-    """F_c of every leaf cluster on the leaf level's grid: (C, n, n, 3) complex.
-    ``segments``: the kind's pair of kernels from :func:`raysim.optics.kernels.radiation.segment_kernel`."""
+def leaf_grids(segments: Any, src: Any, the_plan: Plan, domain: Domain, k: float, device: str,
+               lo: int = 0, hi: int | None = None) -> NDArray[np.complex128]:
+    """F_c of leaf clusters lo .. hi - 1 on the leaf level's grid: (hi - lo, n, n, 3) complex.
+    ``segments``: the kind's pair of kernels from :func:`raysim.optics.kernels.radiation.segment_kernel`;
+    ``src``: the elements in leaf order (a Warp array, :func:`sorted_sources`)."""
     wp = runtime.init()
     from raysim.optics.kernels import radiation
 
     level = the_plan.levels[the_plan.leaf]
+    hi = len(level.keys) if hi is None else hi
     n = the_plan.sizes[the_plan.leaf]
     nodes = grid_points(n, domain, half_rows(n))
     n_nodes = len(nodes)
     tile = 4 if device == "cpu" else 1  # as the direct radiator: four nodes a thread on the CPU
     n_pad = -(-n_nodes // tile) * tile  # pad with copies of the last node
     padded = np.vstack([nodes, np.repeat(nodes[-1:], n_pad - n_nodes, axis=0)])
-    C = len(level.keys)
+    C = hi - lo
     out = wp.empty((C * n_pad, 6), dtype=wp.float64, device=device)
     runtime.launch(segments[1] if tile == 4 else segments[0], C * n_pad // tile, [
-        _arr(padded.T, device), _arr(level.begins.astype(np.int32), device, wp.int32),
-        _arr(level.ends.astype(np.int32), device, wp.int32), _arr(level.centres, device), n_pad,
-        _arr(src[:, the_plan.order], device), k, 1.0 / k,
-        _arr(radiation.cis_table(), device, wp.vec2d), out], device, min_chunk=16)
+        _arr(padded.T, device), _arr(level.begins[lo:hi].astype(np.int32), device, wp.int32),
+        _arr(level.ends[lo:hi].astype(np.int32), device, wp.int32), _arr(level.centres[lo:hi], device),
+        n_pad, src, k, 1.0 / k, _arr(radiation.cis_table(), device, wp.vec2d), out], device, min_chunk=16)
     half = out.numpy().view(np.complex128).reshape(C, n_pad, 3)[:, :n_nodes]
     return mirror(half.reshape(C, half_rows(n), n, 3), n)
 
 
 def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Domain, k: float,
-              device: str) -> NDArray[np.complex128]:
-    """The parent level's grids (C0, n, n, 3) from the child level's ``G`` (C1, nc, nc, 3):
-    spectra zero-padded (whole families at a time), re-phased and summed in order."""
+              device: str, q_lo: int = 0, q_hi: int | None = None) -> NDArray[np.complex128]:
+    """The grids (q_hi - q_lo, n, n, 3) of parents q_lo .. q_hi - 1 (level ``child - 1``) from
+    ``G`` (their children's grids, in order): spectra zero-padded (whole families at a time),
+    re-phased and summed in order."""
     wp = runtime.init()
     from raysim.optics.kernels import fast, radiation
 
@@ -187,8 +207,10 @@ def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Dom
     n = the_plan.sizes[child - 1]
     nodes = _arr(grid_points(n, domain), device)
     table = _arr(radiation.cis_table(), device, wp.vec2d)
-    C0 = len(up.keys)
-    first = np.searchsorted(low.parent, np.arange(C0 + 1)).astype(np.int32)
+    q_hi = len(up.keys) if q_hi is None else q_hi
+    C0 = q_hi - q_lo
+    first = (np.searchsorted(low.parent, np.arange(q_lo, q_hi + 1))
+             - np.searchsorted(low.parent, q_lo)).astype(np.int32)  # into G
     out = np.empty((C0, n, n, 3), dtype=np.complex128)
     per = max(1, int(CHUNK_BYTES // (48 * n * n * 2)))  # children refined at once
     q = 0
@@ -199,13 +221,51 @@ def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Dom
         c0, c1 = int(first[q]), int(first[q1])
         fine = resample(G[c0:c1], n).view(np.float64).reshape(-1, 6)
         part = wp.empty(((q1 - q) * n * n, 6), dtype=wp.float64, device=device)
+        base = int(np.searchsorted(low.parent, q_lo))  # G's first child in the level's numbering
         runtime.launch(fast.rephase_merge, (q1 - q) * n * n, [
             _arr(fine, device), n * n, _arr(first[q:q1 + 1], device, wp.int32),
-            _arr(low.centres, device), _arr(up.centres[q:q1], device), nodes, k, table, part],
-            device, min_chunk=256)
+            _arr(low.centres[base:], device), _arr(up.centres[q_lo + q:q_lo + q1], device), nodes, k,
+            table, part], device, min_chunk=256)
         out[q:q1] = part.numpy().view(np.complex128).reshape(q1 - q, n, n, 3)
         q = q1
     return out
+
+
+def sorted_sources(src: NDArray[np.float64], the_plan: Plan, device: str) -> Any:
+    """The elements (rows, n) in the plan's leaf order, as the leaf kernels read them (Warp)."""
+    return _arr(src[:, the_plan.order], device)
+
+
+def pivot_chunks(the_plan: Plan) -> list[tuple[int, int]]:
+    """Ranges of the pivot level's clusters whose subtrees' leaf grids take about
+    4 x :data:`CHUNK_BYTES` each (one range when the pivot is the leaf level)."""
+    pivot, leaf = the_plan.pivot, the_plan.leaf
+    C = len(the_plan.levels[pivot].keys)
+    leaves = len(the_plan.levels[leaf].keys)
+    leaf_bytes = 48.0 * leaves * the_plan.sizes[leaf] ** 2
+    per = max(1, int(C * 4 * CHUNK_BYTES // max(leaf_bytes, 1.0)))
+    return [(q0, min(q0 + per, C)) for q0 in range(0, C, per)]
+
+
+def stop_grids(segments: Any, src: NDArray[np.float64], the_plan: Plan, domain: Domain, k: float,
+               device: str) -> NDArray[np.complex128]:
+    """The stop level's grids (C, n, n, 3) of the elements ``src`` (the kind's packed rows):
+    below the plan's pivot level, one chunk of pivot clusters at a time, leaves to pivot (so the
+    fine levels, whose grids together outgrow memory, are never held whole); then whole levels
+    from the pivot to the stop."""
+    sorted_src = sorted_sources(src, the_plan, device)
+    pivot, leaf = the_plan.pivot, the_plan.leaf
+    parts = []
+    for q0, q1 in pivot_chunks(the_plan):
+        lo, hi = the_plan.below(pivot, q0, q1, leaf)
+        G = leaf_grids(segments, sorted_src, the_plan, domain, k, device, lo, hi)
+        for child in range(leaf, pivot, -1):
+            G = aggregate(G, child, the_plan, domain, k, device, *the_plan.below(pivot, q0, q1, child - 1))
+        parts.append(G)
+    G = parts[0] if len(parts) == 1 else np.concatenate(parts)
+    for child in range(pivot, the_plan.stop, -1):
+        G = aggregate(G, child, the_plan, domain, k, device)
+    return G
 
 
 def target_axis(n: int, p: int) -> Axis:

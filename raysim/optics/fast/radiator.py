@@ -141,9 +141,7 @@ class FastRadiator:
             return one.sums_of(kind)
         self.method[kind] = describe(the_plan)
         assert self.domain is not None and self.angles is not None
-        G = multilevel.leaf_grids(_segments(kind), src, the_plan, self.domain, self.k, self.device)
-        for child in range(the_plan.leaf, the_plan.stop, -1):
-            G = multilevel.aggregate(G, child, the_plan, self.domain, self.k, self.device)
+        G = multilevel.stop_grids(_segments(kind), src, the_plan, self.domain, self.k, self.device)
         store: dict = {}
         if self.cache is not None:
             self.cache[key] = (the_plan, G, store)

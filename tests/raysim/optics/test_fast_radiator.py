@@ -1,9 +1,10 @@
 """The fast (multilevel) radiator against the direct sum (issue 31).
 
 A scaled dish (D 10 m, F 3.3 m) at 1 GHz (about 33 wavelengths across) radiating to a sphere of
-1 m about the focus: the quadtree has five levels, so leaves, aggregation and the stop level all
-run. The reference is the direct sum (:class:`raysim.optics.radiator.Radiator`), an independent
-implementation of the same sum.
+1 m about the focus: the quadtree has five levels. The cost estimate picks the leaves as the
+stop level there, so :func:`test_every_step_of_the_tree` sets the stop and pivot levels by hand
+to run aggregation, chunked subtrees and both last steps. The reference is the direct sum
+(:class:`raysim.optics.radiator.Radiator`), an independent implementation of the same sum.
 """
 
 from __future__ import annotations
@@ -101,6 +102,40 @@ def test_a_block_of_points_gives_the_same_bits() -> None:
     whole, _ = _fast(pts, src, "electric", 1e-6, domain=domain)
     block, _ = _fast(pts[100:333], src, "electric", 1e-6, domain=domain)
     assert np.array_equal(block, whole[100:333])
+
+
+def _planned(pts: np.ndarray, src: np.ndarray, kind: str, stop: int, pivot: int, last=(0, 0)) -> np.ndarray:
+    """The multilevel sum with the plan's stop and pivot levels set by hand (whatever the cost
+    estimate prefers), so that every step runs: leaves, aggregation in chunks below the pivot
+    and whole above it, and the last step (``last``: (0, 0) the series on the tensor grid, else
+    (oversampling, p) for the refined-grid Lagrange step)."""
+    from dataclasses import replace
+
+    from raysim.optics.fast import multilevel
+    from raysim.optics.fast.chart import to_angles
+    from raysim.optics.fast.radiator import _segments
+
+    domain = domain_of(pts, CENTRE)
+    plan = multilevel.plan(np.ascontiguousarray(src[:3].T), domain, K, 1e-6 / 8, (last,))
+    plan = replace(plan, stop=stop, pivot=pivot, oversampling=last[0], p=last[1])
+    G = multilevel.stop_grids(_segments(kind), src, plan, domain, K, "cpu")
+    return multilevel.to_targets(G, plan, to_angles(pts, CENTRE), pts, K, "cpu", domain)
+
+
+@pytest.mark.parametrize("stop, pivot, last", [(2, 4, (0, 0)), (2, 2, (0, 0)), (3, 3, (6, 10))])
+def test_every_step_of_the_tree(stop: int, pivot: int, last: tuple[int, int], monkeypatch) -> None:
+    """Aggregation from the leaves (level 4) up to level ``stop``, the levels below ``pivot``
+    summed a few clusters at a time (a small chunk size), on the tensor grid or by the general
+    last step: each within the tolerance of the direct sum."""
+    from raysim.optics.fast import multilevel
+
+    monkeypatch.setattr(multilevel, "CHUNK_BYTES", 2e5)
+    pts = _grid_points()
+    src = _elements("magnetic")
+    plan = multilevel.plan(np.ascontiguousarray(src[:3].T), domain_of(pts, CENTRE), K, 1e-6 / 8, (last,))
+    assert plan is not None and plan.leaf == 4
+    out = _planned(pts, src, "magnetic", stop, pivot, last)
+    assert _rel_rms(out, _direct(pts, src, "magnetic")) < 1e-6
 
 
 def test_targets_anywhere_on_the_sphere() -> None:
