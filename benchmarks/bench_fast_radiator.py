@@ -5,7 +5,8 @@ Run: ``python benchmarks/bench_fast_radiator.py [--freqs 0.1 0.3 1] [--grid 90 3
 dish (default sampling) radiated to the sphere grid by the fast radiator (tolerance ``--tol``)
 and by the direct sum, wall time of each (kernels warmed up first), and the relative RMS error
 of E. Beyond :data:`FULL_PAIRS` element-point pairs the direct reference runs on ``--ref-points``
-points spread over the grid only (its time then extrapolated to the whole grid, marked ``~``).
+points spread over the grid only (its time then extrapolated to the whole grid, marked ``~``);
+``--ref-points 0`` makes it cover every point whatever the cost.
 ``--curve``: relative RMS error against tolerance at the first frequency (multilevel sum forced,
 even where the direct sum would be chosen).
 """
@@ -61,7 +62,7 @@ def run(freq: float, grid_shape: tuple[int, int], tol: float, ref_points: int, p
         fast.add_packed(s, kind)
     Ef = fast.field()
     t_fast = time.perf_counter() - start
-    full = n_src * len(pts) <= FULL_PAIRS
+    full = n_src * len(pts) <= FULL_PAIRS or ref_points <= 0
     idx = np.arange(len(pts)) if full else np.linspace(0, len(pts) - 1, ref_points).astype(int)
     start = time.perf_counter()
     direct = Radiator(pts[idx], wave.k)

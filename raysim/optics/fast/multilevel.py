@@ -255,14 +255,16 @@ def stop_grids(segments: Any, src: NDArray[np.float64], the_plan: Plan, domain: 
     from the pivot to the stop."""
     sorted_src = sorted_sources(src, the_plan, device)
     pivot, leaf = the_plan.pivot, the_plan.leaf
-    parts = []
+    n = the_plan.sizes[pivot]
+    G = np.empty((len(the_plan.levels[pivot].keys), n, n, 3), dtype=np.complex128)
     for q0, q1 in pivot_chunks(the_plan):
         lo, hi = the_plan.below(pivot, q0, q1, leaf)
-        G = leaf_grids(segments, sorted_src, the_plan, domain, k, device, lo, hi)
+        part = leaf_grids(segments, sorted_src, the_plan, domain, k, device, lo, hi)
         for child in range(leaf, pivot, -1):
-            G = aggregate(G, child, the_plan, domain, k, device, *the_plan.below(pivot, q0, q1, child - 1))
-        parts.append(G)
-    G = parts[0] if len(parts) == 1 else np.concatenate(parts)
+            parents = the_plan.below(pivot, q0, q1, child - 1)
+            part = aggregate(part, child, the_plan, domain, k, device, *parents)
+        G[q0:q1] = part
+    del sorted_src, part
     for child in range(pivot, the_plan.stop, -1):
         G = aggregate(G, child, the_plan, domain, k, device)
     return G
