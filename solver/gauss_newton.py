@@ -277,7 +277,12 @@ def refine_gauss_newton(delta0: NDArray[np.float64], fa_measured: NDArray[np.flo
 
 
 REFINE_METHODS = ("auto", "defect", "gauss-newton")
-AUTO_MAX_PAIRS = 1.0e9  # PO samples x sphere cells up to which "auto" runs Gauss-Newton
+#: the cost of one radiation (direct pair evaluations, as :func:`model_pairs` estimates it for the
+#: model's radiator) up to which "auto" runs Gauss-Newton: its default 3 steps of up to 60 LSQR
+#: iterations (a JVP and a VJP each) then take about 10 minutes on two cores (measured: the
+#: paper's dish at 0.1 GHz on 90 x 360, 4e7 with the fast radiator; at 0.3 GHz, 2e8, it would
+#: take about half an hour)
+AUTO_MAX_PAIRS = 1.0e8
 IN_PROCESS = ("gauss-newton computes its Jacobian in this process, not in blocks on Dask: drop "
               "--scheduler / --workers (the Dask runner), or refine with the defect correction")
 
@@ -317,8 +322,8 @@ def choose_method(name: str, model: ForwardModel | None, scan, iterations: int) 
     Called before any work, so a request that cannot run is one line. Gauss-Newton needs the
     PO or PO + PTD model (:func:`has_exact_jacobian`) computed in this process (not inside
     :func:`solver.forward.distributed`); ``auto`` takes it where one radiation costs at most
-    AUTO_MAX_PAIRS element-point pairs (each step costs two radiations per LSQR iteration:
-    about a minute per iteration on two cores at that size), else the defect correction alone.
+    :data:`AUTO_MAX_PAIRS` pair evaluations (each LSQR iteration costs two radiations), else
+    the defect correction alone.
     """
     if name not in REFINE_METHODS:
         raise SolverError(f"unknown refine method {name!r}: choose one of "
@@ -340,8 +345,10 @@ def choose_method(name: str, model: ForwardModel | None, scan, iterations: int) 
         return "gauss-newton", "requested"
     pairs = model_pairs(model, scan.sphere, scan.F, scan.D)
     if pairs <= AUTO_MAX_PAIRS:
-        return "gauss-newton", f"auto: {pairs:.2g} pairs per radiation <= {AUTO_MAX_PAIRS:.0e}"
-    return "defect", f"auto: {pairs:.2g} pairs per radiation > {AUTO_MAX_PAIRS:.0e}"
+        return "gauss-newton", f"auto: {pairs:.2g} pair evaluations per radiation <= {AUTO_MAX_PAIRS:.0e}"
+    return "defect", (f"auto: {pairs:.2g} pair evaluations per radiation > {AUTO_MAX_PAIRS:.0e} "
+                      "(Gauss-Newton would take well over 10 minutes; --refine-method gauss-newton "
+                      "asks for it)")
 
 
 def report_attrs(report: GaussNewtonReport | None, why: str) -> dict:

@@ -29,12 +29,13 @@ def invert_command(
                    "iteration is a PO run: about a minute at 0.3 GHz on two cores, growing with "
                    "f^2; go+edge (geometric wave plus rim diffraction) takes seconds, growing with f."),
     refine_method: str = typer.Option(
-        "defect", "--refine-method",
-        help="defect (defect correction, the default), gauss-newton (then Gauss-Newton with the "
-             "model's exact Jacobian: po or po+ptd models, in this process; two PO radiations "
-             "per LSQR iteration) or auto (gauss-newton for a po or po+ptd model where a PO "
-             "radiation is at most 1e9 element-point pairs, about 0.1 GHz on the paper's grid, "
-             "and without --scheduler / --workers)."),
+        "auto", "--refine-method",
+        help="auto (the default: Gauss-Newton with the model's exact Jacobian where one "
+             "radiation of a po or po+ptd model costs at most 1e8 pair evaluations with its "
+             "radiator, about 10 min in all on two cores: the paper's dish at 0.1 GHz on 90 x 360; "
+             "else the defect correction, and the SurfaceMap's gn_choice says why), defect "
+             "(the defect correction alone) or gauss-newton (then Gauss-Newton whatever the cost; "
+             "po or po+ptd models, in this process)."),
     gn_steps: int | None = typer.Option(
         None, "--gn-steps",
         help="gauss-newton: outer steps, 1 to 50 (default 3; each relinearises the model; the "

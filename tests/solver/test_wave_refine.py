@@ -181,6 +181,6 @@ def test_cli_model_option(monkeypatch, capsys, tmp_path, po_field):
 
     code, out = run("--model", "fdtd")
     assert code == 2 and "unknown model 'fdtd'" in out.err and len(out.err.splitlines()) == 1
-    code, out = run("--model", "po", "--refine", "1")
+    code, out = run("--model", "po", "--refine", "1", "--refine-method", "defect")
     assert code in (0, None) and "model po (requested)" in out.out
     assert surface.load(tmp_path / "s.nc").attrs["refine_model"] == "po"
