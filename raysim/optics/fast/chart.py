@@ -140,6 +140,17 @@ def mirror(half: NDArray[np.complex128], n: int) -> NDArray[np.complex128]:
     return full
 
 
+def _kept_blocks(n: int, m: int):
+    """The four (coarse, fine) pairs of index blocks, along both angles, through which an n x n
+    spectrum (its frequencies below n / 2 in modulus; the Nyquist ones dropped) sits inside an
+    m x m one."""
+    h = n // 2
+    along = ((slice(0, h), slice(0, h)), (slice(n - h + 1, n), slice(m - h + 1, m)))
+    for coarse_u, fine_u in along:
+        for coarse_v, fine_v in along:
+            yield (..., coarse_u, coarse_v, slice(None)), (..., fine_u, fine_v, slice(None))
+
+
 def resample(G: NDArray[np.complex128], m: int) -> NDArray[np.complex128]:
     """The periodic grids ``G`` (..., n, n, c) on the finer m x m grid (m >= n, even n):
     spectra zero-padded. The Nyquist row and column are dropped (a grid chosen by
@@ -148,11 +159,9 @@ def resample(G: NDArray[np.complex128], m: int) -> NDArray[np.complex128]:
     if m == n:
         return G
     S = sfft.fft2(G, axes=(-3, -2), workers=FFT_WORKERS)
-    h = n // 2
     out = np.zeros((*G.shape[:-3], m, m, G.shape[-1]), dtype=np.complex128)
-    for src_u, dst_u in ((slice(0, h), slice(0, h)), (slice(n - h + 1, n), slice(m - h + 1, m))):
-        for src_v, dst_v in ((slice(0, h), slice(0, h)), (slice(n - h + 1, n), slice(m - h + 1, m))):
-            out[..., dst_u, dst_v, :] = S[..., src_u, src_v, :]
+    for coarse, fine in _kept_blocks(n, m):
+        out[fine] = S[coarse]
     out = sfft.ifft2(out, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=True)
     out *= (m * m) / (n * n)
     return out
@@ -166,11 +175,9 @@ def restrict(X: NDArray[np.complex128], n: int) -> NDArray[np.complex128]:
     if m == n:
         return X
     T = sfft.ifft2(X, axes=(-3, -2), workers=FFT_WORKERS)
-    h = n // 2
     S = np.zeros((*X.shape[:-3], n, n, X.shape[-1]), dtype=np.complex128)
-    for src_u, dst_u in ((slice(0, h), slice(0, h)), (slice(m - h + 1, m), slice(n - h + 1, n))):
-        for src_v, dst_v in ((slice(0, h), slice(0, h)), (slice(m - h + 1, m), slice(n - h + 1, n))):
-            S[..., dst_u, dst_v, :] = T[..., src_u, src_v, :]
+    for coarse, fine in _kept_blocks(n, m):
+        S[coarse] = T[fine]
     S = sfft.fft2(S, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=True)
     S *= (m * m) / (n * n)
     return S
