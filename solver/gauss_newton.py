@@ -291,21 +291,15 @@ def model_pairs(model: WaveForward, sphere, F: float, D: float) -> float:
     """The cost of one radiation of ``model`` on the scan's sphere, in direct pair evaluations:
     PO samples times field points for the direct sum, the plan's estimate for the fast one
     (:func:`raysim.optics.fast.radiator.estimated_cost`)."""
-    import numpy as np
-
-    from raysim.optics.fast.radiator import estimated_cost
+    from raysim.optics.fast.radiator import quadrature_cost
     from raysim.optics.po import C0, DEFAULT_SAMPLES_PER_WAVELENGTH
     from raysim.surface.quadrature import plan
 
     spw = model.samples_per_wavelength or DEFAULT_SAMPLES_PER_WAVELENGTH
     quadrature = plan(model.paraboloid(D, F), C0 / model.frequency_hz, spw)
-    points = sphere.points(F).reshape(-1, 3)
-    direct = float(quadrature.n_samples) * len(points)
-    if getattr(model, "radiator", "direct") != "fast":
-        return direct
-    positions = np.concatenate([chunk.points for chunk in quadrature.chunks()])
-    return estimated_cost(positions, points, 2.0 * np.pi * model.frequency_hz / C0, (0.0, 0.0, F),
-                          model.radiator_tol)[0]
+    return quadrature_cost(quadrature, sphere.points(F).reshape(-1, 3), model.wavenumber(),
+                           (0.0, 0.0, F), getattr(model, "radiator", "direct"),
+                           getattr(model, "radiator_tol", 1e-6))[0]
 
 
 def has_exact_jacobian(model: object) -> bool:

@@ -38,7 +38,6 @@ WAVE_CHOICES = ("auto", "po", "po+ptd", "go+edge")
 DEFORMATIONS = ("auto", "scene", "mix")
 DEFAULT_RMS_M = 100e-6
 PO_PAIR_BUDGET = {"cpu": 1.2e10, "cuda": 1e12}  # pair evaluations: minutes on 2 cores / a GPU
-PLAN_SUBSET = 1 << 21  # sample positions at most that plan the fast radiator's tree for the rule
 WAVE_FACE_M = 4.0  # quadrature faces of the wave data (the refinement's PO model uses 5 m)
 SPHERE_RADIUS_OF_F = 0.3  # a mesh's probe sphere by default: R = 0.3 F (the paper's 10 / 33)
 MAX_FREQUENCIES = 12
@@ -271,7 +270,7 @@ def wave_cost(dish: Dish, frequency_hz: float, radiator: str = "fast") -> tuple[
     """(cost, direct, samples): PO's sums at ``frequency_hz`` for the ideal and the deformed
     reflector (the same sample count) to the sphere's points, as ``radiator`` runs them and as
     the direct sum would, in direct pair evaluations, and the samples of one reflector."""
-    from raysim.optics.fast.radiator import estimated_cost
+    from raysim.optics.fast.radiator import quadrature_cost
     from raysim.optics.po import DEFAULT_SAMPLES_PER_WAVELENGTH
     from raysim.simulate import MAX_PO_SAMPLES
     from raysim.surface.quadrature import plan
@@ -279,18 +278,10 @@ def wave_cost(dish: Dish, frequency_hz: float, radiator: str = "fast") -> tuple[
     wavelength = 299_792_458.0 / frequency_hz
     quad = plan(_wave_ideal(dish), wavelength, DEFAULT_SAMPLES_PER_WAVELENGTH)
     n = quad.n_samples
-    sphere = dish.wave.sphere
-    points = sphere.points(dish.F).reshape(-1, 3)
-    direct = 2.0 * n * len(points)
-    if radiator == "direct" or n > MAX_PO_SAMPLES:
-        return direct, direct, n
-    # the plan needs the samples' positions only; an even subset of at most PLAN_SUBSET of them
-    # gives the tree's extents (the costs are counted for all n)
-    stride = max(1, n // PLAN_SUBSET)
-    positions = np.concatenate([c.points[::stride] for c in quad.chunks()])
-    cost, _ = estimated_cost(positions, points, 2.0 * math.pi / wavelength, (0.0, 0.0, dish.F),
-                             count=n)
-    return 2.0 * cost, direct, n
+    points = dish.wave.sphere.points(dish.F).reshape(-1, 3)
+    cost, direct = quadrature_cost(quad, points, 2.0 * math.pi / wavelength, (0.0, 0.0, dish.F),
+                                   "direct" if n > MAX_PO_SAMPLES else radiator)
+    return 2.0 * cost, 2.0 * direct, n
 
 
 _IDEAL: dict[tuple, object] = {}

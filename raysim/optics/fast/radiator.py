@@ -200,6 +200,26 @@ def estimated_cost(positions: ArrayLike, points: ArrayLike, k: float, centre: Ar
     return (direct if the_plan is None else min(the_plan.cost, direct)), direct
 
 
+#: sample positions at most that plan a cost estimate's tree (an even subset of them)
+PLAN_SUBSET = 1 << 21
+
+
+def quadrature_cost(quadrature: Any, points: ArrayLike, k: float, centre: ArrayLike,
+                    radiator: str = "fast", tol: float = DEFAULT_TOL) -> tuple[float, float]:
+    """(cost, direct) of radiating every sample of ``quadrature`` (a
+    :class:`raysim.surface.quadrature.FaceQuadrature`) to ``points`` (m, 3) m, as ``radiator``
+    would run it and as the direct sum would, in direct pair evaluations. The fast radiator's
+    plan is made on an even subset of at most :data:`PLAN_SUBSET` sample positions, its costs
+    counted for all of them; nothing is summed."""
+    n = quadrature.n_samples
+    direct = float(n) * len(np.asarray(points).reshape(-1, 3))
+    if radiator == "direct" or n == 0:
+        return direct, direct
+    stride = max(1, n // PLAN_SUBSET)
+    positions = np.concatenate([chunk.points[::stride] for chunk in quadrature.chunks()])
+    return estimated_cost(positions, points, k, centre, tol, count=n)[0], direct
+
+
 def make_radiator(points: ArrayLike, k: float, device: str | None = "cpu", block: int | None = None,
                   radiator: str = "fast", tol: float = DEFAULT_TOL, centre: ArrayLike | None = None,
                   domain: Domain | None = None, cache: dict | None = None,
