@@ -50,23 +50,18 @@ from raysim.optics.fast.chart import (
     tensor_index,
     to_angles,
 )
+from raysim.optics.fast.multilevel import warray
 from raysim.optics.fast.radiator import DEFAULT_TOL, describe, plan_for
 
 #: bytes of weights held at once per step (clusters taken in chunks)
 CHUNK_BYTES = 2.5e8
 
 
-def _arr(a: NDArray, device: str, dtype: Any = None) -> Any:
-    wp = runtime.init()
-    return wp.array(np.ascontiguousarray(a), dtype=dtype or wp.float64, device=device)
-
-
 def _spectrum_to_grid(S_adj: NDArray[np.complex128], n: int) -> NDArray[np.complex128]:
     """The transpose of "grid -> its kept Fourier coefficients" (fft2 / n^2, the Nyquist row and
     column dropped): coefficients (c, n - 1, n - 1, 3) -> grid weights (c, n, n, 3). The DFT
     matrix is symmetric, so the transpose is the same DFT of the zero-filled coefficients."""
-    h = n // 2
-    keep = np.r_[0:h, n - h + 1:n]
+    keep = np.r_[0:n // 2, n - n // 2 + 1:n]
     full = np.zeros((S_adj.shape[0], n, n, 3), dtype=np.complex128)
     full[:, keep[:, None], keep[None, :]] = S_adj
     return sfft.fft2(full, axes=(1, 2), workers=FFT_WORKERS, overwrite_x=True) / (n * n)
@@ -78,23 +73,20 @@ def _tensor_weights(b: NDArray[np.complex128], index: NDArray[np.int64], the_pla
     :func:`raysim.optics.fast.multilevel.grid_sums`."""
     level = the_plan.levels[the_plan.stop]
     n = the_plan.sizes[the_plan.stop]
-    h = n // 2
-    freqs = np.r_[0:h, -(h - 1):0]
-    thetas, phis = np.asarray(domain.thetas), np.asarray(domain.phis)
-    R, Q = len(thetas), len(phis)
-    E_theta_T = np.exp(1j * np.outer(freqs, thetas))  # (nk, R)
-    E_phi = np.exp(1j * np.outer(phis, freqs))  # (Q, nk)
+    keep, E_theta, E_phi_T = multilevel.series_basis(n, domain)
+    E_theta_T, E_phi = np.ascontiguousarray(E_theta.T), np.ascontiguousarray(E_phi_T.T)  # (nk, R), (Q, nk)
+    R, Q = E_theta.shape[0], E_phi_T.shape[1]
     B = np.zeros((R * Q, 3), dtype=np.complex128)
     np.add.at(B, index, b)  # a target twice on the grid counts twice
     points = multilevel.tensor_points(domain)
-    nk = len(freqs)
+    nk = len(keep)
     C = len(level.keys)
     out = np.empty((C, n, n, 3), dtype=np.complex128)
     per = max(1, int(CHUNK_BYTES // (16 * 3 * R * Q * 2)))
     for c0 in range(0, C, per):
         c1 = min(c0 + per, C)
         c = c1 - c0
-        r = np.sqrt(np.sum((points[None, :, :] - level.centres[c0:c1, None, :]) ** 2, axis=-1))
+        r = multilevel.distances(points, level.centres[c0:c1])
         X = (np.exp(-1j * k * r)[:, :, None] * B[None, :, :]).reshape(c, R, Q, 3)
         # (nk x R) X (R x Q) (Q x nk) per cluster and component, as two plain matrix products
         A = np.ascontiguousarray(np.transpose(X, (1, 0, 3, 2))).reshape(R, c * 3 * Q)
@@ -126,7 +118,7 @@ def _scattered_weights(b: NDArray[np.complex128], angles: NDArray[np.float64], p
     per = max(1, int(CHUNK_BYTES // (48 * m * m * 2)))
     for c0 in range(0, C, per):
         c1 = min(c0 + per, C)
-        r = np.sqrt(np.sum((points[None, :, :] - level.centres[c0:c1, None, :]) ** 2, axis=-1))
+        r = multilevel.distances(points, level.centres[c0:c1])
         X = np.exp(-1j * k * r)[:, :, None] * b[None, :, :]  # (c, M, 3)
         fine = (W_T @ np.moveaxis(X, 1, 0).reshape(M, -1)).reshape(m, m, c1 - c0, 3)
         out[c0:c1] = restrict(np.moveaxis(fine, 2, 0), n)
@@ -148,8 +140,8 @@ def disaggregate(beta: NDArray[np.complex128], child: int, the_plan: multilevel.
     for c0 in range(a, b, per):
         c1 = min(c0 + per, b)
         parents = low.parent[c0:c1]
-        r_p = np.sqrt(np.sum((points[None] - up.centres[parents, None, :]) ** 2, axis=-1))
-        r_c = np.sqrt(np.sum((points[None] - low.centres[c0:c1, None, :]) ** 2, axis=-1))
+        r_p = multilevel.distances(points, up.centres[parents])
+        r_c = multilevel.distances(points, low.centres[c0:c1])
         shifted = beta[parents - q_lo] * np.exp(1j * k * (r_p - r_c)).reshape(c1 - c0, n, n, 1)
         out[c0 - a:c1 - a] = restrict(shifted, nc)
     return out
@@ -172,17 +164,17 @@ def leaf_sums(kernel: Any, src: NDArray[np.float64], beta: NDArray[np.complex128
     n_nodes = len(nodes)
     half = fold(beta, n).reshape(hi - lo, n_nodes, 3)
     split = np.concatenate([half.real, half.imag], axis=-1)  # (C, n_nodes, 6): Re 3, Im 3
-    table = _arr(radiation.cis_table(), device, wp.vec2d)
+    table = warray(radiation.cis_table(), device, wp.vec2d)
     # the leaf centre's phase put back once per (leaf, node), not once per element
     weights = wp.empty((hi - lo, n_nodes, 6), dtype=wp.float64, device=device)
     runtime.launch(fast_adjoint.phase_rows, (hi - lo) * n_nodes, [
-        _arr(nodes, device), _arr(split, device), _arr(full.centres[lo:hi], device), 1.0, k, table,
+        warray(nodes, device), warray(split, device), warray(full.centres[lo:hi], device), 1.0, k, table,
         weights], device, min_chunk=1024)
     leaf_of = np.repeat(np.arange(hi - lo), full.ends[lo:hi] - full.begins[lo:hi]).astype(np.int32)
     out = wp.zeros((8, e1 - e0), dtype=wp.float64, device=device)
     runtime.launch(kernel, e1 - e0, [
-        _arr(nodes.T, device), _arr(leaf_of, device, wp.int32), weights.reshape((-1, 6)), n_nodes,
-        _arr(src[:, e0:e1], device), k, 1.0 / k, table, out], device, min_chunk=16)
+        warray(nodes.T, device), warray(leaf_of, device, wp.int32), weights.reshape((-1, 6)), n_nodes,
+        warray(src[:, e0:e1], device), k, 1.0 / k, table, out], device, min_chunk=16)
     return out.numpy()
 
 

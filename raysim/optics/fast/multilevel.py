@@ -164,7 +164,8 @@ def _last_cost(n: int, u: int, p: int, domain: Domain) -> float:
     return _fft_cost(u * n) + M * (p * p * COST_STENCIL + COST_EXP)
 
 
-def _arr(a: NDArray, device: str, dtype: Any = None) -> Any:
+def warray(a: NDArray, device: str, dtype: Any = None) -> Any:
+    """``a`` as a contiguous Warp array on ``device`` (float64 unless ``dtype``)."""
     wp = runtime.init()
     return wp.array(np.ascontiguousarray(a), dtype=dtype or wp.float64, device=device)
 
@@ -188,9 +189,9 @@ def leaf_grids(segments: Any, src: Any, the_plan: Plan, domain: Domain, k: float
     C = hi - lo
     out = wp.empty((C * n_pad, 6), dtype=wp.float64, device=device)
     runtime.launch(segments[1] if tile == 4 else segments[0], C * n_pad // tile, [
-        _arr(padded.T, device), _arr(level.begins[lo:hi].astype(np.int32), device, wp.int32),
-        _arr(level.ends[lo:hi].astype(np.int32), device, wp.int32), _arr(level.centres[lo:hi], device),
-        n_pad, src, k, 1.0 / k, _arr(radiation.cis_table(), device, wp.vec2d), out], device, min_chunk=16)
+        warray(padded.T, device), warray(level.begins[lo:hi].astype(np.int32), device, wp.int32),
+        warray(level.ends[lo:hi].astype(np.int32), device, wp.int32), warray(level.centres[lo:hi], device),
+        n_pad, src, k, 1.0 / k, warray(radiation.cis_table(), device, wp.vec2d), out], device, min_chunk=16)
     half = out.numpy().view(np.complex128).reshape(C, n_pad, 3)[:, :n_nodes]
     return mirror(half.reshape(C, half_rows(n), n, 3), n)
 
@@ -205,12 +206,12 @@ def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Dom
 
     low, up = the_plan.levels[child], the_plan.levels[child - 1]
     n = the_plan.sizes[child - 1]
-    nodes = _arr(grid_points(n, domain), device)
-    table = _arr(radiation.cis_table(), device, wp.vec2d)
+    nodes = warray(grid_points(n, domain), device)
+    table = warray(radiation.cis_table(), device, wp.vec2d)
     q_hi = len(up.keys) if q_hi is None else q_hi
     C0 = q_hi - q_lo
-    first = (np.searchsorted(low.parent, np.arange(q_lo, q_hi + 1))
-             - np.searchsorted(low.parent, q_lo)).astype(np.int32)  # into G
+    base = int(np.searchsorted(low.parent, q_lo))  # G's first child in the level's numbering
+    first = (np.searchsorted(low.parent, np.arange(q_lo, q_hi + 1)) - base).astype(np.int32)  # into G
     out = np.empty((C0, n, n, 3), dtype=np.complex128)
     per = max(1, int(CHUNK_BYTES // (48 * n * n * 2)))  # children refined at once
     q = 0
@@ -221,10 +222,9 @@ def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Dom
         c0, c1 = int(first[q]), int(first[q1])
         fine = resample(G[c0:c1], n).view(np.float64).reshape(-1, 6)
         part = wp.empty(((q1 - q) * n * n, 6), dtype=wp.float64, device=device)
-        base = int(np.searchsorted(low.parent, q_lo))  # G's first child in the level's numbering
         runtime.launch(fast.rephase_merge, (q1 - q) * n * n, [
-            _arr(fine, device), n * n, _arr(first[q:q1 + 1], device, wp.int32),
-            _arr(low.centres[base:], device), _arr(up.centres[q_lo + q:q_lo + q1], device), nodes, k,
+            warray(fine, device), n * n, warray(first[q:q1 + 1], device, wp.int32),
+            warray(low.centres[base:], device), warray(up.centres[q_lo + q:q_lo + q1], device), nodes, k,
             table, part], device, min_chunk=256)
         out[q:q1] = part.numpy().view(np.complex128).reshape(q1 - q, n, n, 3)
         q = q1
@@ -233,7 +233,7 @@ def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Dom
 
 def sorted_sources(src: NDArray[np.float64], the_plan: Plan, device: str) -> Any:
     """The elements (rows, n) in the plan's leaf order, as the leaf kernels read them (Warp)."""
-    return _arr(src[:, the_plan.order], device)
+    return warray(src[:, the_plan.order], device)
 
 
 def pivot_chunks(the_plan: Plan) -> list[tuple[int, int]]:
@@ -301,15 +301,9 @@ def grid_sums(G: NDArray[np.complex128], the_plan: Plan, domain: Domain, k: floa
     at the grid's angles by two matrix products, times exp(-j k |P - c|), clusters summed."""
     level = the_plan.levels[the_plan.stop]
     n = G.shape[1]
-    h = n // 2
-    keep = np.r_[0:h, n - h + 1:n]
-    freqs = np.r_[0:h, -(h - 1):0]
-    thetas, phis = np.asarray(domain.thetas), np.asarray(domain.phis)
-    E_theta = np.exp(1j * np.outer(thetas, freqs))  # (R, n - 1)
-    E_phi_T = np.exp(1j * np.outer(freqs, phis))  # (n - 1, Q)
-    R, Q = len(thetas), len(phis)
+    keep, E_theta, E_phi_T = series_basis(n, domain)
+    R, Q = E_theta.shape[0], E_phi_T.shape[1]
     points = tensor_points(domain)
-    r_all = np.sqrt(np.sum((points[None, :, :] - level.centres[:, None, :]) ** 2, axis=-1))
     total = np.zeros((R, 3, Q), dtype=np.complex128)
     nk = len(keep)
     per = max(1, int(CHUNK_BYTES // (16 * 3 * R * Q * 2)))
@@ -320,10 +314,29 @@ def grid_sums(G: NDArray[np.complex128], the_plan: Plan, domain: Domain, k: floa
         # two plain matrix products (one BLAS call each): theta first, then phi
         A = np.ascontiguousarray(np.transpose(S, (1, 0, 3, 2))).reshape(nk, c * 3 * nk)
         W = (E_theta @ A).reshape(R * c * 3, nk) @ E_phi_T  # (R * c * 3, Q)
-        phase = np.exp(-1j * k * r_all[c0:c1]).reshape(c, R, Q).transpose(1, 0, 2)  # (R, c, Q)
+        r = distances(points, level.centres[c0:c1])
+        phase = np.exp(-1j * k * r).reshape(c, R, Q).transpose(1, 0, 2)  # (R, c, Q)
         total += np.sum(W.reshape(R, c, 3, Q) * phase[:, :, None, :], axis=1)
     total = np.moveaxis(total, 1, 2).reshape(R * Q, 3)
     return np.concatenate([total.real, total.imag], axis=1)
+
+
+def series_basis(n: int, domain: Domain) -> tuple[NDArray[np.int64], NDArray[np.complex128],
+                                                 NDArray[np.complex128]]:
+    """(keep, E_theta (R, n - 1), E_phi_T (n - 1, Q)): the kept coefficients of an n x n grid's
+    FFT (the Nyquist ones dropped) and exp(j m angle) at the tensor grid's thetas and phis for
+    their signed frequencies m, so that the series on the grid is E_theta S E_phi_T."""
+    h = n // 2
+    keep = np.r_[0:h, n - h + 1:n]
+    freqs = np.r_[0:h, -(h - 1):0]
+    E_theta = np.exp(1j * np.outer(np.asarray(domain.thetas), freqs))
+    E_phi_T = np.exp(1j * np.outer(freqs, np.asarray(domain.phis)))
+    return keep, E_theta, E_phi_T
+
+
+def distances(points: NDArray[np.float64], centres: NDArray[np.float64]) -> NDArray[np.float64]:
+    """|P - c| (C, m) m for every centre (C, 3) and point (m, 3)."""
+    return np.sqrt(np.sum((points[None, :, :] - centres[:, None, :]) ** 2, axis=-1))
 
 
 def tensor_points(domain: Domain) -> NDArray[np.float64]:
@@ -355,15 +368,15 @@ def interpolated(G: NDArray[np.complex128], the_plan: Plan, angles: NDArray[np.f
     axis = target_axis(m, p)
     iu, wu = lagrange(angles[:, 0], axis, p)
     iv, wv = lagrange(angles[:, 1], axis, p)
-    args = [_arr(iu - p, device, wp.int32), _arr(iv - p, device, wp.int32), _arr(wu, device),
-            _arr(wv, device)]
-    pts, table = _arr(points, device), _arr(radiation.cis_table(), device, wp.vec2d)
+    args = [warray(iu - p, device, wp.int32), warray(iv - p, device, wp.int32), warray(wu, device),
+            warray(wv, device)]
+    pts, table = warray(points, device), warray(radiation.cis_table(), device, wp.vec2d)
     out = wp.zeros((len(angles), 6), dtype=wp.float64, device=device)
     per = max(1, int(CHUNK_BYTES // (48 * m * m * 2)))
     for c0 in range(0, len(G), per):
         c1 = min(c0 + per, len(G))
         fine = resample(G[c0:c1], m).view(np.float64)  # (c, m, m, 6): (Re, Im) pairs
         runtime.launch(fast.interpolate_targets, len(angles), [
-            _arr(fine, device), p, *args, _arr(level.centres[c0:c1], device), pts, k, table, out],
+            warray(fine, device), p, *args, warray(level.centres[c0:c1], device), pts, k, table, out],
             device, min_chunk=16)
     return out.numpy()
