@@ -36,6 +36,10 @@ from solver.nonlinear import extend_outside, outside_fill
 
 DEGREE = 3
 CHUNK = 65_536
+#: the fast radiator's tolerance for the Jacobian's products, at its loosest: Gauss-Newton's
+#: truncated LSQR solves a step to about 1e-2, so products to 1e-4 leave the steps as they
+#: are, while the fields (the misfit the steps are judged by) keep the model's own tolerance
+JACOBIAN_TOL = 1e-4
 
 
 def _basis(x: NDArray[np.float64], t: NDArray[np.float64], lo: float, hi: float):
@@ -185,19 +189,26 @@ class WaveJacobian:
             return E if self.g0 == 1.0 else self.g0 * E
         return np.sum(v * E, axis=-1, keepdims=True) * v
 
+    @property
+    def _fast(self) -> dict:
+        """How the products sum their elements: the model's radiator, at the looser of its
+        tolerance and :data:`JACOBIAN_TOL`."""
+        return {"radiator": self.model.radiator, "tol": max(self.model.radiator_tol, JACOBIAN_TOL),
+                "centre": self.focus}
+
     def field_jvp(self, v_in: NDArray[np.float64]) -> NDArray[np.complex128]:
         """dE (evaluated points, 3) for grid values ``v_in`` (m) inside the aperture."""
         from raysim.optics import po_jacobian
 
         points = self._at(self.points)
         dz, hx, hy = self.samples.apply(v_in)
-        dE = po_jacobian.jvp(self.elements, points, dz, hx, hy, self.model.device,
-                             radiator=self.model.radiator, tol=self.model.radiator_tol, centre=self.focus)
+        fast = self._fast
+        dE = po_jacobian.jvp(self.elements, points, dz, hx, hy, self.model.device, **fast)
         if self.edges is not None:
             from raysim.optics import ptd_jacobian
 
-            dE = dE + ptd_jacobian.jvp(self.edges, self.wave, points,
-                                       *self.edge_samples.apply(v_in), device=self.model.device)
+            dE = dE + ptd_jacobian.jvp(self.edges, self.wave, points, *self.edge_samples.apply(v_in),
+                                       device=self.model.device, **fast)
         return dE
 
     def jvp(self, v_in: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -221,7 +232,7 @@ class WaveJacobian:
         weights = self._at(np.asarray(y, dtype=np.float64).reshape(-1))
         c = 2.0 * weights[:, None] * self._reading()
         points = self._at(self.points)
-        fast = {"radiator": self.model.radiator, "tol": self.model.radiator_tol, "centre": self.focus}
+        fast = self._fast
         g = po_jacobian.vjp(self.elements, points, c, self.model.device, **fast)
         out = self.samples.transpose(*g)
         if self.edges is not None:

@@ -29,10 +29,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from raysim.errors import RaysimError
 from raysim.optics import runtime
-from raysim.optics.fast.radiator import DEFAULT_TOL
+from raysim.optics.fast.radiator import DEFAULT_TOL, make_radiator
 from raysim.optics.illumination import Illumination
 from raysim.optics.ptd import DEFAULT_POINTS_PER_WAVELENGTH, fringe_elements, lit_points
-from raysim.optics.radiator import Radiator
 from raysim.surface.edges import Edges, edge_quadrature
 from raysim.surface.mesh import Reflector
 
@@ -96,17 +95,27 @@ def _rows(state: EdgeState, wave: Illumination, dz, dhx, dhy) -> NDArray[np.floa
 
 
 def jvp(state: EdgeState, wave: Illumination, points: ArrayLike, dz: ArrayLike, dhx: ArrayLike,
-        dhy: ArrayLike, device: str | None = "cpu") -> NDArray[np.complex128]:
-    """dE (n, 3) of the fringe field at ``points`` for per-point dz (m) and slope changes."""
+        dhy: ArrayLike, device: str | None = "cpu", radiator: str = "direct", tol: float = DEFAULT_TOL,
+        centre: ArrayLike | None = None, force: bool = False) -> NDArray[np.complex128]:
+    """dE (n, 3) of the fringe field at ``points`` for per-point dz (m) and slope changes.
+
+    ``radiator="fast"`` with ``centre`` (the sphere's centre, m): both copies of the central
+    difference summed multilevel on one tree (``plans`` of
+    :class:`raysim.optics.fast.radiator.FastRadiator`), so the sums' errors cancel in the
+    difference as they do in the transposed sum, at ``tol`` times :data:`FAST_TOL_FACTOR` for
+    the same reason as :func:`vjp`; ``force`` as
+    :func:`raysim.optics.fast.radiator.make_radiator`.
+    """
     dz, dhx, dhy = (np.asarray(a, dtype=np.float64) for a in (dz, dhx, dhy))
     size = max(float(np.max(np.abs(np.concatenate([dz, dhx, dhy])), initial=0.0)), 1e-300)
     t = EPS / size
+    plans: dict = {}
     fields = []
     for sign in (1.0, -1.0):
-        radiator = Radiator(points, wave.k, device, block=1024)
-        radiator.add_packed(_rows(state, wave, sign * t * dz, sign * t * dhx, sign * t * dhy),
-                            "fringe")
-        fields.append(radiator.field())
+        rad = make_radiator(points, wave.k, device, block=1024, radiator=radiator, tol=tol * FAST_TOL_FACTOR,
+                            centre=centre, force=force, plans=plans)
+        rad.add_packed(_rows(state, wave, sign * t * dz, sign * t * dhx, sign * t * dhy), "fringe")
+        fields.append(rad.field())
     return (fields[0] - fields[1]) / (2.0 * t)
 
 

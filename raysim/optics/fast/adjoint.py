@@ -67,24 +67,21 @@ def _spectrum_to_grid(S_adj: NDArray[np.complex128], n: int) -> NDArray[np.compl
     return sfft.fft2(full, axes=(1, 2), workers=FFT_WORKERS, overwrite_x=True) / (n * n)
 
 
-def _tensor_weights(b: NDArray[np.complex128], index: NDArray[np.int64], the_plan: multilevel.Plan,
-                    domain: Domain, k: float) -> NDArray[np.complex128]:
-    """Step 1 on the domain's tensor grid: the transpose of
-    :func:`raysim.optics.fast.multilevel.grid_sums`."""
+def _tensor_weights(B: NDArray[np.complex128], the_plan: multilevel.Plan, domain: Domain, k: float,
+                    q0: int, q1: int) -> NDArray[np.complex128]:
+    """Step 1 on the domain's tensor grid for stop clusters q0 .. q1 - 1, ``B`` (R * Q, 3) the
+    weights on the whole grid: the transpose of :func:`raysim.optics.fast.multilevel.grid_sums`."""
     level = the_plan.levels[the_plan.stop]
     n = the_plan.sizes[the_plan.stop]
     keep, E_theta, E_phi_T = multilevel.series_basis(n, domain)
     E_theta_T, E_phi = np.ascontiguousarray(E_theta.T), np.ascontiguousarray(E_phi_T.T)  # (nk, R), (Q, nk)
     R, Q = E_theta.shape[0], E_phi_T.shape[1]
-    B = np.zeros((R * Q, 3), dtype=np.complex128)
-    np.add.at(B, index, b)  # a target twice on the grid counts twice
     points = multilevel.tensor_points(domain)
     nk = len(keep)
-    C = len(level.keys)
-    out = np.empty((C, n, n, 3), dtype=np.complex128)
+    out = np.empty((q1 - q0, n, n, 3), dtype=np.complex128)
     per = max(1, int(CHUNK_BYTES // (16 * 3 * R * Q * 2)))
-    for c0 in range(0, C, per):
-        c1 = min(c0 + per, C)
+    for c0 in range(q0, q1, per):
+        c1 = min(c0 + per, q1)
         c = c1 - c0
         r = multilevel.distances(points, level.centres[c0:c1])
         X = (np.exp(-1j * k * r)[:, :, None] * B[None, :, :]).reshape(c, R, Q, 3)
@@ -92,15 +89,13 @@ def _tensor_weights(b: NDArray[np.complex128], index: NDArray[np.int64], the_pla
         A = np.ascontiguousarray(np.transpose(X, (1, 0, 3, 2))).reshape(R, c * 3 * Q)
         W = (E_theta_T @ A).reshape(nk * c * 3, Q) @ E_phi  # (nk * c * 3, nk)
         S_adj = np.transpose(W.reshape(nk, c, 3, nk), (1, 0, 3, 2))  # (c, kθ, kφ, 3)
-        out[c0:c1] = _spectrum_to_grid(S_adj, n)
+        out[c0 - q0:c1 - q0] = _spectrum_to_grid(S_adj, n)
     return out
 
 
-def _scattered_weights(b: NDArray[np.complex128], angles: NDArray[np.float64], points: NDArray[np.float64],
-                       the_plan: multilevel.Plan, k: float) -> NDArray[np.complex128]:
-    """Step 1 for any targets: the transpose of :func:`raysim.optics.fast.multilevel.interpolated`
-    (Lagrange weights scattered onto the refined periodic grid, then the refinement transposed)."""
-    level = the_plan.levels[the_plan.stop]
+def _scatter_matrix(angles: NDArray[np.float64], the_plan: multilevel.Plan) -> sparse.csr_matrix:
+    """(m * m, M): the transpose of the Lagrange interpolation from the refined periodic grid
+    (m = oversampling x n) to the targets at ``angles`` (M, 2) rad."""
     n, p = the_plan.sizes[the_plan.stop], the_plan.p
     m = the_plan.oversampling * n
     axis = multilevel.target_axis(m, p)
@@ -111,17 +106,27 @@ def _scattered_weights(b: NDArray[np.complex128], angles: NDArray[np.float64], p
     M = len(angles)
     flat = (rows[:, :, None] * m + cols[:, None, :]).reshape(M, p * p)
     weights = (wu[:, :, None] * wv[:, None, :]).reshape(M, p * p)
-    W_T = sparse.csr_matrix((weights.ravel(), (flat.ravel(), np.repeat(np.arange(M), p * p))),
-                            shape=(m * m, M))  # duplicates summed in a fixed order
-    C = len(level.keys)
-    out = np.empty((C, n, n, 3), dtype=np.complex128)
+    return sparse.csr_matrix((weights.ravel(), (flat.ravel(), np.repeat(np.arange(M), p * p))),
+                             shape=(m * m, M))  # duplicates summed in a fixed order
+
+
+def _scattered_weights(b: NDArray[np.complex128], W_T: sparse.csr_matrix, points: NDArray[np.float64],
+                       the_plan: multilevel.Plan, k: float, q0: int, q1: int) -> NDArray[np.complex128]:
+    """Step 1 for any targets and stop clusters q0 .. q1 - 1: the transpose of
+    :func:`raysim.optics.fast.multilevel.interpolated` (``W_T`` from :func:`_scatter_matrix`,
+    then the refinement transposed)."""
+    level = the_plan.levels[the_plan.stop]
+    n = the_plan.sizes[the_plan.stop]
+    m = the_plan.oversampling * n
+    M = len(points)
+    out = np.empty((q1 - q0, n, n, 3), dtype=np.complex128)
     per = max(1, int(CHUNK_BYTES // (48 * m * m * 2)))
-    for c0 in range(0, C, per):
-        c1 = min(c0 + per, C)
+    for c0 in range(q0, q1, per):
+        c1 = min(c0 + per, q1)
         r = multilevel.distances(points, level.centres[c0:c1])
         X = np.exp(-1j * k * r)[:, :, None] * b[None, :, :]  # (c, M, 3)
         fine = (W_T @ np.moveaxis(X, 1, 0).reshape(M, -1)).reshape(m, m, c1 - c0, 3)
-        out[c0:c1] = restrict(np.moveaxis(fine, 2, 0), n)
+        out[c0 - q0:c1 - q0] = restrict(np.moveaxis(fine, 2, 0), n)
     return out
 
 
@@ -178,6 +183,22 @@ def leaf_sums(kernel: Any, src: NDArray[np.float64], beta: NDArray[np.complex128
     return out.numpy()
 
 
+def _descend(kernel: Any, ordered: NDArray[np.float64], beta: NDArray[np.complex128],
+             the_plan: multilevel.Plan, domain: Domain, k: float, device: str, level: int, q0: int, q1: int,
+             result: NDArray[np.float64]) -> None:
+    """Steps 2 and 3 below clusters q0 .. q1 - 1 of ``level`` (their weights ``beta``): their
+    elements' sums written into ``result`` (8, n) in leaf order."""
+    if level == the_plan.leaf:
+        leaves = the_plan.levels[level]
+        result[:, leaves.begins[q0]:leaves.ends[q1 - 1]] = leaf_sums(kernel, ordered, beta, the_plan, domain,
+                                                                     k, device, q0, q1)
+        return
+    for p0, p1 in the_plan.chunks(level, q0, q1):
+        part = disaggregate(beta[p0 - q0:p1 - q0], level + 1, the_plan, domain, k, p0, p1)
+        _descend(kernel, ordered, part, the_plan, domain, k, device, level + 1,
+                 *the_plan.children(level, p0, p1), result)
+
+
 def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike, k: float,
                    centre: ArrayLike | None, device: str = "cpu", tol: float = DEFAULT_TOL,
                    force: bool = False, info: dict | None = None) -> NDArray[np.float64] | None:
@@ -209,25 +230,20 @@ def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike,
     angles = to_angles(pts, domain.centre)
     index = tensor_index(angles, domain) if the_plan.oversampling == 0 else None
     if index is not None:
-        beta = _tensor_weights(bw, index, the_plan, domain, k)
+        B = np.zeros((len(np.asarray(domain.thetas)) * len(np.asarray(domain.phis)), 3), dtype=np.complex128)
+        np.add.at(B, index, bw)  # a target twice on the grid counts twice
     else:
         if the_plan.oversampling == 0:  # a tensor plan's stray target: the general last step
             the_plan = multilevel.general_last_step(the_plan)
-        beta = _scattered_weights(bw, angles, pts, the_plan, k)
-    for child in range(the_plan.stop + 1, the_plan.pivot + 1):
-        beta = disaggregate(beta, child, the_plan, domain, k)
-    # below the pivot, one chunk of pivot clusters at a time down to the leaves (as the forward)
+        W_T = _scatter_matrix(angles, the_plan)
     ordered = np.ascontiguousarray(src[:, the_plan.order])
     result = np.empty((8, src.shape[1]))
-    pivot, leaf = the_plan.pivot, the_plan.leaf
-    for q0, q1 in multilevel.pivot_chunks(the_plan):
-        part = beta[q0:q1]
-        for child in range(pivot + 1, leaf + 1):
-            part = disaggregate(part, child, the_plan, domain, k, *the_plan.below(pivot, q0, q1, child - 1))
-        lo, hi = the_plan.below(pivot, q0, q1, leaf)
-        levels = the_plan.levels[leaf]
-        result[:, levels.begins[lo]:levels.ends[hi - 1]] = leaf_sums(kernel, ordered, part, the_plan, domain,
-                                                                   k, dev, lo, hi)
+    # a chunk of stop clusters at a time, down to the leaves a chunk of families per level at a
+    # time (the forward's walk, :meth:`raysim.optics.fast.multilevel.Plan.chunks`)
+    for q0, q1 in the_plan.chunks(-1, 0, 0):
+        beta = _tensor_weights(B, the_plan, domain, k, q0, q1) if index is not None else \
+            _scattered_weights(bw, W_T, pts, the_plan, k, q0, q1)
+        _descend(kernel, ordered, beta, the_plan, domain, k, dev, the_plan.stop, q0, q1, result)
     out = np.empty_like(result)
     out[:, the_plan.order] = result  # back from leaf order to the elements' order
     if info is not None:

@@ -22,6 +22,7 @@ All sums are the raw sums of :mod:`raysim.optics.kernels.radiation` (before the 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -57,7 +58,7 @@ COST_EXP = 1.5
 COST_FFT = 0.1
 COST_NUMPY = 0.1
 COST_BLAS = 0.05  # a complex multiply-add in a matrix product
-MEMORY_BYTES = 3e9  # one level's grids (two levels are held at once), at most
+GRID_BYTES = 4e8  # one level's grids held at once (a chunk of it; one chunk per level is live)
 CHUNK_BYTES = 2.5e8  # refined grids held at once while aggregating or interpolating
 MIN_LEAF = 8  # elements per non-empty leaf on average, at least
 FALLBACK_STENCIL = stencil_for(1e-9, OVERSAMPLINGS[-1])  # a stray target of a tensor plan
@@ -79,18 +80,29 @@ class Plan:
     p: int
     cost: float
     direct_cost: float
-    pivot: int = -1  # the finest level held whole (below it, subtrees are summed one chunk at a time)
 
     def children(self, level: int, q0: int, q1: int) -> tuple[int, int]:
         """The clusters of ``level + 1`` whose parents are clusters q0 .. q1 - 1 of ``level``."""
         parent = self.levels[level + 1].parent
         return int(np.searchsorted(parent, q0)), int(np.searchsorted(parent, q1))
 
-    def below(self, level: int, q0: int, q1: int, lower: int) -> tuple[int, int]:
-        """The clusters of ``lower`` (finer) under clusters q0 .. q1 - 1 of ``level``."""
-        for upper in range(level, lower):
-            q0, q1 = self.children(upper, q0, q1)
-        return q0, q1
+    def chunks(self, level: int, q0: int, q1: int) -> list[tuple[int, int]]:
+        """Ranges of clusters q0 .. q1 - 1 of ``level`` (``level`` -1: the one range of the
+        stop level's clusters) whose children's grids take at most :data:`GRID_BYTES`
+        together (one cluster at least): the units in which the sum walks the tree, so that
+        one chunk per level is held at a time however many clusters a level has."""
+        if level < 0:
+            level, q0, q1 = self.stop - 1, 0, len(self.levels[self.stop].keys)
+            first = np.arange(q0, q1 + 1)  # the stop clusters themselves
+        else:
+            first = np.searchsorted(self.levels[level + 1].parent, np.arange(q0, q1 + 1))
+        per = max(1, int(GRID_BYTES // (48.0 * self.sizes[level + 1] ** 2)))
+        out, q = [], 0
+        while q < q1 - q0:
+            q_next = max(q + 1, int(np.searchsorted(first, first[q] + per, side="right")) - 1)
+            out.append((q0 + q, q0 + q_next))
+            q = q_next
+        return out
 
 
 def _size(level: quadtree.Level, domain: Domain, k: float, digits: float) -> int | None:
@@ -133,8 +145,6 @@ def plan(positions: NDArray[np.float64], domain: Domain, k: float, tol: float,
             ns = sizes[stop]
             if ns is None:
                 break
-            if 48.0 * len(levels[stop].keys) * ns * ns > MEMORY_BYTES:
-                continue  # finer levels are summed a subtree at a time, but the stop level is whole
             if stop < leaf:  # one more aggregation step, level stop + 1 -> stop
                 child = sizes[stop + 1]
                 assert child is not None
@@ -146,12 +156,22 @@ def plan(positions: NDArray[np.float64], domain: Domain, k: float, tol: float,
                     best = (cost + final, leaf, stop, u, p)
     if best is None:
         return None
-    leaf, stop = best[1], best[2]
-    pivot = stop  # the finest level from the stop down whose grids fit whole
-    while pivot < leaf and 48.0 * len(levels[pivot + 1].keys) * (sizes[pivot + 1] or 0) ** 2 <= MEMORY_BYTES:
-        pivot += 1
-    return Plan(order, levels, leaf, stop, [s or 0 for s in sizes], best[3], best[4], best[0], direct,
-                pivot)
+    return Plan(order, levels, best[1], best[2], [s or 0 for s in sizes], best[3], best[4], best[0], direct)
+
+
+def holds(the_plan: Plan, positions: NDArray[np.float64], slack: float) -> bool:
+    """Whether elements at ``positions`` (n, 3) m, taken in the order the plan was made for,
+    still lie within every cluster's radius (plus ``slack``, m): then the plan's grid sizes
+    still bound their clusters' fields, and the plan serves them."""
+    if len(positions) != len(the_plan.order):
+        return False
+    pos = positions[the_plan.order]
+    for level in the_plan.levels:
+        member = np.repeat(np.arange(len(level.keys)), level.ends - level.begins)
+        dist = np.linalg.norm(pos - level.centres[member], axis=1)
+        if np.any(dist > level.radii[member] + slack):
+            return False
+    return True
 
 
 def _last_cost(n: int, u: int, p: int, domain: Domain) -> float:
@@ -165,9 +185,10 @@ def _last_cost(n: int, u: int, p: int, domain: Domain) -> float:
 
 
 def warray(a: NDArray, device: str, dtype: Any = None) -> Any:
-    """``a`` as a contiguous Warp array on ``device`` (float64 unless ``dtype``)."""
+    """``a`` as a contiguous Warp array on ``device`` (float64 unless ``dtype``); on the CPU
+    it shares a contiguous ``a``'s memory (and keeps it alive) rather than copying it."""
     wp = runtime.init()
-    return wp.array(np.ascontiguousarray(a), dtype=dtype or wp.float64, device=device)
+    return wp.array(np.ascontiguousarray(a), dtype=dtype or wp.float64, device=device, copy=device != "cpu")
 
 
 def leaf_grids(segments: Any, src: Any, the_plan: Plan, domain: Domain, k: float, device: str,
@@ -236,38 +257,30 @@ def sorted_sources(src: NDArray[np.float64], the_plan: Plan, device: str) -> Any
     return warray(src[:, the_plan.order], device)
 
 
-def pivot_chunks(the_plan: Plan) -> list[tuple[int, int]]:
-    """Ranges of the pivot level's clusters whose subtrees' leaf grids take about
-    4 x :data:`CHUNK_BYTES` each (one range when the pivot is the leaf level)."""
-    pivot, leaf = the_plan.pivot, the_plan.leaf
-    C = len(the_plan.levels[pivot].keys)
-    leaves = len(the_plan.levels[leaf].keys)
-    leaf_bytes = 48.0 * leaves * the_plan.sizes[leaf] ** 2
-    per = max(1, int(C * 4 * CHUNK_BYTES // max(leaf_bytes, 1.0)))
-    return [(q0, min(q0 + per, C)) for q0 in range(0, C, per)]
-
-
 def stop_grids(segments: Any, src: NDArray[np.float64], the_plan: Plan, domain: Domain, k: float,
-               device: str) -> NDArray[np.complex128]:
-    """The stop level's grids (C, n, n, 3) of the elements ``src`` (the kind's packed rows):
-    below the plan's pivot level, one chunk of pivot clusters at a time, leaves to pivot (so the
-    fine levels, whose grids together outgrow memory, are never held whole); then whole levels
-    from the pivot to the stop."""
+               device: str) -> Iterator[tuple[int, int, NDArray[np.complex128]]]:
+    """The stop level's grids of the elements ``src`` (the kind's packed rows), a chunk of
+    clusters at a time: (q0, q1, grids (q1 - q0, n, n, 3)) of clusters q0 .. q1 - 1. Each chunk
+    is summed from the leaves up one chunk of families per level at a time
+    (:meth:`Plan.chunks`), so the memory held is a chunk per level whatever the frequency."""
     sorted_src = sorted_sources(src, the_plan, device)
-    pivot, leaf = the_plan.pivot, the_plan.leaf
-    n = the_plan.sizes[pivot]
-    G = np.empty((len(the_plan.levels[pivot].keys), n, n, 3), dtype=np.complex128)
-    for q0, q1 in pivot_chunks(the_plan):
-        lo, hi = the_plan.below(pivot, q0, q1, leaf)
-        part = leaf_grids(segments, sorted_src, the_plan, domain, k, device, lo, hi)
-        for child in range(leaf, pivot, -1):
-            parents = the_plan.below(pivot, q0, q1, child - 1)
-            part = aggregate(part, child, the_plan, domain, k, device, *parents)
-        G[q0:q1] = part
-    del sorted_src, part
-    for child in range(pivot, the_plan.stop, -1):
-        G = aggregate(G, child, the_plan, domain, k, device)
-    return G
+    for q0, q1 in the_plan.chunks(-1, 0, 0):
+        yield q0, q1, _grids(segments, sorted_src, the_plan, domain, k, device, the_plan.stop, q0, q1)
+
+
+def _grids(segments: Any, sorted_src: Any, the_plan: Plan, domain: Domain, k: float, device: str,
+           level: int, q0: int, q1: int) -> NDArray[np.complex128]:
+    """The grids (q1 - q0, n, n, 3) of clusters q0 .. q1 - 1 of ``level``: at the leaves by
+    the kernel, above from their children, a chunk of families at a time."""
+    if level == the_plan.leaf:
+        return leaf_grids(segments, sorted_src, the_plan, domain, k, device, q0, q1)
+    n = the_plan.sizes[level]
+    out = np.empty((q1 - q0, n, n, 3), dtype=np.complex128)
+    for p0, p1 in the_plan.chunks(level, q0, q1):
+        part = _grids(segments, sorted_src, the_plan, domain, k, device, level + 1,
+                      *the_plan.children(level, p0, p1))
+        out[p0 - q0:p1 - q0] = aggregate(part, level + 1, the_plan, domain, k, device, p0, p1)
+    return out
 
 
 def target_axis(n: int, p: int) -> Axis:
@@ -277,46 +290,49 @@ def target_axis(n: int, p: int) -> Axis:
     return Axis(-p * h, h, n + 2 * p)
 
 
-def to_targets(G: NDArray[np.complex128], the_plan: Plan, angles: NDArray[np.float64],
-               points: NDArray[np.float64], k: float, device: str, domain: Domain,
-               store: dict | None = None) -> NDArray[np.float64]:
+def to_targets(grids: Callable[[], Iterable[tuple[int, int, NDArray[np.complex128]]]], the_plan: Plan,
+               angles: NDArray[np.float64], points: NDArray[np.float64], k: float, device: str,
+               domain: Domain, store: dict | None = None) -> NDArray[np.float64]:
     """The raw sums (M, 6) at the targets (``angles`` (M, 2) theta, phi rad; ``points`` (M, 3)
-    m, on ``domain``'s sphere) from the stop level's grids ``G``. ``store``: where the sums on
-    the whole tensor grid are kept between blocks (the owner's cache). Every target's value is
-    the same whatever block it comes in."""
+    m, on ``domain``'s sphere) from the stop level's grids, which ``grids()`` yields a chunk at
+    a time (:func:`stop_grids`). ``store``: where the sums on the whole tensor grid are kept
+    between blocks (the owner's cache). Every target's value is the same whatever block it
+    comes in."""
     if the_plan.oversampling == 0:
         index = tensor_index(angles, domain)
         if index is not None:
             store = {} if store is None else store
             if "grid" not in store:
-                store["grid"] = grid_sums(G, the_plan, domain, k)
+                store["grid"] = grid_sums(grids(), the_plan, domain, k)
             return store["grid"][index]
         the_plan = general_last_step(the_plan)  # a target off the tensor grid
-    return interpolated(G, the_plan, angles, points, k, device)
+    return interpolated(grids(), the_plan, angles, points, k, device)
 
 
-def grid_sums(G: NDArray[np.complex128], the_plan: Plan, domain: Domain, k: float) -> NDArray[np.float64]:
+def grid_sums(grids: Iterable[tuple[int, int, NDArray[np.complex128]]], the_plan: Plan, domain: Domain,
+              k: float) -> NDArray[np.float64]:
     """The raw sums (R * Q, 6) on ``domain``'s whole tensor grid (R thetas x Q phis, row-major):
     each cluster's Fourier series (its grid's FFT, the Nyquist row and column dropped) summed
     at the grid's angles by two matrix products, times exp(-j k |P - c|), clusters summed."""
     level = the_plan.levels[the_plan.stop]
-    n = G.shape[1]
+    n = the_plan.sizes[the_plan.stop]
     keep, E_theta, E_phi_T = series_basis(n, domain)
     R, Q = E_theta.shape[0], E_phi_T.shape[1]
     points = tensor_points(domain)
     total = np.zeros((R, 3, Q), dtype=np.complex128)
     nk = len(keep)
     per = max(1, int(CHUNK_BYTES // (16 * 3 * R * Q * 2)))
-    for c0 in range(0, len(G), per):
-        c1 = min(c0 + per, len(G))
-        c = c1 - c0
-        S = sfft.fft2(G[c0:c1], axes=(1, 2), workers=FFT_WORKERS)[:, keep][:, :, keep] / (n * n)
-        # two plain matrix products (one BLAS call each): theta first, then phi
-        A = np.ascontiguousarray(np.transpose(S, (1, 0, 3, 2))).reshape(nk, c * 3 * nk)
-        W = (E_theta @ A).reshape(R * c * 3, nk) @ E_phi_T  # (R * c * 3, Q)
-        r = distances(points, level.centres[c0:c1])
-        phase = np.exp(-1j * k * r).reshape(c, R, Q).transpose(1, 0, 2)  # (R, c, Q)
-        total += np.sum(W.reshape(R, c, 3, Q) * phase[:, :, None, :], axis=1)
+    for q0, q1, G in grids:
+        for c0 in range(q0, q1, per):
+            c1 = min(c0 + per, q1)
+            c = c1 - c0
+            S = sfft.fft2(G[c0 - q0:c1 - q0], axes=(1, 2), workers=FFT_WORKERS)[:, keep][:, :, keep] / (n * n)
+            # two plain matrix products (one BLAS call each): theta first, then phi
+            A = np.ascontiguousarray(np.transpose(S, (1, 0, 3, 2))).reshape(nk, c * 3 * nk)
+            W = (E_theta @ A).reshape(R * c * 3, nk) @ E_phi_T  # (R * c * 3, Q)
+            r = distances(points, level.centres[c0:c1])
+            phase = np.exp(-1j * k * r).reshape(c, R, Q).transpose(1, 0, 2)  # (R, c, Q)
+            total += np.sum(W.reshape(R, c, 3, Q) * phase[:, :, None, :], axis=1)
     total = np.moveaxis(total, 1, 2).reshape(R * Q, 3)
     return np.concatenate([total.real, total.imag], axis=1)
 
@@ -354,8 +370,9 @@ def general_last_step(the_plan: Plan) -> Plan:
     return replace(the_plan, oversampling=OVERSAMPLINGS[-1], p=FALLBACK_STENCIL)
 
 
-def interpolated(G: NDArray[np.complex128], the_plan: Plan, angles: NDArray[np.float64],
-                 points: NDArray[np.float64], k: float, device: str) -> NDArray[np.float64]:
+def interpolated(grids: Iterable[tuple[int, int, NDArray[np.complex128]]], the_plan: Plan,
+                 angles: NDArray[np.float64], points: NDArray[np.float64], k: float,
+                 device: str) -> NDArray[np.float64]:
     """The raw sums (M, 6) at any targets: each stop grid refined ``the_plan.oversampling``
     times and interpolated by p x p Lagrange; one thread per target, clusters in a fixed order
     (a block of targets gives the same bits)."""
@@ -364,7 +381,7 @@ def interpolated(G: NDArray[np.complex128], the_plan: Plan, angles: NDArray[np.f
 
     level = the_plan.levels[the_plan.stop]
     p = the_plan.p
-    m = the_plan.oversampling * G.shape[1]
+    m = the_plan.oversampling * the_plan.sizes[the_plan.stop]
     axis = target_axis(m, p)
     iu, wu = lagrange(angles[:, 0], axis, p)
     iv, wv = lagrange(angles[:, 1], axis, p)
@@ -373,10 +390,11 @@ def interpolated(G: NDArray[np.complex128], the_plan: Plan, angles: NDArray[np.f
     pts, table = warray(points, device), warray(radiation.cis_table(), device, wp.vec2d)
     out = wp.zeros((len(angles), 6), dtype=wp.float64, device=device)
     per = max(1, int(CHUNK_BYTES // (48 * m * m * 2)))
-    for c0 in range(0, len(G), per):
-        c1 = min(c0 + per, len(G))
-        fine = resample(G[c0:c1], m).view(np.float64)  # (c, m, m, 6): (Re, Im) pairs
-        runtime.launch(fast.interpolate_targets, len(angles), [
-            warray(fine, device), p, *args, warray(level.centres[c0:c1], device), pts, k, table, out],
-            device, min_chunk=16)
+    for q0, q1, G in grids:
+        for c0 in range(q0, q1, per):
+            c1 = min(c0 + per, q1)
+            fine = resample(G[c0 - q0:c1 - q0], m).view(np.float64)  # (c, m, m, 6): (Re, Im) pairs
+            runtime.launch(fast.interpolate_targets, len(angles), [
+                warray(fine, device), p, *args, warray(level.centres[c0:c1], device), pts, k, table, out],
+                device, min_chunk=16)
     return out.numpy()

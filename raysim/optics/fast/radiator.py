@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import time
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -54,13 +55,20 @@ class FastRadiator:
         field is bit-identical whatever the split); default: the points' own.
     force : run the multilevel sum even where the direct sum is estimated cheaper (tests).
     cache : a dict kept by the owner of the elements (:class:`raysim.optics.sources.Sources`):
-        the stop level's grids are stored there per kind, domain and tolerance, so later blocks
-        of points only interpolate (the elements of a kind must not change between uses).
+        the plan, the sums on a tensor grid and (when they fit one chunk) the stop level's grids
+        are stored there per kind, domain and tolerance, so later blocks of points only look up
+        or interpolate (the elements of a kind must not change between uses).
+    plans : a dict shared between radiators of elements at nearly the same positions (a
+        central difference's two copies): the first plans each kind's tree and keeps it there,
+        the others sum on that tree while every element still lies within its clusters
+        (:func:`raysim.optics.fast.multilevel.holds`). One tree makes the sums one linear map of
+        the elements' exact leaf fields, so the approximation errors of the two copies cancel in
+        their difference instead of adding to it.
     """
 
     def __init__(self, points: ArrayLike, k: float, device: str | None = "cpu", block: int | None = None,
                  tol: float = DEFAULT_TOL, centre: ArrayLike | None = None, domain: Domain | None = None,
-                 force: bool = False, cache: dict | None = None) -> None:
+                 force: bool = False, cache: dict | None = None, plans: dict | None = None) -> None:
         if not 0 < tol < 1:
             raise RaysimError(f"radiator tolerance must be in (0, 1), got {tol:g}")
         self.direct = Radiator(points, k, device, block=block)
@@ -71,6 +79,7 @@ class FastRadiator:
         self.tol = float(tol)
         self.force = force
         self.cache = cache
+        self.plans = plans
         self.domain = domain
         self.angles: NDArray[np.float64] | None = None
         if centre is not None and self.n:
@@ -91,7 +100,9 @@ class FastRadiator:
 
     def add_packed(self, src: Any, kind: str = "electric", progress: Progress | None = None,
                    extent: Any = None) -> None:
-        """Keep elements of ``kind`` (numpy or Warp float64, the kernels' packed layout)."""
+        """Keep elements of ``kind`` (numpy or Warp float64, the kernels' packed layout), by
+        reference where they are float64 on the CPU (at 6 GHz on the paper's dish a copy is
+        2 GB): the caller does not change them afterwards."""
         spec = self.direct.kinds[kind]
         a = src.numpy() if hasattr(src, "numpy") else np.asarray(src, dtype=np.float64)
         if a.shape[0] != spec.rows:
@@ -99,7 +110,7 @@ class FastRadiator:
         if a.shape[1] == 0 or self.n == 0:
             return
         self.direct._check_phase((a[:3].min(axis=1), a[:3].max(axis=1)))
-        self.sources.setdefault(kind, []).append(np.array(a, dtype=np.float64))
+        self.sources.setdefault(kind, []).append(np.asarray(a, dtype=np.float64))
         self.results.pop(kind, None)
         self.pairs += a.shape[1] * self.n
         if progress is not None:
@@ -119,21 +130,31 @@ class FastRadiator:
             return np.zeros((self.n, 6))
         if kind not in self.results:
             start = time.perf_counter()
-            self.results[kind] = self._run(kind, np.concatenate(self.sources[kind], axis=1))
+            if len(self.sources[kind]) > 1:  # one copy of the elements kept, not two
+                self.sources[kind] = [np.concatenate(self.sources[kind], axis=1)]
+            self.results[kind] = self._run(kind, self.sources[kind][0])
             self.seconds += time.perf_counter() - start
         return self.results[kind]
 
     def _run(self, kind: str, src: NDArray[np.float64]) -> NDArray[np.float64]:
         the_plan = None
         # the kept grids belong to these very elements: keyed on their bytes, not their count
-        key = (kind, self.domain, self.tol, hashlib.blake2b(src.tobytes(), digest_size=16).digest())
+        digest = hashlib.blake2b(np.ascontiguousarray(src).data, digest_size=16).digest()  # no copy
+        key = (kind, self.domain, self.tol, digest)
         if self.cache is not None and key in self.cache:
-            the_plan, G, store = self.cache[key]
+            the_plan, store = self.cache[key]
             self.method[kind] = describe(the_plan)
-            return multilevel.to_targets(G, the_plan, self.angles, self.points, self.k, self.device,
-                                         self.domain, store)
+            return multilevel.to_targets(self._grids(kind, src, the_plan, store), the_plan, self.angles,
+                                         self.points, self.k, self.device, self.domain, store)
         if self.domain is not None and self.angles is not None and kind in FAST_KINDS:
-            the_plan = plan_for(np.ascontiguousarray(src[:3].T), self.domain, self.k, self.tol)
+            positions = np.ascontiguousarray(src[:3].T)
+            shared = None if self.plans is None else self.plans.get((kind, self.domain, self.tol))
+            if shared is not None and multilevel.holds(shared, positions, 1e-3 * 2.0 * np.pi / self.k):
+                the_plan = shared
+            else:
+                the_plan = plan_for(positions, self.domain, self.k, self.tol)
+                if self.plans is not None and the_plan is not None:
+                    self.plans[(kind, self.domain, self.tol)] = the_plan
         if the_plan is None or (the_plan.cost >= the_plan.direct_cost and not self.force):
             self.method[kind] = "direct"
             one = Radiator(self.points, self.k, self.device, block=self.direct.block)
@@ -141,12 +162,33 @@ class FastRadiator:
             return one.sums_of(kind)
         self.method[kind] = describe(the_plan)
         assert self.domain is not None and self.angles is not None
-        G = multilevel.stop_grids(_segments(kind), src, the_plan, self.domain, self.k, self.device)
         store: dict = {}
         if self.cache is not None:
-            self.cache[key] = (the_plan, G, store)
-        return multilevel.to_targets(G, the_plan, self.angles, self.points, self.k, self.device,
-                                     self.domain, store)
+            self.cache[key] = (the_plan, store)
+        return multilevel.to_targets(self._grids(kind, src, the_plan, store), the_plan, self.angles,
+                                     self.points, self.k, self.device, self.domain, store)
+
+    def _grids(self, kind: str, src: NDArray[np.float64], the_plan: multilevel.Plan,
+               store: dict) -> Callable[[], Iterator[tuple[int, int, NDArray[np.complex128]]]]:
+        """The stop grids' chunks, as :func:`raysim.optics.fast.multilevel.to_targets` reads
+        them: kept in ``store`` for later blocks of points when they come in one chunk (one
+        chunk's memory) and the last step interpolates them; summed again from the elements
+        otherwise (a tensor plan keeps its grid's sums instead)."""
+        assert self.domain is not None
+        domain = self.domain
+
+        def grids() -> Iterator[tuple[int, int, NDArray[np.complex128]]]:
+            if "stop" in store:
+                yield from store["stop"]
+                return
+            chunks = multilevel.stop_grids(_segments(kind), src, the_plan, domain, self.k, self.device)
+            if the_plan.oversampling and len(the_plan.chunks(-1, 0, 0)) == 1:
+                store["stop"] = list(chunks)
+                yield from store["stop"]
+            else:
+                yield from chunks
+
+        return grids
 
     def field(self, kinds: tuple[str, ...] | None = None) -> NDArray[np.complex128]:
         """E (n, 3) complex (V/m) of everything added so far (or of the ``kinds`` named)."""
@@ -223,13 +265,14 @@ def quadrature_cost(quadrature: Any, points: ArrayLike, k: float, centre: ArrayL
 def make_radiator(points: ArrayLike, k: float, device: str | None = "cpu", block: int | None = None,
                   radiator: str = "fast", tol: float = DEFAULT_TOL, centre: ArrayLike | None = None,
                   domain: Domain | None = None, cache: dict | None = None,
-                  force: bool = False) -> Radiator | FastRadiator:
+                  force: bool = False, plans: dict | None = None) -> Radiator | FastRadiator:
     """A radiator of the chosen method: ``fast`` (multilevel where cheaper, else direct; needs
     ``centre``, the targets' sphere centre; ``force``: multilevel whatever the cost estimate,
-    for tests and benchmarks) or ``direct`` (the reference sum)."""
+    for tests and benchmarks; ``plans``: a tree shared with other radiators, as
+    :class:`FastRadiator`) or ``direct`` (the reference sum)."""
     if radiator not in RADIATORS:
         raise RaysimError(f"unknown radiator {radiator!r}: use one of {', '.join(RADIATORS)}")
     if radiator == "direct" or centre is None:
         return Radiator(points, k, device, block=block)
     return FastRadiator(points, k, device, block=block, tol=tol, centre=centre, domain=domain, cache=cache,
-                        force=force)
+                        force=force, plans=plans)

@@ -108,9 +108,9 @@ def test_the_same_bits_on_every_run_and_chunks_agree(elements, points, weights, 
 
 @pytest.mark.parametrize("last", [(0, 0), (6, 10)])
 def test_every_step_of_the_transposed_tree(elements, points, weights, direct, last, monkeypatch) -> None:
-    """The transposed sum with the plan's stop two levels above the leaves, the pivot between
-    them (the finer subtree summed a chunk at a time), by the tensor series or the general last
-    step: within tolerance of the direct VJP."""
+    """The transposed sum with the plan's stop two levels above the leaves, walked a few
+    clusters at a time at every level (a chunk size of a few grids), by the tensor series or the
+    general last step: within tolerance of the direct VJP."""
     from dataclasses import replace
 
     from raysim.optics.fast import adjoint, multilevel
@@ -121,7 +121,10 @@ def test_every_step_of_the_transposed_tree(elements, points, weights, direct, la
         made = original(*args, **kw)
         if made is None or made.leaf < 2:
             return made
-        return replace(made, stop=made.leaf - 2, pivot=made.leaf - 1, oversampling=last[0], p=last[1])
+        shaped = replace(made, stop=made.leaf - 2, oversampling=last[0], p=last[1])
+        monkeypatch.setattr(multilevel, "GRID_BYTES", 3 * 48 * made.sizes[made.leaf - 2] ** 2)
+        assert len(shaped.chunks(-1, 0, 0)) > 1
+        return shaped
 
     monkeypatch.setattr(adjoint.multilevel, "plan", shaped)
     monkeypatch.setattr(multilevel, "CHUNK_BYTES", 2e5)
@@ -192,3 +195,27 @@ def test_fringe_vjp_through_the_fast_radiator(points) -> None:
     assert info["method"].startswith("fast")
     for a, b in zip(fast, direct, strict=True):
         assert _rel_rms(a, b) < 1e-6
+
+
+def test_fringe_jvp_through_the_fast_radiator(points) -> None:
+    """The rim's fringe JVP (central differences of two copies of the edge elements) with both
+    copies summed on one multilevel tree, against the direct sum's; and its pairing with the
+    fast fringe VJP, <J v, c> = <v, J^T c>."""
+    from raysim.optics import ptd_jacobian
+    from raysim.optics.illumination import Illumination
+    from raysim.surface.mesh import paraboloid
+
+    wave = Illumination.plane_wave(1e9, (0, 0, -1), (1, 0, 0))
+    state = ptd_jacobian.edge_state(paraboloid(D, F, 1.0), wave)
+    rng = np.random.default_rng(3)
+    n = len(state.edges)
+    v = [rng.standard_normal(n) * scale for scale in (1e-4, 1e-3, 1e-3)]
+    fast_kw = {"radiator": "fast", "tol": 1e-6, "centre": CENTRE, "force": True}
+    direct = ptd_jacobian.jvp(state, wave, points, *v)
+    fast = ptd_jacobian.jvp(state, wave, points, *v, **fast_kw)
+    assert np.linalg.norm(fast - direct) <= 1e-6 * np.linalg.norm(direct)
+    c = rng.standard_normal((len(points), 3)) + 1j * rng.standard_normal((len(points), 3))
+    grads = ptd_jacobian.vjp(state, wave, points, c, **fast_kw)
+    lhs = float(np.real(np.sum(np.conj(c) * fast)))
+    rhs = sum(float(g @ d) for g, d in zip(grads, v, strict=True))
+    assert abs(lhs - rhs) <= 1e-6 * abs(lhs)
