@@ -236,7 +236,7 @@ def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike,
         if the_plan.oversampling == 0:  # a tensor plan's stray target: the general last step
             the_plan = multilevel.general_last_step(the_plan)
         W_T = _scatter_matrix(angles, the_plan)
-    ordered = np.ascontiguousarray(src[:, the_plan.order])
+    ordered = multilevel.leaf_ordered([src], the_plan)
     result = np.empty((8, src.shape[1]))
     # a chunk of stop clusters at a time, down to the leaves a chunk of families per level at a
     # time (the forward's walk, :meth:`raysim.optics.fast.multilevel.Plan.chunks`)

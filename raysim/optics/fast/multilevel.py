@@ -16,7 +16,12 @@ One n per level (its widest cluster's), so every cluster of a level shares one g
    exactly on the whole grid by two matrix products; elsewhere each grid refined a few times
    (the plan's ``oversampling``) and interpolated to the targets by p x p Lagrange.
 
-All sums are the raw sums of :mod:`raysim.optics.kernels.radiation` (before the prefactor).
+The tree is walked depth first, a chunk of clusters at a time (:meth:`Plan.chunks`): a chunk of
+the stop level's clusters, under it a chunk of their children, and so on to the leaves, each
+chunk's grids within :data:`GRID_BYTES`; so one chunk per level is held at once and memory stays
+bounded at any frequency (at 6 GHz on the paper's dish the stop level's grids alone would take
+6 GB). All sums are the raw sums of :mod:`raysim.optics.kernels.radiation` (before the
+prefactor).
 """
 
 from __future__ import annotations
@@ -195,7 +200,7 @@ def leaf_grids(segments: Any, src: Any, the_plan: Plan, domain: Domain, k: float
                lo: int = 0, hi: int | None = None) -> NDArray[np.complex128]:
     """F_c of leaf clusters lo .. hi - 1 on the leaf level's grid: (hi - lo, n, n, 3) complex.
     ``segments``: the kind's pair of kernels from :func:`raysim.optics.kernels.radiation.segment_kernel`;
-    ``src``: the elements in leaf order (a Warp array, :func:`sorted_sources`)."""
+    ``src``: the elements in leaf order (a Warp array of :func:`leaf_ordered`'s)."""
     wp = runtime.init()
     from raysim.optics.kernels import radiation
 
@@ -252,18 +257,28 @@ def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Dom
     return out
 
 
-def sorted_sources(src: NDArray[np.float64], the_plan: Plan, device: str) -> Any:
-    """The elements (rows, n) in the plan's leaf order, as the leaf kernels read them (Warp)."""
-    return warray(src[:, the_plan.order], device)
+def leaf_ordered(pieces: list[NDArray[np.float64]], the_plan: Plan) -> NDArray[np.float64]:
+    """The elements of ``pieces`` ((rows, n_i) each, in the order the plan was made for) as one
+    (rows, n) array in the plan's leaf order, gathered piece by piece (no concatenated copy)."""
+    n = sum(piece.shape[1] for piece in pieces)
+    where = np.empty(n, dtype=np.int64)
+    where[the_plan.order] = np.arange(n)
+    out = np.empty((pieces[0].shape[0], n))
+    at = 0
+    for piece in pieces:
+        out[:, where[at:at + piece.shape[1]]] = piece
+        at += piece.shape[1]
+    return out
 
 
-def stop_grids(segments: Any, src: NDArray[np.float64], the_plan: Plan, domain: Domain, k: float,
+def stop_grids(segments: Any, ordered: NDArray[np.float64], the_plan: Plan, domain: Domain, k: float,
                device: str) -> Iterator[tuple[int, int, NDArray[np.complex128]]]:
-    """The stop level's grids of the elements ``src`` (the kind's packed rows), a chunk of
-    clusters at a time: (q0, q1, grids (q1 - q0, n, n, 3)) of clusters q0 .. q1 - 1. Each chunk
-    is summed from the leaves up one chunk of families per level at a time
-    (:meth:`Plan.chunks`), so the memory held is a chunk per level whatever the frequency."""
-    sorted_src = sorted_sources(src, the_plan, device)
+    """The stop level's grids of the elements ``ordered`` (the kind's packed rows, in the plan's
+    leaf order: :func:`leaf_ordered`), a chunk of clusters at a time: (q0, q1, grids (q1 - q0,
+    n, n, 3)) of clusters q0 .. q1 - 1. Each chunk is summed from the leaves up one chunk of
+    families per level at a time (:meth:`Plan.chunks`), so the memory held is a chunk per
+    level whatever the frequency."""
+    sorted_src = warray(ordered, device)
     for q0, q1 in the_plan.chunks(-1, 0, 0):
         yield q0, q1, _grids(segments, sorted_src, the_plan, domain, k, device, the_plan.stop, q0, q1)
 

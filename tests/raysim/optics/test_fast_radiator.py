@@ -96,6 +96,19 @@ def test_error_shrinks_with_tolerance_on_scan_points() -> None:
     assert errors[2] < errors[1] < errors[0]
 
 
+def test_elements_added_in_pieces_give_the_same_bits() -> None:
+    """Elements added in three pieces sum to the bits of the same elements added at once, and
+    the radiator then holds them as one array (in leaf order) instead of the pieces."""
+    pts = _grid_points()
+    src = _elements("electric")
+    whole, _ = _fast(pts, src, "electric", 1e-6)
+    r = FastRadiator(pts, K, tol=1e-6, centre=CENTRE, force=True)
+    for part in np.array_split(src, 3, axis=1):
+        r.add_packed(part, "electric")
+    assert np.array_equal(r.sums_of("electric"), whole)
+    assert len(r.sources["electric"]) == 1 and r.sources["electric"][0].shape == src.shape
+
+
 @pytest.mark.parametrize("stop_chunks", [1, 3])
 def test_a_block_of_points_gives_the_same_bits(stop_chunks: int, monkeypatch) -> None:
     """A block of the grid's points gets the whole grid's bits, with the stop level's grids in
@@ -130,7 +143,7 @@ def _planned(pts: np.ndarray, src: np.ndarray, kind: str, stop: int, last=(0, 0)
     plan = replace(plan, stop=stop, oversampling=last[0], p=last[1])
 
     def grids():
-        return multilevel.stop_grids(_segments(kind), src, plan, domain, K, "cpu")
+        return multilevel.stop_grids(_segments(kind), multilevel.leaf_ordered([src], plan), plan, domain, K, "cpu")
 
     return multilevel.to_targets(grids, plan, to_angles(pts, CENTRE), pts, K, "cpu", domain)
 
