@@ -28,6 +28,7 @@ every run.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -67,10 +68,11 @@ def _spectrum_to_grid(S_adj: NDArray[np.complex128], n: int) -> NDArray[np.compl
     return sfft.fft2(full, axes=(1, 2), workers=FFT_WORKERS, overwrite_x=True) / (n * n)
 
 
-def _tensor_weights(B: NDArray[np.complex128], the_plan: multilevel.Plan, domain: Domain, k: float,
-                    q0: int, q1: int) -> NDArray[np.complex128]:
-    """Step 1 on the domain's tensor grid for stop clusters q0 .. q1 - 1, ``B`` (R * Q, 3) the
-    weights on the whole grid: the transpose of :func:`raysim.optics.fast.multilevel.grid_sums`."""
+def _tensor_weights(B: NDArray[np.complex128], the_plan: multilevel.Plan, domain: Domain,
+                    k: float) -> Callable[[int, int], NDArray[np.complex128]]:
+    """Step 1 on the domain's tensor grid, ``B`` (R * Q, 3) the weights on the whole grid: the
+    transpose of :func:`raysim.optics.fast.multilevel.grid_sums`, as a function of a range of
+    stop clusters q0 .. q1 - 1 (the series' basis and the grid's points made once)."""
     level = the_plan.levels[the_plan.stop]
     n = the_plan.sizes[the_plan.stop]
     keep, E_theta, E_phi_T = multilevel.series_basis(n, domain)
@@ -78,19 +80,23 @@ def _tensor_weights(B: NDArray[np.complex128], the_plan: multilevel.Plan, domain
     R, Q = E_theta.shape[0], E_phi_T.shape[1]
     points = multilevel.tensor_points(domain)
     nk = len(keep)
-    out = np.empty((q1 - q0, n, n, 3), dtype=np.complex128)
     per = max(1, int(CHUNK_BYTES // (16 * 3 * R * Q * 2)))
-    for c0 in range(q0, q1, per):
-        c1 = min(c0 + per, q1)
-        c = c1 - c0
-        r = multilevel.distances(points, level.centres[c0:c1])
-        X = (np.exp(-1j * k * r)[:, :, None] * B[None, :, :]).reshape(c, R, Q, 3)
-        # (nk x R) X (R x Q) (Q x nk) per cluster and component, as two plain matrix products
-        A = np.ascontiguousarray(np.transpose(X, (1, 0, 3, 2))).reshape(R, c * 3 * Q)
-        W = (E_theta_T @ A).reshape(nk * c * 3, Q) @ E_phi  # (nk * c * 3, nk)
-        S_adj = np.transpose(W.reshape(nk, c, 3, nk), (1, 0, 3, 2))  # (c, kθ, kφ, 3)
-        out[c0 - q0:c1 - q0] = _spectrum_to_grid(S_adj, n)
-    return out
+
+    def weights(q0: int, q1: int) -> NDArray[np.complex128]:
+        out = np.empty((q1 - q0, n, n, 3), dtype=np.complex128)
+        for c0 in range(q0, q1, per):
+            c1 = min(c0 + per, q1)
+            c = c1 - c0
+            r = multilevel.distances(points, level.centres[c0:c1])
+            X = (np.exp(-1j * k * r)[:, :, None] * B[None, :, :]).reshape(c, R, Q, 3)
+            # (nk x R) X (R x Q) (Q x nk) per cluster and component, as two plain matrix products
+            A = np.ascontiguousarray(np.transpose(X, (1, 0, 3, 2))).reshape(R, c * 3 * Q)
+            W = (E_theta_T @ A).reshape(nk * c * 3, Q) @ E_phi  # (nk * c * 3, nk)
+            S_adj = np.transpose(W.reshape(nk, c, 3, nk), (1, 0, 3, 2))  # (c, kθ, kφ, 3)
+            out[c0 - q0:c1 - q0] = _spectrum_to_grid(S_adj, n)
+        return out
+
+    return weights
 
 
 def _scatter_matrix(angles: NDArray[np.float64], the_plan: multilevel.Plan) -> sparse.csr_matrix:
@@ -110,24 +116,30 @@ def _scatter_matrix(angles: NDArray[np.float64], the_plan: multilevel.Plan) -> s
                              shape=(m * m, M))  # duplicates summed in a fixed order
 
 
-def _scattered_weights(b: NDArray[np.complex128], W_T: sparse.csr_matrix, points: NDArray[np.float64],
-                       the_plan: multilevel.Plan, k: float, q0: int, q1: int) -> NDArray[np.complex128]:
-    """Step 1 for any targets and stop clusters q0 .. q1 - 1: the transpose of
-    :func:`raysim.optics.fast.multilevel.interpolated` (``W_T`` from :func:`_scatter_matrix`,
-    then the refinement transposed)."""
+def _scattered_weights(b: NDArray[np.complex128], angles: NDArray[np.float64], points: NDArray[np.float64],
+                       the_plan: multilevel.Plan, k: float) -> Callable[[int, int], NDArray[np.complex128]]:
+    """Step 1 for any targets: the transpose of
+    :func:`raysim.optics.fast.multilevel.interpolated` (the Lagrange weights scattered onto the
+    refined grid, :func:`_scatter_matrix`, made once; then the refinement transposed), as a
+    function of a range of stop clusters q0 .. q1 - 1."""
     level = the_plan.levels[the_plan.stop]
     n = the_plan.sizes[the_plan.stop]
     m = the_plan.oversampling * n
     M = len(points)
-    out = np.empty((q1 - q0, n, n, 3), dtype=np.complex128)
+    W_T = _scatter_matrix(angles, the_plan)
     per = max(1, int(CHUNK_BYTES // (48 * m * m * 2)))
-    for c0 in range(q0, q1, per):
-        c1 = min(c0 + per, q1)
-        r = multilevel.distances(points, level.centres[c0:c1])
-        X = np.exp(-1j * k * r)[:, :, None] * b[None, :, :]  # (c, M, 3)
-        fine = (W_T @ np.moveaxis(X, 1, 0).reshape(M, -1)).reshape(m, m, c1 - c0, 3)
-        out[c0 - q0:c1 - q0] = restrict(np.moveaxis(fine, 2, 0), n)
-    return out
+
+    def weights(q0: int, q1: int) -> NDArray[np.complex128]:
+        out = np.empty((q1 - q0, n, n, 3), dtype=np.complex128)
+        for c0 in range(q0, q1, per):
+            c1 = min(c0 + per, q1)
+            r = multilevel.distances(points, level.centres[c0:c1])
+            X = np.exp(-1j * k * r)[:, :, None] * b[None, :, :]  # (c, M, 3)
+            fine = (W_T @ np.moveaxis(X, 1, 0).reshape(M, -1)).reshape(m, m, c1 - c0, 3)
+            out[c0 - q0:c1 - q0] = restrict(np.moveaxis(fine, 2, 0), n)
+        return out
+
+    return weights
 
 
 def disaggregate(beta: NDArray[np.complex128], child: int, the_plan: multilevel.Plan, domain: Domain,
@@ -232,18 +244,17 @@ def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike,
     if index is not None:
         B = np.zeros((len(np.asarray(domain.thetas)) * len(np.asarray(domain.phis)), 3), dtype=np.complex128)
         np.add.at(B, index, bw)  # a target twice on the grid counts twice
+        weights = _tensor_weights(B, the_plan, domain, k)
     else:
         if the_plan.oversampling == 0:  # a tensor plan's stray target: the general last step
             the_plan = multilevel.general_last_step(the_plan)
-        W_T = _scatter_matrix(angles, the_plan)
+        weights = _scattered_weights(bw, angles, pts, the_plan, k)
     ordered = multilevel.leaf_ordered([src], the_plan)
     result = np.empty((8, src.shape[1]))
     # a chunk of stop clusters at a time, down to the leaves a chunk of families per level at a
     # time (the forward's walk, :meth:`raysim.optics.fast.multilevel.Plan.chunks`)
     for q0, q1 in the_plan.chunks(-1, 0, 0):
-        beta = _tensor_weights(B, the_plan, domain, k, q0, q1) if index is not None else \
-            _scattered_weights(bw, W_T, pts, the_plan, k, q0, q1)
-        _descend(kernel, ordered, beta, the_plan, domain, k, dev, the_plan.stop, q0, q1, result)
+        _descend(kernel, ordered, weights(q0, q1), the_plan, domain, k, dev, the_plan.stop, q0, q1, result)
     out = np.empty_like(result)
     out[:, the_plan.order] = result  # back from leaf order to the elements' order
     if info is not None:
