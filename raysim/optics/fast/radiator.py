@@ -150,7 +150,11 @@ class FastRadiator:
             return multilevel.to_targets(self._grids(kind, the_plan, store), the_plan, self.angles,
                                          self.points, self.k, self.device, self.domain, store)
         if self.domain is not None and self.angles is not None and kind in FAST_KINDS:
-            positions = np.ascontiguousarray(np.concatenate([part[:3] for part in held], axis=1).T)
+            positions = np.empty((sum(part.shape[1] for part in held), 3))  # (n, 3), one copy
+            at = 0
+            for part in held:
+                positions[at:at + part.shape[1]] = part[:3].T
+                at += part.shape[1]
             shared = None if self.plans is None else self.plans.get((kind, self.domain, self.tol))
             if shared is not None and multilevel.holds(shared, positions, 1e-3 * 2.0 * np.pi / self.k):
                 the_plan = shared
