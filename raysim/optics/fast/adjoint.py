@@ -253,7 +253,7 @@ def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike,
     result = np.empty((8, src.shape[1]))
     # a chunk of stop clusters at a time, down to the leaves a chunk of families per level at a
     # time (the forward's walk, :meth:`raysim.optics.fast.multilevel.Plan.chunks`)
-    for q0, q1 in the_plan.chunks(-1, 0, 0):
+    for q0, q1 in the_plan.stop_chunks():
         _descend(kernel, ordered, weights(q0, q1), the_plan, domain, k, dev, the_plan.stop, q0, q1, result)
     out = np.empty_like(result)
     out[:, the_plan.order] = result  # back from leaf order to the elements' order

@@ -92,22 +92,29 @@ class Plan:
         return int(np.searchsorted(parent, q0)), int(np.searchsorted(parent, q1))
 
     def chunks(self, level: int, q0: int, q1: int) -> list[tuple[int, int]]:
-        """Ranges of clusters q0 .. q1 - 1 of ``level`` (``level`` -1: the one range of the
-        stop level's clusters) whose children's grids take at most :data:`GRID_BYTES`
-        together (one cluster at least): the units in which the sum walks the tree, so that
-        one chunk per level is held at a time however many clusters a level has."""
-        if level < 0:
-            level, q0, q1 = self.stop - 1, 0, len(self.levels[self.stop].keys)
-            first = np.arange(q0, q1 + 1)  # the stop clusters themselves
-        else:
-            first = np.searchsorted(self.levels[level + 1].parent, np.arange(q0, q1 + 1))
-        per = max(1, int(GRID_BYTES // (48.0 * self.sizes[level + 1] ** 2)))
-        out, q = [], 0
-        while q < q1 - q0:
-            q_next = max(q + 1, int(np.searchsorted(first, first[q] + per, side="right")) - 1)
-            out.append((q0 + q, q0 + q_next))
-            q = q_next
-        return out
+        """Ranges of clusters q0 .. q1 - 1 of ``level`` whose children's grids take at most
+        :data:`GRID_BYTES` together (one cluster at least): the units in which the sum walks
+        the tree, so that one chunk per level is held at a time however many clusters a level
+        has."""
+        first = np.searchsorted(self.levels[level + 1].parent, np.arange(q0, q1 + 1))
+        return _runs(first, self.sizes[level + 1], q0)
+
+    def stop_chunks(self) -> list[tuple[int, int]]:
+        """Ranges of the stop level's clusters whose grids take at most :data:`GRID_BYTES`
+        (one cluster at least): the chunks the sum's last step takes one after another."""
+        return _runs(np.arange(len(self.levels[self.stop].keys) + 1), self.sizes[self.stop], 0)
+
+
+def _runs(first: NDArray[np.int64], n: int, q0: int) -> list[tuple[int, int]]:
+    """Consecutive ranges of items q0, q0 + 1, ... where item q owns the grids (n x n) numbered
+    first[q - q0] .. first[q - q0 + 1] - 1, each range's grids within :data:`GRID_BYTES`."""
+    per = max(1, int(GRID_BYTES // (48.0 * n * n)))
+    out, q = [], 0
+    while q < len(first) - 1:
+        q_next = max(q + 1, int(np.searchsorted(first, first[q] + per, side="right")) - 1)
+        out.append((q0 + q, q0 + q_next))
+        q = q_next
+    return out
 
 
 def _size(level: quadtree.Level, domain: Domain, k: float, digits: float) -> int | None:
@@ -172,9 +179,8 @@ def holds(the_plan: Plan, positions: NDArray[np.float64], slack: float) -> bool:
         return False
     pos = positions[the_plan.order]
     for level in the_plan.levels:
-        member = np.repeat(np.arange(len(level.keys)), level.ends - level.begins)
-        dist = np.linalg.norm(pos - level.centres[member], axis=1)
-        if np.any(dist > level.radii[member] + slack):
+        dist = quadtree.centre_distances(pos, level.begins, level.ends, level.centres)
+        if np.any(np.maximum.reduceat(dist, level.begins) > level.radii + slack):
             return False
     return True
 
@@ -279,7 +285,7 @@ def stop_grids(segments: Any, ordered: NDArray[np.float64], the_plan: Plan, doma
     families per level at a time (:meth:`Plan.chunks`), so the memory held is a chunk per
     level whatever the frequency."""
     sorted_src = warray(ordered, device)
-    for q0, q1 in the_plan.chunks(-1, 0, 0):
+    for q0, q1 in the_plan.stop_chunks():
         yield q0, q1, _grids(segments, sorted_src, the_plan, domain, k, device, the_plan.stop, q0, q1)
 
 

@@ -201,7 +201,7 @@ class FastRadiator:
                 return
             ordered = self._in_leaf_order(kind, the_plan)
             chunks = multilevel.stop_grids(_segments(kind), ordered, the_plan, domain, self.k, self.device)
-            if the_plan.oversampling and len(the_plan.chunks(-1, 0, 0)) == 1:
+            if the_plan.oversampling and len(the_plan.stop_chunks()) == 1:
                 store["stop"] = list(chunks)
                 yield from store["stop"]
             else:

@@ -36,6 +36,14 @@ def _morton(ix: NDArray[np.int64], iy: NDArray[np.int64], depth: int) -> NDArray
     return key
 
 
+def centre_distances(pos: NDArray[np.float64], begins: NDArray[np.int64], ends: NDArray[np.int64],
+                     centres: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Each element's distance (m) from its cluster's centre: ``pos`` (n, 3) in leaf order,
+    the clusters' element ranges ``begins``/``ends`` and ``centres`` (C, 3)."""
+    member = np.repeat(np.arange(len(begins)), ends - begins)
+    return np.linalg.norm(pos - centres[member], axis=1)
+
+
 def build(positions: NDArray[np.float64], depth: int) -> tuple[NDArray[np.int64], list[Level]]:
     """(order, levels): ``order`` sorts the elements (n, 3 positions, m) into leaf order;
     ``levels[l]`` holds level l's clusters, l = 0 (root) .. depth (leaves)."""
@@ -56,9 +64,7 @@ def build(positions: NDArray[np.float64], depth: int) -> tuple[NDArray[np.int64]
         lo3 = np.minimum.reduceat(pos, starts, axis=0)
         hi3 = np.maximum.reduceat(pos, starts, axis=0)
         centres = 0.5 * (lo3 + hi3)
-        member = np.repeat(np.arange(len(starts)), ends - starts)
-        dist = np.linalg.norm(pos - centres[member], axis=1)
-        radii = np.maximum.reduceat(dist, starts)
+        radii = np.maximum.reduceat(centre_distances(pos, starts, ends, centres), starts)
         levels.append(Level(key[starts], starts, ends, centres, radii, np.full(len(starts), -1)))
     for level in range(1, depth + 1):
         child, up = levels[level], levels[level - 1]

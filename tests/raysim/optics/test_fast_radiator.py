@@ -122,7 +122,7 @@ def test_a_block_of_points_gives_the_same_bits(stop_chunks: int, monkeypatch) ->
         plan = multilevel.plan(np.ascontiguousarray(src[:3].T), domain, K, 1e-6 / 8, ((0, 0),))
         clusters = len(plan.levels[plan.stop].keys)
         monkeypatch.setattr(multilevel, "GRID_BYTES", 48 * plan.sizes[plan.stop] ** 2 * -(-clusters // 3))
-        assert len(plan.chunks(-1, 0, 0)) == 3
+        assert len(plan.stop_chunks()) == 3
     whole, _ = _fast(pts, src, "electric", 1e-6, domain=domain)
     block, _ = _fast(pts[100:333], src, "electric", 1e-6, domain=domain)
     assert np.array_equal(block, whole[100:333])
@@ -166,7 +166,7 @@ def test_every_step_of_the_tree(stop: int, last: tuple[int, int], monkeypatch) -
     assert _rel_rms(whole, _direct(pts, src, "magnetic")) < 1e-6
     monkeypatch.setattr(multilevel, "CHUNK_BYTES", 2e5)
     monkeypatch.setattr(multilevel, "GRID_BYTES", 3 * 48 * plan.sizes[stop] ** 2)  # three stop grids
-    assert len(replace(plan, stop=stop).chunks(-1, 0, 0)) > 1
+    assert len(replace(plan, stop=stop).stop_chunks()) > 1
     chunked = _planned(pts, src, "magnetic", stop, last)
     assert np.max(np.abs(chunked - whole)) <= 1e-12 * np.max(np.abs(whole))
 
