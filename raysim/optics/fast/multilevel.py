@@ -265,15 +265,20 @@ def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Dom
 
 def leaf_ordered(pieces: list[NDArray[np.float64]], the_plan: Plan) -> NDArray[np.float64]:
     """The elements of ``pieces`` ((rows, n_i) each, in the order the plan was made for) as one
-    (rows, n) array in the plan's leaf order, gathered piece by piece (no concatenated copy)."""
+    (rows, n) array in the plan's leaf order, gathered piece by piece (no concatenated copy).
+    The list is emptied as it is read: a piece nothing else holds is freed once it is copied,
+    so the elements are held about once, not twice, while they are gathered."""
     n = sum(piece.shape[1] for piece in pieces)
     where = np.empty(n, dtype=np.int64)
     where[the_plan.order] = np.arange(n)
     out = np.empty((pieces[0].shape[0], n))
     at = 0
-    for piece in pieces:
+    pieces.reverse()  # popped from the end, in the order they were added
+    while pieces:
+        piece = pieces.pop()
         out[:, where[at:at + piece.shape[1]]] = piece
         at += piece.shape[1]
+        del piece
     return out
 
 
