@@ -344,9 +344,10 @@ class _WaveContext:
         from raysim.optics.fast.chart import domain_of
 
         self.radiator, self.radiator_tol = options.radiator, options.radiator_tol
+        plans: dict = {}  # the ideal reflector's trees, reused by the deformed one where they hold it
         self.sources: dict[str, Sources] = {
             name: Sources(r, wave, self.spw, self.edges, device, keep, radiator=options.radiator,
-                          tol=options.radiator_tol)
+                          tol=options.radiator_tol, plans=plans)
             for name, r in (("ideal", ideal), ("deformed", deformed))}
         # the whole grid's chart domain: every block of points is summed on the same grids
         self.domains = {name: domain_of(self.points[name], (0.0, 0.0, float(r.F)))

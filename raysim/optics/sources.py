@@ -77,18 +77,23 @@ class Sources:
     device : Warp device.
     keep : keep the PO elements after the first pass (several blocks per process).
     edge_points_per_wavelength : Gauss points per wavelength along the edges.
+    radiator, tol : the sum (``fast`` or ``direct``) and the fast sum's tolerance.
+    plans : a dict given to the Sources of another reflector too (the ideal and the deformed
+        one of a simulation): the fast radiator's trees are planned once and shared where
+        they serve both (:class:`raysim.optics.fast.radiator.FastRadiator`'s ``plans``).
     """
 
     def __init__(self, reflector: Reflector, wave: Illumination, samples_per_wavelength: float,
                  edges: str | None = None, device: str | None = "cpu", keep: bool = True,
                  edge_points_per_wavelength: float | None = None, radiator: str = "direct",
-                 tol: float = DEFAULT_TOL) -> None:
+                 tol: float = DEFAULT_TOL, plans: dict | None = None) -> None:
         from raysim.optics import ptd
 
         if radiator not in RADIATORS:
             raise RaysimError(f"unknown radiator {radiator!r}: use one of {', '.join(RADIATORS)}")
         self.radiator, self.tol = radiator, float(tol)
         self._fast_cache: dict = {}  # the fast radiator's stop-level grids, per domain
+        self._plans = plans  # trees shared with another reflector's Sources (FastRadiator's plans)
         self.methods: dict[str, str] = {}  # kind -> which sum ran last (fast radiator)
         self.device = runtime.resolve_device(device)
         self.reflector, self.wave = reflector, wave
@@ -163,7 +168,7 @@ class Sources:
     def _radiator(self, pts: NDArray[np.float64], domain: Domain | None, block: int | None = None):
         return make_radiator(pts, self.wave.k, self.device, block=block, radiator=self.radiator,
                              tol=self.tol, centre=(0.0, 0.0, float(self.reflector.F)), domain=domain,
-                             cache=self._fast_cache)
+                             cache=self._fast_cache, plans=self._plans)
 
     def radiate(self, points: ArrayLike, progress: Progress | None = None,
                 domain: Domain | None = None) -> Radiated:

@@ -85,6 +85,7 @@ class Plan:
     p: int
     cost: float
     direct_cost: float
+    digits: float  # each step's accuracy, -log10 of its tolerance (sets the grid sizes)
 
     def children(self, level: int, q0: int, q1: int) -> tuple[int, int]:
         """The clusters of ``level + 1`` whose parents are clusters q0 .. q1 - 1 of ``level``."""
@@ -117,12 +118,15 @@ def _runs(first: NDArray[np.int64], n: int, q0: int) -> list[tuple[int, int]]:
     return out
 
 
-def _size(level: quadtree.Level, domain: Domain, k: float, digits: float) -> int | None:
+def _size(centres: NDArray[np.float64], radii: NDArray[np.float64], domain: Domain, k: float,
+          digits: float) -> int | None:
+    """The grid size n of a level whose clusters have ``centres`` (C, 3) m and ``radii`` (C,)
+    m; None when a cluster is not separated from the target sphere."""
     R = domain.radius
-    r_min = np.linalg.norm(level.centres - np.asarray(domain.centre), axis=1) - R - level.radii
+    r_min = np.linalg.norm(centres - np.asarray(domain.centre), axis=1) - R - radii
     if np.any(r_min <= 0.05 * R):
         return None  # a cluster touches the target sphere: not separated
-    B = float(np.max(k * level.radii * R / r_min))
+    B = float(np.max(k * radii * R / r_min))
     return size_for(degree_for(B, digits))
 
 
@@ -143,7 +147,7 @@ def plan(positions: NDArray[np.float64], domain: Domain, k: float, tol: float,
     while depth < max_depth and n / (4 ** (depth + 1)) >= MIN_LEAF:
         depth += 1
     order, levels = quadtree.build(positions, depth)
-    sizes = [_size(level, domain, k, digits) for level in levels]
+    sizes = [_size(level.centres, level.radii, domain, k, digits) for level in levels]
     M = domain.count
     direct = float(n) * M
     best: tuple[float, int, int, int, int] | None = None
@@ -168,19 +172,28 @@ def plan(positions: NDArray[np.float64], domain: Domain, k: float, tol: float,
                     best = (cost + final, leaf, stop, u, p)
     if best is None:
         return None
-    return Plan(order, levels, best[1], best[2], [s or 0 for s in sizes], best[3], best[4], best[0], direct)
+    return Plan(order, levels, best[1], best[2], [s or 0 for s in sizes], best[3], best[4], best[0], direct,
+                digits)
 
 
-def holds(the_plan: Plan, positions: NDArray[np.float64], slack: float) -> bool:
-    """Whether elements at ``positions`` (n, 3) m, taken in the order the plan was made for,
-    still lie within every cluster's radius (plus ``slack``, m): then the plan's grid sizes
-    still bound their clusters' fields, and the plan serves them."""
+def holds(the_plan: Plan, positions: NDArray[np.float64], domain: Domain, k: float) -> bool:
+    """Whether the plan serves elements at ``positions`` (n, 3) m, taken in the order it was
+    made for (the same elements moved: a deformed reflector of the same triangulation, a
+    central difference's copy): every level it uses, with its clusters' centres kept and their
+    radii measured on these positions, still needs grids no larger than the plan's. The sum is
+    then within the tolerance for them, and it is the same linear map of the elements' leaf
+    fields as for the elements it was made for."""
     if len(positions) != len(the_plan.order):
         return False
     pos = positions[the_plan.order]
-    for level in the_plan.levels:
+    for index in range(the_plan.stop, the_plan.leaf + 1):
+        level = the_plan.levels[index]
         dist = quadtree.centre_distances(pos, level.begins, level.ends, level.centres)
-        if np.any(np.maximum.reduceat(dist, level.begins) > level.radii + slack):
+        radii = np.maximum.reduceat(dist, level.begins)
+        if np.all(radii <= level.radii):
+            continue
+        need = _size(level.centres, np.maximum(radii, level.radii), domain, k, the_plan.digits)
+        if need is None or need > the_plan.sizes[index]:
             return False
     return True
 

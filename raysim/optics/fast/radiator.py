@@ -58,12 +58,13 @@ class FastRadiator:
         the plan, the sums on a tensor grid and (when they fit one chunk) the stop level's grids
         are stored there per kind, domain and tolerance, so later blocks of points only look up
         or interpolate (the elements of a kind must not change between uses).
-    plans : a dict shared between radiators of elements at nearly the same positions (a
-        central difference's two copies): the first plans each kind's tree and keeps it there,
-        the others sum on that tree while every element still lies within its clusters
-        (:func:`raysim.optics.fast.multilevel.holds`). One tree makes the sums one linear map of
-        the elements' exact leaf fields, so the approximation errors of the two copies cancel in
-        their difference instead of adding to it.
+    plans : a dict shared between radiators of the same elements moved (a central
+        difference's two copies; the ideal and the deformed reflector of one triangulation):
+        the first plans each kind's tree and keeps it there, the others sum on that tree
+        while its grids still hold their clusters (:func:`raysim.optics.fast.multilevel.holds`),
+        and skip planning. One tree makes the sums one linear map of the elements' exact leaf
+        fields, so the approximation errors of two copies cancel in their difference instead
+        of adding to it.
     """
 
     def __init__(self, points: ArrayLike, k: float, device: str | None = "cpu", block: int | None = None,
@@ -157,7 +158,7 @@ class FastRadiator:
                 positions[at:at + part.shape[1]] = part[:3].T
                 at += part.shape[1]
             shared = None if self.plans is None else self.plans.get((kind, self.domain, self.tol))
-            if shared is not None and multilevel.holds(shared, positions, 1e-3 * 2.0 * np.pi / self.k):
+            if shared is not None and multilevel.holds(shared, positions, self.domain, self.k):
                 the_plan = shared
             else:
                 the_plan = plan_for(positions, self.domain, self.k, self.tol)
