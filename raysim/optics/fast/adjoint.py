@@ -143,24 +143,32 @@ def _scattered_weights(b: NDArray[np.complex128], angles: NDArray[np.float64], p
 
 
 def disaggregate(beta: NDArray[np.complex128], child: int, the_plan: multilevel.Plan, domain: Domain,
-                 k: float, q_lo: int = 0, q_hi: int | None = None) -> NDArray[np.complex128]:
+                 k: float, device: str, q_lo: int = 0, q_hi: int | None = None) -> NDArray[np.complex128]:
     """The weights (C1, nc, nc, 3) of the children of parents q_lo .. q_hi - 1 (level
     ``child - 1``, whose weights ``beta`` holds in order): step 2 (module docs), the transpose of
-    :func:`raysim.optics.fast.multilevel.aggregate`."""
+    :func:`raysim.optics.fast.multilevel.aggregate` (the re-phasing in a Warp kernel, the
+    refinement's transpose by FFTs)."""
+    wp = runtime.init()
+    from raysim.optics.kernels import fast_adjoint, radiation
+
     low, up = the_plan.levels[child], the_plan.levels[child - 1]
     n, nc = the_plan.sizes[child - 1], the_plan.sizes[child]
-    points = grid_points(n, domain)
+    nodes = warray(grid_points(n, domain), device)
+    table = warray(radiation.cis_table(), device, wp.vec2d)
     q_hi = len(up.keys) if q_hi is None else q_hi
     a, b = the_plan.children(child - 1, q_lo, q_hi)
+    weights = warray(np.ascontiguousarray(beta).view(np.float64).reshape(-1, 6), device)
+    parent_centres = warray(up.centres[q_lo:q_hi], device)
     out = np.empty((b - a, nc, nc, 3), dtype=np.complex128)
     per = max(1, int(CHUNK_BYTES // (48 * n * n * 2)))
     for c0 in range(a, b, per):
         c1 = min(c0 + per, b)
-        parents = low.parent[c0:c1]
-        r_p = multilevel.distances(points, up.centres[parents])
-        r_c = multilevel.distances(points, low.centres[c0:c1])
-        shifted = beta[parents - q_lo] * np.exp(1j * k * (r_p - r_c)).reshape(c1 - c0, n, n, 1)
-        out[c0 - a:c1 - a] = restrict(shifted, nc)
+        shifted = wp.empty(((c1 - c0) * n * n, 6), dtype=wp.float64, device=device)
+        runtime.launch(fast_adjoint.rephase_split, (c1 - c0) * n * n, [
+            weights, n * n, warray((low.parent[c0:c1] - q_lo).astype(np.int32), device, wp.int32),
+            warray(low.centres[c0:c1], device), parent_centres, nodes, k, table, shifted], device,
+            min_chunk=256)
+        out[c0 - a:c1 - a] = restrict(shifted.numpy().view(np.complex128).reshape(c1 - c0, n, n, 3), nc)
     return out
 
 
@@ -206,7 +214,7 @@ def _descend(kernel: Any, ordered: NDArray[np.float64], beta: NDArray[np.complex
                                                                      k, device, q0, q1)
         return
     for p0, p1 in the_plan.chunks(level, q0, q1):
-        part = disaggregate(beta[p0 - q0:p1 - q0], level + 1, the_plan, domain, k, p0, p1)
+        part = disaggregate(beta[p0 - q0:p1 - q0], level + 1, the_plan, domain, k, device, p0, p1)
         _descend(kernel, ordered, part, the_plan, domain, k, device, level + 1,
                  *the_plan.children(level, p0, p1), result)
 
