@@ -277,12 +277,29 @@ def refine_gauss_newton(delta0: NDArray[np.float64], fa_measured: NDArray[np.flo
 
 
 REFINE_METHODS = ("auto", "defect", "gauss-newton")
-#: the cost of one radiation (direct pair evaluations, as :func:`model_pairs` estimates it for the
-#: model's radiator) up to which "auto" runs Gauss-Newton: its default 3 steps of up to 60 LSQR
-#: iterations (a JVP and a VJP each) then take about 10 minutes on two cores (measured: the
-#: paper's dish at 0.1 GHz on 90 x 360, 4e7 with the fast radiator; at 0.3 GHz, 2e8, it would
-#: take about half an hour)
-AUTO_MAX_PAIRS = 1.0e8
+#: the pair evaluations (direct-sum units, as :func:`model_pairs` counts one radiation) that
+#: "auto" lets a whole Gauss-Newton run spend: each LSQR iteration is two radiations. About
+#: 10 minutes on two cores, measured on the paper's dish (90 x 360) with the fast radiator:
+#: 0.1 GHz (4e7 per radiation), 3 steps x 60 iterations (1.4e10) in 4.2 min; 0.3 GHz (2e8),
+#: 4 steps x 25 (4e10) in 9.6 min
+AUTO_BUDGET_PAIRS = 3.6e10
+#: the fewest LSQR iterations per step "auto" runs Gauss-Newton with: on the paper's dish the
+#: weak directions need tens of iterations per step (docs/inversion.md), so below this the
+#: defect correction alone is kept
+AUTO_MIN_INNER = 20
+
+
+@dataclass(frozen=True)
+class Choice:
+    """The refinement :func:`choose_method` picks: ``method`` (``defect`` or ``gauss-newton``),
+    ``why`` (one line, the SurfaceMap's ``gn_choice``) and ``inner``, the LSQR iterations per
+    step "auto" affords within :data:`AUTO_BUDGET_PAIRS` (None: the options' own)."""
+
+    method: str
+    why: str
+    inner: int | None = None
+
+
 IN_PROCESS = ("gauss-newton computes its Jacobian in this process, not in blocks on Dask: drop "
               "--scheduler / --workers (the Dask runner), or refine with the defect correction")
 
@@ -310,20 +327,23 @@ def has_exact_jacobian(model: object) -> bool:
         type(model)._scattered is WaveForward._scattered
 
 
-def choose_method(name: str, model: ForwardModel | None, scan, iterations: int) -> tuple[str, str]:
-    """(method, why): ``defect`` or ``gauss-newton`` for the refinement's ``model``.
+def choose_method(name: str, model: ForwardModel | None, scan, iterations: int,
+                  options: GaussNewtonOptions | None = None) -> Choice:
+    """The refinement for ``model`` (:class:`Choice`), before any work is done, so that a
+    request that cannot run is one line.
 
-    Called before any work, so a request that cannot run is one line. Gauss-Newton needs the
-    PO or PO + PTD model (:func:`has_exact_jacobian`) computed in this process (not inside
-    :func:`solver.forward.distributed`); ``auto`` takes it where one radiation costs at most
-    :data:`AUTO_MAX_PAIRS` pair evaluations (each LSQR iteration costs two radiations), else
-    the defect correction alone.
+    Gauss-Newton needs the PO or PO + PTD model (:func:`has_exact_jacobian`) computed in this
+    process (not inside :func:`solver.forward.distributed`). ``auto`` takes it where its steps
+    (``options``, default :class:`GaussNewtonOptions`) with at least :data:`AUTO_MIN_INNER`
+    LSQR iterations each fit :data:`AUTO_BUDGET_PAIRS` pair evaluations (two radiations of the
+    model per iteration, :func:`model_pairs`), with as many iterations per step as fit, up to
+    the options' own; else the defect correction alone.
     """
     if name not in REFINE_METHODS:
         raise SolverError(f"unknown refine method {name!r}: choose one of "
                           f"{', '.join(REFINE_METHODS)}")
     if iterations == 0 or name == "defect":
-        return "defect", "requested" if name == "defect" else "refine 0"
+        return Choice("defect", "requested" if name == "defect" else "refine 0")
     refused = None
     if not has_exact_jacobian(model):
         named = getattr(model, "name", "none")
@@ -334,15 +354,20 @@ def choose_method(name: str, model: ForwardModel | None, scan, iterations: int) 
     if refused is not None:
         if name == "gauss-newton":
             raise SolverError(refused[0])
-        return "defect", refused[1]
+        return Choice("defect", refused[1])
     if name == "gauss-newton":
-        return "gauss-newton", "requested"
+        return Choice("gauss-newton", "requested")
+    opts = options or GaussNewtonOptions()
     pairs = model_pairs(model, scan.sphere, scan.F, scan.D)
-    if pairs <= AUTO_MAX_PAIRS:
-        return "gauss-newton", f"auto: {pairs:.2g} pair evaluations per radiation <= {AUTO_MAX_PAIRS:.0e}"
-    return "defect", (f"auto: {pairs:.2g} pair evaluations per radiation > {AUTO_MAX_PAIRS:.0e} "
-                      "(Gauss-Newton would take well over 10 minutes; --refine-method gauss-newton "
-                      "asks for it)")
+    affordable = int(AUTO_BUDGET_PAIRS // (2.0 * pairs * opts.iterations))  # LSQR iterations a step
+    inner = min(opts.inner, affordable)
+    budget = (f"{pairs:.2g} pair evaluations per radiation, {opts.iterations} steps within "
+              f"{AUTO_BUDGET_PAIRS:.2g}")
+    if inner >= min(AUTO_MIN_INNER, opts.inner):
+        return Choice("gauss-newton", f"auto: {budget}: {inner} LSQR iterations a step", inner)
+    return Choice("defect", f"auto: {budget} leave {affordable} LSQR iterations a step, fewer than "
+                            f"{min(AUTO_MIN_INNER, opts.inner)} (Gauss-Newton would take well over 10 "
+                            "minutes; --refine-method gauss-newton asks for it)")
 
 
 def report_attrs(report: GaussNewtonReport | None, why: str) -> dict:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 
 import numpy as np
 import xarray as xr
@@ -140,7 +141,12 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     data = measured_fa(scan, resolve_gain(opts.gain, str(scan.attrs.get("method", ""))))
     chosen = choose_model(scan.attrs, opts.refine_iterations, opts.model, opts.forward, opts.device,
                           scan.obstacles, opts.radiator, opts.radiator_tol)
-    method, why = choose_method(opts.refine_method, chosen.forward, scan, opts.refine_iterations)
+    choice = choose_method(opts.refine_method, chosen.forward, scan, opts.refine_iterations,
+                           opts.gauss_newton)
+    method, why = choice.method, choice.why
+    if choice.inner is not None:  # auto: the LSQR iterations per step that fit its budget
+        steps = opts.gauss_newton or GaussNewtonOptions()
+        opts = replace(opts, gauss_newton=replace(steps, inner=choice.inner))
     weighted = opts.weights == "amplitude" or (opts.weights == "auto" and chosen.wave)
     weight = amplitude_weight(scan.intensity_ideal, scan.sphere, scan.F,
                               str(scan.attrs.get("sampling", "centre"))) if weighted else None

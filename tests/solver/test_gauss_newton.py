@@ -203,22 +203,25 @@ def test_method_choice_refuses_what_the_jacobian_does_not_model(small_field):
 
     scan = Scan.from_fieldmap(small_field)
     paper = type("PaperScan", (), {"sphere": SphereGrid(R, 90, 360), "F": F, "D": D})
-    # auto by the cost of one radiation: 0.1 GHz on the paper's grid is affordable, 0.3 is not
-    assert choose_method("auto", WaveForward(0.1e9), paper, 3)[0] == "gauss-newton"
-    assert choose_method("auto", WaveForward(0.3e9), paper, 3)[0] == "defect"
-    assert choose_method("gauss-newton", WaveForward(0.3e9), scan, 0)[0] == "defect"
+    # auto by what the steps cost: on the paper's grid 0.1 GHz affords the default 60 LSQR
+    # iterations a step, 0.3 GHz fewer (its radiation costs five times more), 1 GHz too few
+    at_01, at_03 = (choose_method("auto", WaveForward(f), paper, 3) for f in (0.1e9, 0.3e9))
+    assert at_01.method == "gauss-newton" and at_01.inner == GaussNewtonOptions().inner
+    assert at_03.method == "gauss-newton" and 20 <= at_03.inner < at_01.inner
+    assert choose_method("auto", WaveForward(1e9), paper, 3).method == "defect"
+    assert choose_method("gauss-newton", WaveForward(0.3e9), scan, 0).method == "defect"
     # the Jacobian is PO's (+ PTD's): the go+edge model (a WaveForward with other physics) and
     # GO are refused on request and skipped by auto
     for model in (GOEdgeForward(0.1e9, ptd=True), GOForward()):
         with pytest.raises(SolverError, match="needs the po or po\\+ptd model"):
             choose_method("gauss-newton", model, scan, 3)
-        method, why = choose_method("auto", model, scan, 3)
-        assert method == "defect" and model.name in why
+        choice = choose_method("auto", model, scan, 3)
+        assert choice.method == "defect" and model.name in choice.why
     # the Jacobian runs in this process: not on a Dask runner
     with distributed(object()):
         with pytest.raises(SolverError, match="not in blocks on Dask"):
             choose_method("gauss-newton", WaveForward(0.1e9), scan, 3)
-        assert choose_method("auto", WaveForward(0.1e9), scan, 3)[0] == "defect"
+        assert choose_method("auto", WaveForward(0.1e9), scan, 3).method == "defect"
     with pytest.raises(SolverError, match="unknown refine method"):
         InvertOptions(refine_method="newton")
 
