@@ -363,11 +363,12 @@ def choose_method(name: str, model: ForwardModel | None, scan, iterations: int,
     inner = min(opts.inner, affordable)
     budget = (f"{pairs:.2g} pair evaluations per radiation, {opts.iterations} steps within "
               f"{AUTO_BUDGET_PAIRS:.2g}")
-    if inner >= min(AUTO_MIN_INNER, opts.inner):
+    fewest = min(AUTO_MIN_INNER, opts.inner)
+    if inner >= fewest:
         return Choice("gauss-newton", f"auto: {budget}: {inner} LSQR iterations a step", inner)
     return Choice("defect", f"auto: {budget} leave {affordable} LSQR iterations a step, fewer than "
-                            f"{min(AUTO_MIN_INNER, opts.inner)} (Gauss-Newton would take well over 10 "
-                            "minutes; --refine-method gauss-newton asks for it)")
+                            f"{fewest} (Gauss-Newton would take well over 10 minutes; "
+                            "--refine-method gauss-newton asks for it)")
 
 
 def report_attrs(report: GaussNewtonReport | None, why: str) -> dict:
