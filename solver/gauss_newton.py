@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse.linalg as spla
@@ -281,23 +281,34 @@ REFINE_METHODS = ("auto", "defect", "gauss-newton")
 #: "auto" lets a whole Gauss-Newton run spend: each LSQR iteration is two radiations. About
 #: 10 minutes on two cores, measured on the paper's dish (90 x 360) with the fast radiator:
 #: 0.1 GHz (4e7 per radiation), 3 steps x 60 iterations (1.4e10) in 4.2 min; 0.3 GHz (2e8),
-#: 3 steps x 30 (3.6e10) in 7.9 min, the defect correction's start included
+#: 2 steps x 46 iterations (3.6e10) in 8.3 min, the defect correction's start included
 AUTO_BUDGET_PAIRS = 3.6e10
-#: the fewest LSQR iterations per step "auto" runs Gauss-Newton with: on the paper's dish the
-#: weak directions need tens of iterations per step (docs/inversion.md), so below this the
-#: defect correction alone is kept
+#: the fewest LSQR iterations per step of the options' steps (60 in all with the default 3)
+#: "auto" runs Gauss-Newton with: on the paper's dish the weak directions need tens of
+#: iterations, so below this the defect correction alone is kept
 AUTO_MIN_INNER = 20
 
 
 @dataclass(frozen=True)
 class Choice:
     """The refinement :func:`choose_method` picks: ``method`` (``defect`` or ``gauss-newton``),
-    ``why`` (one line, the SurfaceMap's ``gn_choice``) and ``inner``, the LSQR iterations per
-    step "auto" affords within :data:`AUTO_BUDGET_PAIRS` (None: the options' own)."""
+    ``why`` (one line, the SurfaceMap's ``gn_choice``), and the ``steps`` and ``inner`` LSQR
+    iterations per step "auto" affords within :data:`AUTO_BUDGET_PAIRS` (None: the options'
+    own)."""
 
     method: str
     why: str
+    steps: int | None = None
     inner: int | None = None
+
+    def applied(self, options: GaussNewtonOptions | None) -> GaussNewtonOptions:
+        """``options`` (None: the defaults) with this choice's steps and LSQR iterations; coarse
+        steps, if asked for, still leave the last step on all cells."""
+        options = options or GaussNewtonOptions()
+        if self.steps is None or self.inner is None:
+            return options
+        return replace(options, iterations=self.steps, inner=self.inner,
+                       coarse=min(options.coarse, self.steps - 1))
 
 
 IN_PROCESS = ("gauss-newton computes its Jacobian in this process, not in blocks on Dask: drop "
@@ -333,11 +344,12 @@ def choose_method(name: str, model: ForwardModel | None, scan, iterations: int,
     request that cannot run is one line.
 
     Gauss-Newton needs the PO or PO + PTD model (:func:`has_exact_jacobian`) computed in this
-    process (not inside :func:`solver.forward.distributed`). ``auto`` takes it where its steps
-    (``options``, default :class:`GaussNewtonOptions`) with at least :data:`AUTO_MIN_INNER`
-    LSQR iterations each fit :data:`AUTO_BUDGET_PAIRS` pair evaluations (two radiations of the
-    model per iteration, :func:`model_pairs`), with as many iterations per step as fit, up to
-    the options' own; else the defect correction alone.
+    process (not inside :func:`solver.forward.distributed`). ``auto`` takes it where the
+    options' steps (``options``, default :class:`GaussNewtonOptions`) times
+    :data:`AUTO_MIN_INNER` LSQR iterations fit :data:`AUTO_BUDGET_PAIRS` pair evaluations (two
+    radiations of the model per iteration, :func:`model_pairs`), and spends as many iterations
+    as fit (up to the options' steps times their iterations) in as few steps of up to the
+    options' iterations as they fill; else the defect correction alone.
     """
     if name not in REFINE_METHODS:
         raise SolverError(f"unknown refine method {name!r}: choose one of "
@@ -359,14 +371,20 @@ def choose_method(name: str, model: ForwardModel | None, scan, iterations: int,
         return Choice("gauss-newton", "requested")
     opts = options or GaussNewtonOptions()
     pairs = max(model_pairs(model, scan.sphere, scan.F, scan.D), 1.0)  # 0 for a dish with no samples
-    affordable = int(AUTO_BUDGET_PAIRS // (2.0 * pairs * opts.iterations))  # LSQR iterations a step
-    inner = min(opts.inner, affordable)
-    budget = (f"{pairs:.2g} pair evaluations per radiation, {opts.iterations} steps within "
-              f"{AUTO_BUDGET_PAIRS:.2g}")
-    fewest = min(AUTO_MIN_INNER, opts.inner)
-    if inner >= fewest:
-        return Choice("gauss-newton", f"auto: {budget}: {inner} LSQR iterations a step", inner)
-    return Choice("defect", f"auto: {budget} leave {affordable} LSQR iterations a step, fewer than "
+    # LSQR iterations the budget affords in all, up to what the options ask for; spent in as
+    # few steps of up to opts.inner as they fill: below ~1 GHz the deformation is a small
+    # fraction of the wavelength, the model nearly linear, and each new step restarts LSQR's
+    # Krylov space (0.3 GHz on the paper's dish: 2 x 46 reach 1.73 % RRMS, 3 x 30 1.91 %)
+    affordable = int(AUTO_BUDGET_PAIRS // (2.0 * pairs))
+    total = min(affordable, opts.iterations * opts.inner)
+    steps = max(1, min(opts.iterations, -(-total // opts.inner)))
+    inner = total // steps
+    budget = f"{pairs:.2g} pair evaluations per radiation, {AUTO_BUDGET_PAIRS:.2g} in all"
+    fewest = opts.iterations * min(AUTO_MIN_INNER, opts.inner)
+    if total >= fewest:
+        return Choice("gauss-newton", f"auto: {budget}: {steps} steps of {inner} LSQR iterations",
+                      steps, inner)
+    return Choice("defect", f"auto: {budget} leave {affordable} LSQR iterations, fewer than "
                             f"{fewest} (Gauss-Newton would take well over 10 minutes; "
                             "--refine-method gauss-newton asks for it)")
 

@@ -144,9 +144,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     choice = choose_method(opts.refine_method, chosen.forward, scan, opts.refine_iterations,
                            opts.gauss_newton)
     method, why = choice.method, choice.why
-    if choice.inner is not None:  # auto: the LSQR iterations per step that fit its budget
-        steps = opts.gauss_newton or GaussNewtonOptions()
-        opts = replace(opts, gauss_newton=replace(steps, inner=choice.inner))
+    if choice.inner is not None:  # auto: the steps and LSQR iterations that fit its budget
+        opts = replace(opts, gauss_newton=choice.applied(opts.gauss_newton))
     weighted = opts.weights == "amplitude" or (opts.weights == "auto" and chosen.wave)
     weight = amplitude_weight(scan.intensity_ideal, scan.sphere, scan.F,
                               str(scan.attrs.get("sampling", "centre"))) if weighted else None
