@@ -126,18 +126,22 @@ def paper_command(
     refine: int = typer.Option(3, help="GO refinement iterations of raysim's default row, 0 to 50."),
     device: str = typer.Option("cpu", help="Warp device: cpu or cuda."),
     po: bool = typer.Option(False, "--po", help="The PO & PTD frequency sweep (Table 3) instead of "
-                                               "the GO case (Table 2). Slow on a CPU: about an hour."),
+                                               "the GO case (Table 2). About 11 min on two cores, 7 of "
+                                               "them the 3 GHz data."),
     frequencies: str = typer.Option("0.1e9,0.3e9,0.6e9,1e9,3e9", "--frequencies",
                                     help="--po: frequencies (Hz), comma-separated, 1e6 to 1e11."),
-    coarse_3ghz: str = typer.Option("90x36", "--coarse-3ghz",
-                                    help="--po: sphere grid (n_theta x n_phi) at frequencies of 2 GHz "
-                                         "and above (the sweep's 3 GHz row); 90x360 below. "
-                                         "90x360 gives the full grid everywhere."),
+    coarse_3ghz: str | None = typer.Option(
+        None, "--coarse-3ghz",
+        help="--po: sphere grid (n_theta x n_phi) at frequencies of 2 GHz and above (the sweep's "
+             "3 GHz row); 90x360 below. Default: 90x360 with --radiator fast (its cost barely "
+             "depends on the points: 90x36 saves about 10 % at 3 GHz), 90x36 with direct."),
     fields: Path | None = typer.Option(None, "--fields",
                                        help="--po: folder to keep each FieldMap in and reuse it from."),
-    wave_max_ghz: float = typer.Option(0.3, "--wave-max-ghz",
-                                       help="--po: highest frequency (GHz) of the PO + PTD model "
-                                            "refinement row (about 5 min at 0.3 GHz, grows as f^2)."),
+    wave_max_ghz: float | None = typer.Option(
+        None, "--wave-max-ghz",
+        help="--po: highest frequency (GHz) of the PO + PTD model refinement row (default 1 with "
+             "--radiator fast, about a minute a row there; 0.3 with direct, whose 1 GHz row "
+             "takes 35 min)."),
     radiator: str = typer.Option(
         "fast", "--radiator",
         help="--po: the PO + PTD sums of the data and the wave refinement: fast (the multilevel "
@@ -155,10 +159,11 @@ def paper_command(
     check_options(radiator=radiator)
     if po:
         options = paper.sweep_options(frequencies, coarse_3ghz, N=grid, refine=refine,
-                                      wave_max_ghz=wave_max_ghz)
+                                      wave_max_ghz=wave_max_ghz, radiator=radiator)
         rows = paper.po_sweep(**options, device=device, fields_dir=fields,
                               log=lambda line: note(f"paper: {line}"), radiator=radiator)
-        lines = paper.sweep_lines(rows, N=grid, refine=refine, wave_max_ghz=wave_max_ghz)
+        lines = paper.sweep_lines(rows, N=grid, refine=refine,
+                                  wave_max_ghz=options["wave_max_hz"] / 1e9)
     else:
         rows = paper.compare(scale=scale, N=grid, refine=refine, device=device)
         lines = paper.compare_lines(rows, scale=scale, N=grid)

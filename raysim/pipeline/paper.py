@@ -150,10 +150,27 @@ class SweepRow:
 MAX_SWEEP_HZ = 1e11
 
 
-def sweep_options(frequencies: str | Sequence[float], coarse: str | tuple[int, int], *,
-                  N: int = 256, refine: int = DEFAULT_REFINE, wave_max_ghz: float = 0.3) -> dict:
+#: the sweep's highest frequency of the PO + PTD refinement row when none is asked for (GHz):
+#: with the fast radiator each of its forwards takes under a minute up to 1 GHz (the 0.6 and
+#: 1 GHz rows together 2.4 min on two cores), with the direct sum 1 GHz alone takes 35 min
+WAVE_MAX_GHZ = {"fast": 1.0, "direct": 0.3}
+
+
+def coarse_grid(radiator: str) -> tuple[int, int]:
+    """The sweep's sphere grid from 2 GHz up when none is asked for: the paper's full 90 x 360
+    with the fast radiator, whose cost is mostly on the elements' side (at 3 GHz its estimate
+    on 90 x 36 points is 91 % of that on 90 x 360), and 90 x 36 with the direct sum, which
+    costs samples times points (a tenth)."""
+    return (90, 360) if radiator == "fast" else (90, 36)
+
+
+def sweep_options(frequencies: str | Sequence[float], coarse: str | tuple[int, int] | None, *,
+                  N: int = 256, refine: int = DEFAULT_REFINE, wave_max_ghz: float | None = None,
+                  radiator: str = "fast") -> dict:
     """The options of :func:`po_sweep` from the command line's text (``"0.1e9,0.3e9"``,
-    ``"90x36"``), checked before anything runs: keyword arguments for :func:`po_sweep`."""
+    ``"90x36"``; ``coarse`` None: :func:`coarse_grid` for ``radiator``; ``wave_max_ghz`` None:
+    :data:`WAVE_MAX_GHZ` for it), checked before anything runs: keyword arguments for
+    :func:`po_sweep`."""
     if isinstance(frequencies, str):
         try:
             freqs = [float(f) for f in frequencies.split(",") if f.strip()]
@@ -169,6 +186,8 @@ def sweep_options(frequencies: str | Sequence[float], coarse: str | tuple[int, i
         if f > MAX_SWEEP_HZ:
             raise RaysimError(f"--frequencies: {f:g} Hz is above the sweep's {MAX_SWEEP_HZ:g} Hz "
                               "(PO costs grow as f^2)")
+    if coarse is None:
+        coarse = coarse_grid(radiator)
     if isinstance(coarse, str):
         try:
             n_theta, n_phi = (int(n) for n in coarse.lower().split("x"))
@@ -177,6 +196,8 @@ def sweep_options(frequencies: str | Sequence[float], coarse: str | tuple[int, i
     else:
         n_theta, n_phi = coarse
     check_sphere_cells(n_theta, n_phi, ("--coarse-3ghz n_theta", "--coarse-3ghz n_phi"))
+    if wave_max_ghz is None:
+        wave_max_ghz = WAVE_MAX_GHZ.get(radiator, WAVE_MAX_GHZ["direct"])
     if not (math.isfinite(wave_max_ghz) and wave_max_ghz >= 0):
         raise RaysimError(f"--wave-max-ghz must be a finite number >= 0, got {wave_max_ghz:g}")
     check_options(N=N, refine=refine)
@@ -221,26 +242,30 @@ def po_fieldmap(frequency_hz: float, n_theta: int = 90, n_phi: int = 360, edges:
 
 
 def po_sweep(frequencies_hz=TABLE3_FREQUENCIES_HZ, N: int = 256,
-             coarse: tuple[int, int] = (90, 36), coarse_from_hz: float = 2e9,
+             coarse: tuple[int, int] | None = None, coarse_from_hz: float = 2e9,
              refine: int = DEFAULT_REFINE, device: str | None = "cpu", fields_dir=None,
-             log=None, wave_max_hz: float = 0.3e9, radiator: str = "fast") -> list[SweepRow]:
+             log=None, wave_max_hz: float | None = None, radiator: str = "fast") -> list[SweepRow]:
     """The paper's Table 3 with PO + PTD (rim) data from the project's engines.
 
     Frequencies at or above ``coarse_from_hz`` use the ``coarse`` (n_theta, n_phi) sphere
-    grid: PO's samples grow as f^2 (the 3 GHz case costs 100 times the 0.3 GHz one). The
-    paper's deformation is axially symmetric, so fewer phi cells lose nothing it can show.
+    grid (None: :func:`coarse_grid` for ``radiator``, the full grid with the fast one): PO's
+    samples grow as f^2, and the direct sum's cost with them times the points. The paper's
+    deformation is axially symmetric, so fewer phi cells lose little it can show.
     ``fields_dir`` keeps each FieldMap (``paper_poptd_<f>GHz_<grid>.nc``) and reuses it on
     the next run. ``log(line)`` reports progress. The refinement with the PO + PTD model
-    (:mod:`solver.wave`) runs at frequencies up to ``wave_max_hz`` only: each of its forwards
-    is a PO run. ``radiator``: the PO + PTD sums of the data and of that refinement (``fast``
-    or ``direct``, as :func:`raysim.simulate`).
+    (:mod:`solver.wave`) runs at frequencies up to ``wave_max_hz`` only (None:
+    :data:`WAVE_MAX_GHZ` for ``radiator``): each of its forwards is a PO run. ``radiator``:
+    the PO + PTD sums of the data and of that refinement (``fast`` or ``direct``, as
+    :func:`raysim.simulate`).
     """
     from pathlib import Path
 
     from raysim.maps.fieldmap import load, save
     from raysim.surface.deformation import PaperDeformation
 
-    sweep_options(frequencies_hz, coarse, N=N, refine=refine, wave_max_ghz=wave_max_hz / 1e9)
+    checked = sweep_options(frequencies_hz, coarse, N=N, refine=refine, radiator=radiator,
+                            wave_max_ghz=None if wave_max_hz is None else wave_max_hz / 1e9)
+    coarse, wave_max_hz = checked["coarse"], checked["wave_max_hz"]
     say = log or (lambda line: None)
     truth = PaperDeformation(D, F, 1.0)
     rows = []
