@@ -43,7 +43,31 @@ from raysim.surface.mesh import Reflector, reflectors_for
 if TYPE_CHECKING:
     from raysim.optics.sources import Sources
 
-MAX_PO_SAMPLES = 1e8  # wave source samples per reflector (memory grows with them)
+#: peak memory of a wave run per PO source sample of one reflector (PO + PTD, ideal and
+#: deformed, fast radiator): 6.6 GB at 28.7 M samples on the paper's dish at 6 GHz
+#: (benchmarks/bench_wave_cost.py, peak RSS); the direct sum holds less
+BYTES_PER_PO_SAMPLE = 230.0
+#: PO samples per spacing^2 of surface: the face quadrature (raysim.surface.quadrature) puts
+#: n^2 points on a face whose longest edge is n spacings, 4 per spacing^2 on a mesh of right
+#: triangles (the paper's dish: 3.8 at 0.3 GHz, 3.4 at 6 GHz, 4.7 at 0.1 GHz where faces
+#: take the rule's least order)
+SAMPLES_PER_SPACING2 = 4.0
+
+
+def physical_memory() -> float:
+    """This machine's physical memory (bytes); infinite where the system does not say."""
+    import os
+
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return math.inf
+
+
+def max_po_samples() -> float:
+    """The most PO source samples per reflector a wave run may take here: as many as this
+    machine's memory holds at :data:`BYTES_PER_PO_SAMPLE` (about 1e8 on 23 GB)."""
+    return physical_memory() / BYTES_PER_PO_SAMPLE
 
 
 @dataclass(frozen=True)
@@ -135,21 +159,30 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
     return fieldmap_of(scene, method, run, deformed.F, deformed.D, attrs)
 
 
-def check_wave_size(method: str, diameter: float, frequency_hz: float,
-                    samples_per_wavelength: float | None = None) -> None:
-    """Refuse a wave computation whose memory would not fit, before any work (RaysimError,
-    one line): its size is PO's source samples per reflector, pi (D/2)^2 / (lambda/s)^2 for
-    a dish of diameter ``diameter`` (m) at ``frequency_hz`` (Hz) with ``s`` samples per
-    wavelength, at most :data:`MAX_PO_SAMPLES` (the one cap of simulate, datasets and the
-    inversion's wave models)."""
+def po_samples(diameter: float, frequency_hz: float,
+               samples_per_wavelength: float | None = None) -> float:
+    """PO's source samples on one reflector of diameter ``diameter`` (m) at ``frequency_hz``
+    (Hz) with ``s`` samples per wavelength, before any mesh exists:
+    :data:`SAMPLES_PER_SPACING2` pi (D/2)^2 / (lambda/s)^2."""
     from raysim.constants import wavelength
     from raysim.optics.po import DEFAULT_SAMPLES_PER_WAVELENGTH
 
     spw = samples_per_wavelength or DEFAULT_SAMPLES_PER_WAVELENGTH
-    samples = math.pi * (diameter / 2) ** 2 / (wavelength(frequency_hz) / spw) ** 2
-    if not samples <= MAX_PO_SAMPLES:
+    return SAMPLES_PER_SPACING2 * math.pi * (diameter / 2) ** 2 / (wavelength(frequency_hz) / spw) ** 2
+
+
+def check_wave_size(method: str, diameter: float, frequency_hz: float,
+                    samples_per_wavelength: float | None = None) -> None:
+    """Refuse a wave computation whose memory would not fit, before any work (RaysimError,
+    one line): its size is PO's source samples per reflector (:func:`po_samples`), at most
+    :func:`max_po_samples` (the one cap of simulate, datasets and the inversion's wave
+    models)."""
+    samples = po_samples(diameter, frequency_hz, samples_per_wavelength)
+    if not samples <= max_po_samples():
         raise RaysimError(f"{method} at {frequency_hz:g} Hz needs about {samples:.2g} source samples "
-                          f"per reflector (at most {MAX_PO_SAMPLES:.0g}): use go, or a lower frequency")
+                          f"per reflector, about {samples * BYTES_PER_PO_SAMPLE / 1e9:.2g} GB, more "
+                          f"than this machine's {physical_memory() / 1e9:.3g} GB: use go, or a "
+                          "lower frequency")
 
 
 def check_method(scene: Scene, method: str | None, options: Options,

@@ -272,7 +272,7 @@ def wave_cost(dish: Dish, frequency_hz: float, radiator: str = "fast") -> tuple[
     the direct sum would, in direct pair evaluations, and the samples of one reflector."""
     from raysim.optics.fast.radiator import quadrature_cost
     from raysim.optics.po import DEFAULT_SAMPLES_PER_WAVELENGTH
-    from raysim.simulate import MAX_PO_SAMPLES
+    from raysim.simulate import max_po_samples
     from raysim.surface.quadrature import plan
 
     wavelength = 299_792_458.0 / frequency_hz
@@ -280,7 +280,7 @@ def wave_cost(dish: Dish, frequency_hz: float, radiator: str = "fast") -> tuple[
     n = quad.n_samples
     points = dish.wave.sphere.points(dish.F).reshape(-1, 3)
     cost, direct = quadrature_cost(quad, points, 2.0 * math.pi / wavelength, (0.0, 0.0, dish.F),
-                                   "direct" if n > MAX_PO_SAMPLES else radiator)
+                                   "direct" if n > max_po_samples() else radiator)
     return 2.0 * cost, 2.0 * direct, n
 
 
@@ -302,16 +302,17 @@ def choose_wave(dish: Dish, frequency_hz: float, wave: str, device: str,
                 radiator: str = "fast") -> tuple[str, str]:
     """(method, why) of the wave engine at ``frequency_hz`` (the rule of this module's
     docstring, for sums run by ``radiator``); ``wave`` other than ``auto`` forces that engine."""
-    from raysim.simulate import MAX_PO_SAMPLES
+    from raysim.simulate import BYTES_PER_PO_SAMPLE, max_po_samples
 
     if wave not in WAVE_CHOICES:
         raise CheckError(f"unknown --wave {wave!r}: use one of {', '.join(WAVE_CHOICES)}")
     if wave != "auto":
         return wave, "forced by --wave"
     cost, direct, samples = wave_cost(dish, frequency_hz, radiator)
-    if samples > MAX_PO_SAMPLES:
-        return "go+edge", (f"PO + PTD would need {samples:.2g} samples per reflector (memory cap "
-                           f"{MAX_PO_SAMPLES:.0e}): go+edge, whose cost does not grow as f^2")
+    if samples > max_po_samples():
+        return "go+edge", (f"PO + PTD would need {samples:.2g} samples per reflector (about "
+                           f"{samples * BYTES_PER_PO_SAMPLE / 1e9:.2g} GB, more than this "
+                           "machine's memory): go+edge, whose cost does not grow as f^2")
     budget = PO_PAIR_BUDGET["cuda" if str(device).startswith("cuda") else "cpu"]
     how = "direct" if radiator == "direct" else f"{radiator} radiator, direct {direct:.2g}"
     if cost <= budget:

@@ -117,3 +117,17 @@ def test_shadowed_samples_carry_no_current():
     assert not under(lit_disk, -0.05).any()
     all_disk = s.points[s.face < len(faces) - 2]
     assert (~under(lit_disk, 0.05)).sum() == (~under(all_disk, 0.05)).sum()
+
+
+@pytest.mark.parametrize(("D", "F", "faces", "f_ghz"), [(110.0, 33.0, 5.0, 0.3), (110.0, 33.0, 5.0, 3.0),
+                                                        (25.0, 7.5, 0.5, 10.0)])
+def test_the_size_check_counts_the_samples_the_quadrature_makes(D, F, faces, f_ghz):
+    """simulate refuses a wave run by an estimate made before any mesh exists; it must count
+    what the face quadrature will make (the rule's n^2 points per face, not one point per
+    spacing^2: that estimate let the 110 m dish's 12 GHz run through at a quarter of its size)."""
+    from raysim.simulate import po_samples
+    from raysim.surface.quadrature import plan
+
+    wavelength = 299_792_458.0 / (f_ghz * 1e9)
+    made = plan(paraboloid(D, F, faces), wavelength, po.DEFAULT_SAMPLES_PER_WAVELENGTH).n_samples
+    assert po_samples(D, f_ghz * 1e9) == pytest.approx(made, rel=0.25)
