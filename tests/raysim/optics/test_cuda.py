@@ -129,3 +129,32 @@ def test_simulate_on_cuda():
         for name in ("intensity", "intensity_ideal"):
             assert_agree(cuda[name].values, cpu[name].values, f"{method} {name}")
         assert cuda.attrs["device"] == DEVICES[1]
+
+
+def test_fast_radiator_and_its_transpose_on_cuda():
+    """The multilevel sum (leaf kernel, aggregation's re-phasing, the last step) and its
+    transpose (the VJP's leaf and re-phasing kernels) on CUDA against the CPU's, forced on a
+    dish large enough for a tree (the scaled dish of test_fast_radiator.py, 33 wavelengths
+    across): both devices run the same plan, so they differ only in rounding."""
+    from raysim.optics import po_jacobian
+    from raysim.optics.fast.radiator import FastRadiator
+
+    dish_d, dish_f = 10.0, 3.3
+    wave = po.Illumination.plane_wave(1e9, (0.0, 0.0, -1.0), (1.0, 0.0, 0.0))
+    dish = paraboloid(dish_d, dish_f, 1.0)
+    points = SphereGrid(1.0, 24, 48).points(dish_f).reshape(-1, 3)
+    src = np.hstack([s.numpy() for s in po.po_elements(dish, wave, plan(dish, wave.wavelength, 1.5))])
+    sums, methods = [], []
+    for dev in DEVICES:
+        fast = FastRadiator(points, wave.k, dev, tol=1e-6, centre=(0.0, 0.0, dish_f), force=True)
+        fast.add_packed(src, "electric")
+        sums.append(fast.sums_of("electric"))
+        methods.append(fast.method["electric"])
+    assert methods[0].startswith("fast") and methods[1] == methods[0]
+    assert_agree(sums[1], sums[0], "fast radiator")
+    elements = po_jacobian.surface_elements(dish, wave, 1.5, "cpu")
+    rng = np.random.default_rng(5)
+    c = rng.normal(size=(len(points), 3)) + 1j * rng.normal(size=(len(points), 3))
+    cpu, cuda = (po_jacobian.vjp(elements, points, c, dev, radiator="fast", tol=1e-6,
+                                 centre=(0.0, 0.0, dish_f), force=True) for dev in DEVICES)
+    assert_agree(np.stack(cuda), np.stack(cpu), "fast VJP (dz, dhx, dhy)")
