@@ -281,11 +281,12 @@ REFINE_METHODS = ("auto", "defect", "gauss-newton")
 #: "auto" lets a whole Gauss-Newton run spend: each LSQR iteration is two radiations. About
 #: 10 minutes on two cores, measured on the paper's dish (90 x 360) with the fast radiator:
 #: 0.1 GHz (4e7 per radiation), 3 steps x 60 iterations (1.4e10) in 4.2 min; 0.3 GHz (2e8),
-#: 2 steps x 46 iterations (3.6e10) in 8.3 min, the defect correction's start included
+#: 2 steps x 46 iterations (3.6e10) in 8.3 min, the defect correction's start included;
+#: 0.6 GHz (6.6e8), 1 step x 27 in 9.3 min
 AUTO_BUDGET_PAIRS = 3.6e10
-#: the fewest LSQR iterations per step of the options' steps (60 in all with the default 3)
-#: "auto" runs Gauss-Newton with: on the paper's dish the weak directions need tens of
-#: iterations, so below this the defect correction alone is kept
+#: the fewest LSQR iterations in all "auto" runs Gauss-Newton with: on the paper's dish the
+#: weak directions need tens of iterations (one step of 27 at 0.6 GHz takes the defect
+#: correction's 2.21 % RRMS to 1.24 %), so below this the defect correction alone is kept
 AUTO_MIN_INNER = 20
 
 
@@ -344,12 +345,12 @@ def choose_method(name: str, model: ForwardModel | None, scan, iterations: int,
     request that cannot run is one line.
 
     Gauss-Newton needs the PO or PO + PTD model (:func:`has_exact_jacobian`) computed in this
-    process (not inside :func:`solver.forward.distributed`). ``auto`` takes it where the
-    options' steps (``options``, default :class:`GaussNewtonOptions`) times
+    process (not inside :func:`solver.forward.distributed`). ``auto`` takes it where at least
     :data:`AUTO_MIN_INNER` LSQR iterations fit :data:`AUTO_BUDGET_PAIRS` pair evaluations (two
     radiations of the model per iteration, :func:`model_pairs`), and spends as many iterations
-    as fit (up to the options' steps times their iterations) in as few steps of up to the
-    options' iterations as they fill; else the defect correction alone.
+    as fit (up to the options' steps times their iterations, ``options``, default
+    :class:`GaussNewtonOptions`) in as few steps of up to the options' iterations as they
+    fill; else the defect correction alone.
     """
     if name not in REFINE_METHODS:
         raise SolverError(f"unknown refine method {name!r}: choose one of "
@@ -380,10 +381,11 @@ def choose_method(name: str, model: ForwardModel | None, scan, iterations: int,
     steps = max(1, min(opts.iterations, -(-total // opts.inner)))
     inner = total // steps
     budget = f"{pairs:.2g} pair evaluations per radiation, {AUTO_BUDGET_PAIRS:.2g} in all"
-    fewest = opts.iterations * min(AUTO_MIN_INNER, opts.inner)
+    fewest = min(AUTO_MIN_INNER, opts.iterations * opts.inner)
     if total >= fewest:
-        return Choice("gauss-newton", f"auto: {budget}: {steps} steps of {inner} LSQR iterations",
-                      steps, inner)
+        plural = "s" if steps > 1 else ""
+        return Choice("gauss-newton", f"auto: {budget}: {steps} step{plural} of {inner} LSQR "
+                                      "iterations", steps, inner)
     return Choice("defect", f"auto: {budget} leave {affordable} LSQR iterations, fewer than "
                             f"{fewest} (Gauss-Newton would take well over 10 minutes; "
                             "--refine-method gauss-newton asks for it)")

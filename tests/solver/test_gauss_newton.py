@@ -205,14 +205,15 @@ def test_method_choice_refuses_what_the_jacobian_does_not_model(small_field):
     paper = type("PaperScan", (), {"sphere": SphereGrid(R, 90, 360), "F": F, "D": D})
     # auto by what the steps cost: on the paper's grid 0.1 GHz affords the default 3 steps of
     # 60 LSQR iterations, 0.3 GHz fewer (its radiation costs five times more), spent in fewer,
-    # longer steps; 1 GHz too few
-    at_01, at_03 = (choose_method("auto", WaveForward(f), paper, 3) for f in (0.1e9, 0.3e9))
+    # longer steps, 0.6 GHz one step of at least 20; 1 GHz too few
+    at_01, at_03, at_06 = (choose_method("auto", WaveForward(f), paper, 3) for f in (0.1e9, 0.3e9, 0.6e9))
     defaults = GaussNewtonOptions()
     assert at_01.method == "gauss-newton"
     assert (at_01.steps, at_01.inner) == (defaults.iterations, defaults.inner)
     assert at_03.method == "gauss-newton" and at_03.steps < defaults.iterations
     assert 60 <= at_03.steps * at_03.inner < defaults.iterations * defaults.inner
     assert at_03.inner <= defaults.inner
+    assert at_06.method == "gauss-newton" and at_06.steps == 1 and 20 <= at_06.inner < 60
     # the choice keeps a last step on all cells when coarse steps are asked for
     applied = at_03.applied(GaussNewtonOptions(iterations=4, inner=60, coarse=3))
     assert (applied.iterations, applied.inner, applied.coarse) == (at_03.steps, at_03.inner,
