@@ -4,17 +4,18 @@ Data: PO + PTD FieldMaps made by a finer model than the inversion's (4 m faces, 
 wavelength, 8 edge points per wavelength against 5 m, 1.5 and 4; ``benchmarks/gn_data.py``),
 cached under ``out/gauss_newton/``; each case also with 0.01 dB Gaussian noise per sample.
 For each (frequency, deformation, noise) it inverts twice on the same data at N = 256: the
-defect-correction wave refinement (``--refine-method defect``, today's default) and the same
-followed by Gauss-Newton with the exact PO + PTD Jacobian (``gauss-newton``), and prints RRMS,
-RMS, steps, LSQR iterations and time; rows are appended to ``out/gauss_newton/results.jsonl``.
+defect-correction wave refinement (``--refine-method defect``) and the same followed by
+Gauss-Newton with the exact PO + PTD Jacobian (``gauss-newton``; ``--methods auto`` runs
+``raysim invert``'s default, which fits the steps to its budget), and prints RRMS, RMS, steps,
+LSQR iterations and time; rows are appended to ``out/gauss_newton/results.jsonl``.
 
     nice -n 10 .venv/bin/python benchmarks/bench_gauss_newton.py --frequencies 0.1e9 \
         --deformation paper --noise 0,0.01
 
-Long: each LSQR iteration is a JVP and a VJP of the model, about 3 s at 0.1 GHz and 19 s at
-0.3 GHz on the 45 x 90 grid (``--sphere 45x90``) on two cores, eight times that on 90 x 360;
-the defaults (3 steps of up to 60 iterations) make a clean 0.1 GHz case about 10 min on
-45 x 90 and over an hour on the full grid.
+Each LSQR iteration is a JVP and a VJP of the model; with the fast radiator on the full
+90 x 360 grid on two cores about 1.2 s at 0.1 GHz, 5 s at 0.3 GHz, 18 s at 0.6 GHz and 50 s at
+1 GHz (``--radiator``-less: the model's default, fast), so the default 3 steps of up to 60
+iterations take about 4 min at 0.1 GHz.
 """
 
 from __future__ import annotations
