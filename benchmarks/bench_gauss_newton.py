@@ -12,10 +12,10 @@ LSQR iterations and time; rows are appended to ``out/gauss_newton/results.jsonl`
     nice -n 10 .venv/bin/python benchmarks/bench_gauss_newton.py --frequencies 0.1e9 \
         --deformation paper --noise 0,0.01
 
-Each LSQR iteration is a JVP and a VJP of the model; with the fast radiator on the full
-90 x 360 grid on two cores about 1.2 s at 0.1 GHz, 5 s at 0.3 GHz, 18 s at 0.6 GHz and 50 s at
-1 GHz (``--radiator``-less: the model's default, fast), so the default 3 steps of up to 60
-iterations take about 4 min at 0.1 GHz.
+Each LSQR iteration is a JVP and a VJP of the model. The model sums with the fast radiator
+(its default), and on the full 90 x 360 grid on two cores an iteration takes about 1.3 s at
+0.1 GHz, 5 s at 0.3 GHz, 18 s at 0.6 GHz and 40 to 60 s at 1 GHz; so the default 3 steps of up
+to 60 iterations take about 4 min at 0.1 GHz.
 """
 
 from __future__ import annotations
