@@ -21,6 +21,7 @@ arrays).
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time
 import types
@@ -56,8 +57,6 @@ SAMPLES_PER_SPACING2 = 4.0
 
 def physical_memory() -> float:
     """This machine's physical memory (bytes); infinite where the system does not say."""
-    import os
-
     try:
         return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
     except (AttributeError, ValueError, OSError):

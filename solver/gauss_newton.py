@@ -287,7 +287,7 @@ AUTO_BUDGET_PAIRS = 3.6e10
 #: the fewest LSQR iterations in all "auto" runs Gauss-Newton with: on the paper's dish the
 #: weak directions need tens of iterations (one step of 27 at 0.6 GHz takes the defect
 #: correction's 2.21 % RRMS to 1.24 %), so below this the defect correction alone is kept
-AUTO_MIN_INNER = 20
+AUTO_MIN_LSQR = 20
 
 
 @dataclass(frozen=True)
@@ -346,7 +346,7 @@ def choose_method(name: str, model: ForwardModel | None, scan, iterations: int,
 
     Gauss-Newton needs the PO or PO + PTD model (:func:`has_exact_jacobian`) computed in this
     process (not inside :func:`solver.forward.distributed`). ``auto`` takes it where at least
-    :data:`AUTO_MIN_INNER` LSQR iterations fit :data:`AUTO_BUDGET_PAIRS` pair evaluations (two
+    :data:`AUTO_MIN_LSQR` LSQR iterations fit :data:`AUTO_BUDGET_PAIRS` pair evaluations (two
     radiations of the model per iteration, :func:`model_pairs`), and spends as many iterations
     as fit (up to the options' steps times their iterations, ``options``, default
     :class:`GaussNewtonOptions`) in as few steps of up to the options' iterations as they
@@ -381,7 +381,7 @@ def choose_method(name: str, model: ForwardModel | None, scan, iterations: int,
     steps = max(1, min(opts.iterations, -(-total // opts.inner)))
     inner = total // steps
     budget = f"{pairs:.2g} pair evaluations per radiation, {AUTO_BUDGET_PAIRS:.2g} in all"
-    fewest = min(AUTO_MIN_INNER, opts.iterations * opts.inner)
+    fewest = min(AUTO_MIN_LSQR, opts.iterations * opts.inner)
     if total >= fewest:
         plural = "s" if steps > 1 else ""
         return Choice("gauss-newton", f"auto: {budget}: {steps} step{plural} of {inner} LSQR "
