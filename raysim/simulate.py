@@ -65,7 +65,7 @@ def physical_memory() -> float:
 
 def max_po_samples() -> float:
     """The most PO source samples per reflector a wave run may take here: as many as this
-    machine's memory holds at :data:`BYTES_PER_PO_SAMPLE` (about 1e8 on 23 GB)."""
+    machine's memory holds at :data:`BYTES_PER_PO_SAMPLE` (about 1.1e8 on 25 GB)."""
     return physical_memory() / BYTES_PER_PO_SAMPLE
 
 
