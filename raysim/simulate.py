@@ -56,11 +56,13 @@ SAMPLES_PER_SPACING2 = 4.0
 
 
 def physical_memory() -> float:
-    """This machine's physical memory (bytes); infinite where the system does not say."""
+    """This machine's physical memory (bytes); infinite where the system does not say (no
+    sysconf, or the -1 it gives for a value it does not know)."""
     try:
-        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+        page, pages = os.sysconf("SC_PAGE_SIZE"), os.sysconf("SC_PHYS_PAGES")
     except (AttributeError, ValueError, OSError):
         return math.inf
+    return float(page * pages) if page > 0 and pages > 0 else math.inf
 
 
 def max_po_samples() -> float:

@@ -131,3 +131,21 @@ def test_the_size_check_counts_the_samples_the_quadrature_makes(D, F, faces, f_g
     wavelength = 299_792_458.0 / (f_ghz * 1e9)
     made = plan(paraboloid(D, F, faces), wavelength, po.DEFAULT_SAMPLES_PER_WAVELENGTH).n_samples
     assert po_samples(D, f_ghz * 1e9) == pytest.approx(made, rel=0.25)
+
+
+def test_the_size_check_follows_this_machine_memory(monkeypatch):
+    """The cap is what the machine's memory holds: the paper's dish at 3 GHz (about 2 GB) runs
+    on 5 GB and 6 GHz (about 8 GB) is refused in one line; a system that does not say its
+    memory (sysconf's -1) refuses nothing."""
+    import os
+
+    import raysim.simulate as sim
+    from raysim.errors import RaysimError
+
+    monkeypatch.setattr(sim, "physical_memory", lambda: 5e9)
+    sim.check_wave_size("po", 110.0, 3e9)
+    with pytest.raises(RaysimError, match="more than this machine's 5 GB"):
+        sim.check_wave_size("po", 110.0, 6e9)
+    monkeypatch.undo()
+    monkeypatch.setattr(os, "sysconf", lambda name: -1)
+    sim.check_wave_size("po+ptd", 110.0, 12e9)
