@@ -241,6 +241,8 @@ def with_blockage(ideal: Reflector, run: Run, grid, direction, device: str | Non
 
 def _check_options(method: str, options: Options) -> None:
     """Refuse options that do not apply to ``method`` (one line for the user)."""
+    from raysim.optics.fast.radiator import tol_problem
+
     if options.edges is not None and method != "po+ptd":
         raise RaysimError("--edges applies to --method po+ptd only")
     if options.edges is not None and options.edges not in ("rim", "all"):
@@ -255,8 +257,8 @@ def _check_options(method: str, options: Options) -> None:
         raise RaysimError("--samples-per-wavelength applies to --method po and po+ptd only")
     if options.radiator not in ("fast", "direct"):
         raise RaysimError(f"unknown radiator {options.radiator!r}: use fast or direct")
-    if not (math.isfinite(options.radiator_tol) and 0 < options.radiator_tol < 1):
-        raise RaysimError(f"--radiator-tol must lie in (0, 1), got {options.radiator_tol:g}")
+    if (problem := tol_problem(options.radiator_tol, "--radiator-tol")) is not None:
+        raise RaysimError(problem)
     spw = options.samples_per_wavelength
     if spw is not None and not (math.isfinite(spw) and 0 < spw <= 20):
         raise RaysimError(f"--samples-per-wavelength must lie in (0, 20], got {spw:g}")

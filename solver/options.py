@@ -11,7 +11,7 @@ import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from raysim.optics.fast.radiator import RADIATORS
+from raysim.optics.fast.radiator import RADIATORS, tol_problem
 from solver import boundary
 from solver.aperture import MIN_N
 from solver.equation import GAIN_MODES
@@ -62,8 +62,8 @@ def check_options(*, solver: str | None = None, N: int | None = None, refine: in
                           f"{', '.join(REFINE_METHODS)}")
     if radiator is not None and radiator not in RADIATORS:
         raise SolverError(f"unknown radiator {radiator!r}: choose one of {', '.join(RADIATORS)}")
-    if radiator_tol is not None and not (isinstance(radiator_tol, numbers.Real) and 0 < radiator_tol < 1):
-        raise SolverError(f"--radiator-tol must lie in (0, 1), got {radiator_tol!r}")
+    if radiator_tol is not None and (problem := tol_problem(radiator_tol, "--radiator-tol")) is not None:
+        raise SolverError(problem)
     if refine_method == "gauss-newton" and blocks:
         raise SolverError(IN_PROCESS)
     parse_terms(remove)

@@ -46,7 +46,7 @@ def check(
         help="PO + PTD's sums (wave engine, wave models, and the engine rule's cost): fast (the "
              "multilevel sum where cheaper) or direct (the reference sum)."),
     radiator_tol: float = typer.Option(1e-6, "--radiator-tol",
-                                       help="Relative RMS accuracy of the fast radiator."),
+                                       help="Relative RMS accuracy of the fast radiator, in [1e-12, 1)."),
     sphere_radius: float | None = typer.Option(None, "--sphere-radius",
                                                help="Mesh only: probe-sphere radius R (m), default 0.3 F."),
     focal_length: float | None = typer.Option(None, "--focal-length",

@@ -57,7 +57,8 @@ def invert_command(
              "fields and Gauss-Newton's Jacobian, where its cost estimate beats the direct sum) "
              "or direct (the reference sum)."),
     radiator_tol: float = typer.Option(
-        1e-6, "--radiator-tol", help="po, po+ptd model: relative RMS accuracy of the fast radiator."),
+        1e-6, "--radiator-tol",
+        help="po, po+ptd model: relative RMS accuracy of the fast radiator, in [1e-12, 1)."),
     panels_csv: Path | None = typer.Option(None, help="Write the per-panel adjustment table."),
     gain: str = typer.Option(
         "auto", help="auto (known for simulated data, estimated for a measured scan), known "

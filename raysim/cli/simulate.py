@@ -47,7 +47,8 @@ def simulate(
         help="po, po+ptd: fast (the multilevel sum, where its cost estimate beats the direct "
              "sum; the FieldMap records which ran) or direct (the reference sum)."),
     radiator_tol: float = typer.Option(
-        1e-6, "--radiator-tol", help="po, po+ptd: relative RMS accuracy of the fast radiator."),
+        1e-6, "--radiator-tol",
+        help="po, po+ptd: relative RMS accuracy of the fast radiator, in [1e-12, 1)."),
     scheduler: str | None = typer.Option(
         None, "--scheduler",
         help="po, po+ptd: compute the sphere's points in blocks on the Dask scheduler at "

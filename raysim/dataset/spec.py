@@ -38,7 +38,7 @@ from raysim.dataset.models import (
 from raysim.errors import RaysimError
 from raysim.files import find_input
 from raysim.methods import METHODS
-from raysim.optics.fast.radiator import RADIATORS
+from raysim.optics.fast.radiator import DEFAULT_TOL, MIN_TOL, RADIATORS
 from raysim.scene.scene import Scene, check_frequency, parse_scene
 from raysim.simulate import Options, check_method
 from raysim.tomlschema import Table, parse_toml, read_text
@@ -133,7 +133,7 @@ def _build(top: Table, text: str, source: str, base: Path) -> DatasetSpec:
     seed = top.integer("seed", lo=0, hi=2**63 - 1)
     method = top.string("method", "go", choices=METHODS)
     radiator = top.string("radiator", "fast", choices=RADIATORS)
-    radiator_tol = top.number("radiator_tol", 1e-6, lo=0.0, hi=1.0, lo_open=True, hi_open=True)
+    radiator_tol = top.number("radiator_tol", DEFAULT_TOL, lo=MIN_TOL, hi=1.0, hi_open=True)
     freqs = top.raw("frequencies_hz", [scene.source.frequency_hz])
     if not isinstance(freqs, list) or not freqs or not all(
             isinstance(f, int | float) and not isinstance(f, bool) and math.isfinite(f) and f >= 1e6

@@ -52,7 +52,7 @@ from raysim.optics.fast.chart import (
     to_angles,
 )
 from raysim.optics.fast.multilevel import warray
-from raysim.optics.fast.radiator import DEFAULT_TOL, describe, plan_for
+from raysim.optics.fast.radiator import DEFAULT_TOL, describe, plan_for, tol_problem
 
 #: bytes of weights held at once per step (clusters taken in chunks)
 CHUNK_BYTES = 2.5e8
@@ -231,8 +231,8 @@ def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike,
     weights on the targets; ``k`` rad/m. ``info``, when given, receives ``method`` (the plan or
     ``direct``) and ``seconds``.
     """
-    if not 0 < tol < 1:
-        raise RaysimError(f"radiator tolerance must be in (0, 1), got {tol:g}")
+    if (problem := tol_problem(tol)) is not None:
+        raise RaysimError(problem)
     start = time.perf_counter()
     src = np.ascontiguousarray(np.asarray(src, dtype=np.float64))
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
