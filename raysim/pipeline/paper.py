@@ -156,19 +156,18 @@ MAX_SWEEP_HZ = 1e11
 WAVE_MAX_GHZ = {"fast": 1.0, "direct": 0.3}
 
 
-def coarse_grid(radiator: str) -> tuple[int, int]:
-    """The sweep's sphere grid from 2 GHz up when none is asked for: the paper's full 90 x 360
-    with the fast radiator, whose cost is mostly on the elements' side (at 3 GHz its estimate
-    on 90 x 36 points is 91 % of that on 90 x 360), and 90 x 36 with the direct sum, which
-    costs samples times points (a tenth)."""
-    return (90, 360) if radiator == "fast" else (90, 36)
+#: the sweep's sphere grid from 2 GHz up when none is asked for: the paper's full 90 x 360 with
+#: the fast radiator, whose cost is mostly on the elements' side (at 3 GHz its estimate on
+#: 90 x 36 points is 91 % of that on 90 x 360), and 90 x 36 with the direct sum, which costs
+#: samples times points (a tenth)
+COARSE_GRID = {"fast": (90, 360), "direct": (90, 36)}
 
 
 def sweep_options(frequencies: str | Sequence[float], coarse: str | tuple[int, int] | None, *,
                   N: int = 256, refine: int = DEFAULT_REFINE, wave_max_ghz: float | None = None,
                   radiator: str = "fast") -> dict:
     """The options of :func:`po_sweep` from the command line's text (``"0.1e9,0.3e9"``,
-    ``"90x36"``; ``coarse`` None: :func:`coarse_grid` for ``radiator``; ``wave_max_ghz`` None:
+    ``"90x36"``; ``coarse`` None: :data:`COARSE_GRID` for ``radiator``; ``wave_max_ghz`` None:
     :data:`WAVE_MAX_GHZ` for it), checked before anything runs: keyword arguments for
     :func:`po_sweep`."""
     if isinstance(frequencies, str):
@@ -187,7 +186,7 @@ def sweep_options(frequencies: str | Sequence[float], coarse: str | tuple[int, i
             raise RaysimError(f"--frequencies: {f:g} Hz is above the sweep's {MAX_SWEEP_HZ:g} Hz "
                               "(PO costs grow as f^2)")
     if coarse is None:
-        coarse = coarse_grid(radiator)
+        coarse = COARSE_GRID.get(radiator, COARSE_GRID["direct"])
     if isinstance(coarse, str):
         try:
             n_theta, n_phi = (int(n) for n in coarse.lower().split("x"))
@@ -248,7 +247,7 @@ def po_sweep(frequencies_hz=TABLE3_FREQUENCIES_HZ, N: int = 256,
     """The paper's Table 3 with PO + PTD (rim) data from the project's engines.
 
     Frequencies at or above ``coarse_from_hz`` use the ``coarse`` (n_theta, n_phi) sphere
-    grid (None: :func:`coarse_grid` for ``radiator``, the full grid with the fast one): PO's
+    grid (None: :data:`COARSE_GRID` for ``radiator``, the full grid with the fast one): PO's
     samples grow as f^2, and the direct sum's cost with them times the points. The paper's
     deformation is axially symmetric, so fewer phi cells lose little it can show.
     ``fields_dir`` keeps each FieldMap (``paper_poptd_<f>GHz_<grid>.nc``) and reuses it on
