@@ -11,6 +11,8 @@ direct sum would have evaluated, so ``rate()`` is an equivalent rate.
 from __future__ import annotations
 
 import hashlib
+import math
+import numbers
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -39,9 +41,6 @@ RADIATORS = ("fast", "direct")
 
 def tol_problem(tol: object, name: str = "radiator tolerance") -> str | None:
     """Why ``tol`` is not a radiator tolerance (a real number in [MIN_TOL, 1)); None when it is."""
-    import math
-    import numbers
-
     if isinstance(tol, numbers.Real) and not isinstance(tol, bool) and math.isfinite(tol) \
             and MIN_TOL <= tol < 1:
         return None
