@@ -241,7 +241,7 @@ def with_blockage(ideal: Reflector, run: Run, grid, direction, device: str | Non
 
 def _check_options(method: str, options: Options) -> None:
     """Refuse options that do not apply to ``method`` (one line for the user)."""
-    from raysim.optics.fast.radiator import tol_problem
+    from raysim.optics.fast.radiator import RADIATORS, tol_problem
 
     if options.edges is not None and method != "po+ptd":
         raise RaysimError("--edges applies to --method po+ptd only")
@@ -255,7 +255,7 @@ def _check_options(method: str, options: Options) -> None:
         raise RaysimError("--fresnel applies to --method go+edge only")
     if method == "go+edge" and options.samples_per_wavelength is not None:
         raise RaysimError("--samples-per-wavelength applies to --method po and po+ptd only")
-    if options.radiator not in ("fast", "direct"):
+    if options.radiator not in RADIATORS:
         raise RaysimError(f"unknown radiator {options.radiator!r}: use fast or direct")
     if (problem := tol_problem(options.radiator_tol, "--radiator-tol")) is not None:
         raise RaysimError(problem)
