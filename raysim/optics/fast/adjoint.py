@@ -241,7 +241,7 @@ def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike,
     the_plan = None
     domain = domain_of(pts, centre) if centre is not None and len(pts) and src.shape[1] else None
     if domain is not None:
-        the_plan = plan_for(np.ascontiguousarray(src[:3].T), domain, k, tol)
+        the_plan = plan_for([src], domain, k, tol)
     if the_plan is None or (the_plan.cost >= the_plan.direct_cost and not force):
         if info is not None:
             info["method"] = "direct"

@@ -27,7 +27,7 @@ prefactor).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -134,19 +134,20 @@ def _fft_cost(n: int) -> float:
     return 3.0 * n * n * max(math.log2(n), 1.0) * COST_FFT
 
 
-def plan(positions: NDArray[np.float64], domain: Domain, k: float, tol: float,
+def plan(pieces: Sequence[NDArray[np.float64]], domain: Domain, k: float, tol: float,
          last: tuple[tuple[int, int], ...], max_depth: int = 12, count: int | None = None) -> Plan | None:
-    """The cheapest (leaf, stop, last step) for elements at ``positions`` (n, 3) m, each
-    level's step held to about ``tol``; None when no level is separated from the targets.
-    ``last``: the (oversampling, stencil p) pairs the last step may use. ``count``: the number
-    of elements when ``positions`` is an even subset of them (a cost estimate: the tree and the
-    costs are those of ``count`` elements, the clusters' extents those of the subset)."""
-    n = len(positions) if count is None else int(count)
+    """The cheapest (leaf, stop, last step) for the elements of ``pieces`` (rows 0..2 their
+    positions, m: :func:`raysim.optics.fast.tree.build`), each level's step held to about
+    ``tol``; None when no level is separated from the targets. ``last``: the (oversampling,
+    stencil p) pairs the last step may use. ``count``: the number of elements when the pieces
+    hold an even subset of them (a cost estimate: the tree and the costs are those of ``count``
+    elements, the clusters' extents those of the subset)."""
+    n = sum(piece.shape[1] for piece in pieces) if count is None else int(count)
     digits = -math.log10(tol)
     depth = 0
     while depth < max_depth and n / (4 ** (depth + 1)) >= MIN_LEAF:
         depth += 1
-    order, levels = quadtree.build(positions, depth)
+    order, levels = quadtree.build(pieces, depth)
     sizes = [_size(level.centres, level.radii, domain, k, digits) for level in levels]
     M = domain.count
     direct = float(n) * M
@@ -176,19 +177,19 @@ def plan(positions: NDArray[np.float64], domain: Domain, k: float, tol: float,
                 digits)
 
 
-def holds(the_plan: Plan, positions: NDArray[np.float64], domain: Domain, k: float) -> bool:
-    """Whether the plan serves elements at ``positions`` (n, 3) m, taken in the order it was
-    made for (the same elements moved: a deformed reflector of the same triangulation, a
-    central difference's copy): every level it uses, with its clusters' centres kept and their
-    radii measured on these positions, still needs grids no larger than the plan's. The sum is
-    then within the tolerance for them, and it is the same linear map of the elements' leaf
-    fields as for the elements it was made for."""
-    if len(positions) != len(the_plan.order):
+def holds(the_plan: Plan, pieces: Sequence[NDArray[np.float64]], domain: Domain, k: float) -> bool:
+    """Whether the plan serves the elements of ``pieces`` (as :func:`plan`'s), taken in the
+    order it was made for (the same elements moved: a deformed reflector of the same
+    triangulation, a central difference's copy): every level it uses, with its clusters'
+    centres kept and their radii measured on these positions, still needs grids no larger than
+    the plan's. The sum is then within the tolerance for them, and it is the same linear map of
+    the elements' leaf fields as for the elements it was made for."""
+    if sum(piece.shape[1] for piece in pieces) != len(the_plan.order):
         return False
-    pos = positions[the_plan.order]
+    coords = quadtree.gathered(pieces, the_plan.order, rows=3)  # (3, n) in leaf order
     for index in range(the_plan.stop, the_plan.leaf + 1):
         level = the_plan.levels[index]
-        dist = quadtree.centre_distances(pos, level.begins, level.ends, level.centres)
+        dist = quadtree.centre_distances(coords, level.begins, level.centres)
         radii = np.maximum.reduceat(dist, level.begins)
         if np.all(radii <= level.radii):
             continue
@@ -281,18 +282,7 @@ def leaf_ordered(pieces: list[NDArray[np.float64]], the_plan: Plan) -> NDArray[n
     (rows, n) array in the plan's leaf order, gathered piece by piece (no concatenated copy).
     The list is emptied as it is read: a piece nothing else holds is freed once it is copied,
     so the elements are held about once, not twice, while they are gathered."""
-    n = sum(piece.shape[1] for piece in pieces)
-    where = np.empty(n, dtype=np.int64)
-    where[the_plan.order] = np.arange(n)
-    out = np.empty((pieces[0].shape[0], n))
-    at = 0
-    pieces.reverse()  # popped from the end, in the order they were added
-    while pieces:
-        piece = pieces.pop()
-        out[:, where[at:at + piece.shape[1]]] = piece
-        at += piece.shape[1]
-        del piece
-    return out
+    return quadtree.gathered(pieces, the_plan.order, consume=True)
 
 
 def stop_grids(segments: Any, ordered: NDArray[np.float64], the_plan: Plan, domain: Domain, k: float,

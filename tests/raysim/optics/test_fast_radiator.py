@@ -142,7 +142,7 @@ def test_a_block_of_points_gives_the_same_bits(stop_chunks: int, monkeypatch) ->
     src = _elements("electric")
     domain = domain_of(pts, CENTRE)
     if stop_chunks > 1:
-        plan = multilevel.plan(np.ascontiguousarray(src[:3].T), domain, K, 1e-6 / 8, ((0, 0),))
+        plan = multilevel.plan([src], domain, K, 1e-6 / 8, ((0, 0),))
         clusters = len(plan.levels[plan.stop].keys)
         monkeypatch.setattr(multilevel, "GRID_BYTES", 48 * plan.sizes[plan.stop] ** 2 * -(-clusters // 3))
         assert len(plan.stop_chunks()) == 3
@@ -162,7 +162,7 @@ def _planned(pts: np.ndarray, src: np.ndarray, kind: str, stop: int, last=(0, 0)
     from raysim.optics.fast.radiator import _segments
 
     domain = domain_of(pts, CENTRE)
-    plan = multilevel.plan(np.ascontiguousarray(src[:3].T), domain, K, 1e-6 / 8, (last,))
+    plan = multilevel.plan([src], domain, K, 1e-6 / 8, (last,))
     plan = replace(plan, stop=stop, oversampling=last[0], p=last[1])
 
     def grids():
@@ -183,7 +183,7 @@ def test_every_step_of_the_tree(stop: int, last: tuple[int, int], monkeypatch) -
 
     pts = _grid_points()
     src = _elements("magnetic")
-    plan = multilevel.plan(np.ascontiguousarray(src[:3].T), domain_of(pts, CENTRE), K, 1e-6 / 8, (last,))
+    plan = multilevel.plan([src], domain_of(pts, CENTRE), K, 1e-6 / 8, (last,))
     assert plan is not None and plan.leaf == 4
     whole = _planned(pts, src, "magnetic", stop, last)
     assert _rel_rms(whole, _direct(pts, src, "magnetic")) < 1e-6
