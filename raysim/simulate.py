@@ -44,10 +44,16 @@ from raysim.surface.mesh import Reflector, reflectors_for
 if TYPE_CHECKING:
     from raysim.optics.sources import Sources
 
-#: peak memory of a wave run per PO source sample of one reflector (PO + PTD, ideal and
-#: deformed, fast radiator): 6.6 GB at 28.7 M samples on the paper's dish at 6 GHz
-#: (benchmarks/bench_wave_cost.py, peak RSS); the direct sum holds less
-BYTES_PER_PO_SAMPLE = 230.0
+#: the peak memory of a wave run (PO + PTD, ideal and deformed, fast radiator) is bounded by
+#: WAVE_BASE_BYTES + BYTES_PER_PO_SAMPLE x the PO source samples of one reflector. The walk
+#: holds its chunks of grids (a bounded few GB) beside the elements in leaf order and their
+#: order (80 bytes a sample); the tree's planning about 135 bytes a sample at its peak
+#: (benchmarks/bench_plan_memory.py: 133 at 6 GHz, 127 at 12 GHz). Measured whole runs on the
+#: paper's dish (benchmarks/bench_wave_cost.py, peak RSS): 1.1 GB at 0.3 GHz, 2.2 GB at 1 GHz,
+#: 2.8 GB at 3 GHz (7.5 M samples; the model says 3.6), 5.9 GB at 6 GHz (28.7 M; the model says
+#: 6.5); the direct sum holds less
+WAVE_BASE_BYTES = 2.5e9
+BYTES_PER_PO_SAMPLE = 140.0
 #: PO samples per spacing^2 of surface: the face quadrature (raysim.surface.quadrature) puts
 #: n^2 points on a face whose longest edge is n spacings, 4 per spacing^2 on a mesh of right
 #: triangles (the paper's dish: 3.8 at 0.3 GHz, 3.4 at 6 GHz, 4.7 at 0.1 GHz where faces
@@ -65,10 +71,16 @@ def physical_memory() -> float:
     return float(page * pages) if page > 0 and pages > 0 else math.inf
 
 
+def wave_bytes(samples: float) -> float:
+    """The most memory (bytes) a wave run takes with ``samples`` PO source samples per
+    reflector: :data:`WAVE_BASE_BYTES` + :data:`BYTES_PER_PO_SAMPLE` x ``samples``."""
+    return WAVE_BASE_BYTES + BYTES_PER_PO_SAMPLE * samples
+
+
 def max_po_samples() -> float:
-    """The most PO source samples per reflector a wave run may take here: as many as this
-    machine's memory holds at :data:`BYTES_PER_PO_SAMPLE` (about 1.1e8 on 25 GB)."""
-    return physical_memory() / BYTES_PER_PO_SAMPLE
+    """The most PO source samples per reflector a wave run may take here: as many as
+    :func:`wave_bytes` fits in this machine's memory (about 1.6e8 on 25 GB)."""
+    return max(physical_memory() - WAVE_BASE_BYTES, 0.0) / BYTES_PER_PO_SAMPLE
 
 
 @dataclass(frozen=True)
@@ -181,7 +193,7 @@ def check_wave_size(method: str, diameter: float, frequency_hz: float,
     samples = po_samples(diameter, frequency_hz, samples_per_wavelength)
     if not samples <= max_po_samples():
         raise RaysimError(f"{method} at {frequency_hz:g} Hz needs about {samples:.2g} source samples "
-                          f"per reflector, about {samples * BYTES_PER_PO_SAMPLE / 1e9:.2g} GB, more "
+                          f"per reflector, about {wave_bytes(samples) / 1e9:.2g} GB, more "
                           f"than this machine's {physical_memory() / 1e9:.3g} GB: use go, or a "
                           "lower frequency")
 

@@ -302,7 +302,7 @@ def choose_wave(dish: Dish, frequency_hz: float, wave: str, device: str,
                 radiator: str = "fast") -> tuple[str, str]:
     """(method, why) of the wave engine at ``frequency_hz`` (the rule of this module's
     docstring, for sums run by ``radiator``); ``wave`` other than ``auto`` forces that engine."""
-    from raysim.simulate import BYTES_PER_PO_SAMPLE, max_po_samples
+    from raysim.simulate import max_po_samples, wave_bytes
 
     if wave not in WAVE_CHOICES:
         raise CheckError(f"unknown --wave {wave!r}: use one of {', '.join(WAVE_CHOICES)}")
@@ -311,7 +311,7 @@ def choose_wave(dish: Dish, frequency_hz: float, wave: str, device: str,
     cost, direct, samples = wave_cost(dish, frequency_hz, radiator)
     if samples > max_po_samples():
         return "go+edge", (f"PO + PTD would need {samples:.2g} samples per reflector (about "
-                           f"{samples * BYTES_PER_PO_SAMPLE / 1e9:.2g} GB, more than this "
+                           f"{wave_bytes(samples) / 1e9:.2g} GB, more than this "
                            "machine's memory): go+edge, whose cost does not grow as f^2")
     budget = PO_PAIR_BUDGET["cuda" if str(device).startswith("cuda") else "cpu"]
     how = "direct" if radiator == "direct" else f"{radiator} radiator, direct {direct:.2g}"

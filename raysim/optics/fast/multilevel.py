@@ -279,9 +279,9 @@ def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Dom
 
 def leaf_ordered(pieces: list[NDArray[np.float64]], the_plan: Plan) -> NDArray[np.float64]:
     """The elements of ``pieces`` ((rows, n_i) each, in the order the plan was made for) as one
-    (rows, n) array in the plan's leaf order, gathered piece by piece (no concatenated copy).
-    The list is emptied as it is read: a piece nothing else holds is freed once it is copied,
-    so the elements are held about once, not twice, while they are gathered."""
+    (rows, n) array in the plan's leaf order (:func:`raysim.optics.fast.tree.gathered`). The
+    list is emptied as it is read: a piece nothing else holds is freed once it is copied, so
+    the elements are held about once, not twice, while they are gathered."""
     return quadtree.gathered(pieces, the_plan.order, consume=True)
 
 

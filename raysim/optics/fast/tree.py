@@ -9,6 +9,7 @@ its parent's key is its own shifted right by two bits.
 from __future__ import annotations
 
 import ctypes
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -114,17 +115,17 @@ def _release_freed_memory() -> None:
     reuse (glibc's ``malloc_trim``; nothing elsewhere). Pieces made after the allocator has
     raised its mmap threshold (it does, up to 32 MB, as large blocks are freed) live in its
     heap, and their pages stay resident after they are freed until it is trimmed."""
-    global _trim
-    if _trim is None:
-        try:
-            _trim = ctypes.CDLL(None).malloc_trim
-        except (OSError, AttributeError):
-            _trim = False
-    if _trim:
-        _trim(0)
+    trim = _malloc_trim()
+    if trim is not None:
+        trim(0)
 
 
-_trim: Any = None  # glibc's malloc_trim once looked up; False where there is none
+@functools.cache
+def _malloc_trim() -> Any:
+    try:
+        return ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return None
 
 
 def leaf_keys(pieces: Sequence[NDArray[np.float64]], depth: int) -> NDArray[np.int64]:
