@@ -165,8 +165,9 @@ class FastRadiator:
                                          self.points, self.k, self.device, self.domain, store)
         if self.domain is not None and self.angles is not None and kind in FAST_KINDS:
             # the tree is planned on the pieces as they were added, without an (n, 3) copy of
-            # their positions (the planning's peak is the walk's at high frequency: at 12 GHz on
-            # the paper's dish the elements are 8 GB, an (n, 3) array 2.7 GB)
+            # their positions: at high frequency the planning, not the walk, sets the peak
+            # memory (at 12 GHz on the paper's dish the elements are 8 GB, an (n, 3) array
+            # 2.7 GB); the leaf order then empties this list, freeing the pieces one by one
             pieces = self.sources[kind]
             shared = None if self.plans is None else self.plans.get((kind, self.domain, self.tol))
             if shared is not None and multilevel.holds(shared, pieces, self.domain, self.k):
@@ -175,9 +176,6 @@ class FastRadiator:
                 the_plan = plan_for(pieces, self.domain, self.k, self.tol)
                 if self.plans is not None and the_plan is not None:
                     self.plans[(kind, self.domain, self.tol)] = the_plan
-            # no name here holds the pieces past this point: the leaf order frees them one by
-            # one as it gathers them
-            del pieces
         if the_plan is None or (the_plan.cost >= the_plan.direct_cost and not self.force):
             self.method[kind] = "direct"
             one = Radiator(self.points, self.k, self.device, block=self.direct.block)

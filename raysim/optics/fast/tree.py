@@ -69,9 +69,8 @@ def centre_distances(coords: NDArray[np.float64], begins: NDArray[np.int64],
 def gathered(pieces: Sequence[NDArray[np.float64]], order: NDArray[np.int64], rows: int | None = None,
              consume: bool = False) -> NDArray[np.float64]:
     """The first ``rows`` rows (all by default) of ``pieces`` ((rows_i, n_i) each, consecutive
-    elements) as one (rows, n) array in the order ``order`` (row i of the result is the
-    concatenated row's elements ``order``), a row at a time: besides the pieces and the result
-    it holds one (n,) row.
+    elements) as one (rows, n) array whose column j is element ``order[j]`` of the pieces taken
+    end to end, made a row at a time: besides the pieces and the result it holds one (n,) row.
 
     With ``consume`` (``pieces`` a list) the list is emptied as it is read and the pieces are
     freed as they go, where nothing else holds them, so the elements are held about once, not
