@@ -151,20 +151,31 @@ def _kept_blocks(n: int, m: int):
             yield (..., coarse_u, coarse_v, slice(None)), (..., fine_u, fine_v, slice(None))
 
 
-def resample(G: NDArray[np.complex128], m: int) -> NDArray[np.complex128]:
+def resample(G: NDArray[np.complex128], m: int, out: NDArray[np.complex128] | None = None,
+             overwrite: bool = False) -> NDArray[np.complex128]:
     """The periodic grids ``G`` (..., n, n, c) on the finer m x m grid (m >= n, even n):
     spectra zero-padded. The Nyquist row and column are dropped (a grid chosen by
-    :func:`size_for` holds nothing there)."""
+    :func:`size_for` holds nothing there). ``out``: a (..., m, m, c) array to build the result
+    in (it is returned; a buffer reused between calls, :mod:`raysim.optics.fast.scratch`);
+    ``overwrite``: ``G`` may be overwritten (its spectrum is taken in place)."""
     n = G.shape[-2]
     if m == n:
-        return G
-    S = sfft.fft2(G, axes=(-3, -2), workers=FFT_WORKERS)
-    out = np.zeros((*G.shape[:-3], m, m, G.shape[-1]), dtype=np.complex128)
+        if out is None:
+            return G
+        out[...] = G
+        return out
+    S = sfft.fft2(G, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=overwrite)
+    S *= (m * m) / (n * n)  # the inverse transform's 1 / m^2 against the forward one's n^2
+    if out is None:
+        out = np.zeros((*G.shape[:-3], m, m, G.shape[-1]), dtype=np.complex128)
+    else:  # zero what the blocks leave: the middle rows, and the middle columns of the others
+        h = n // 2
+        out[..., h:m - h + 1, :, :] = 0.0
+        out[..., :h, h:m - h + 1, :] = 0.0
+        out[..., m - h + 1:, h:m - h + 1, :] = 0.0
     for coarse, fine in _kept_blocks(n, m):
         out[fine] = S[coarse]
-    out = sfft.ifft2(out, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=True)
-    out *= (m * m) / (n * n)
-    return out
+    return sfft.ifft2(out, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=True)
 
 
 def restrict(X: NDArray[np.complex128], n: int) -> NDArray[np.complex128]:

@@ -52,6 +52,7 @@ from raysim.optics.fast.chart import (
     stencil_for,
     tensor_index,
 )
+from raysim.optics.fast.scratch import Scratch
 
 #: costs of the steps' inner operations in units of one direct pair evaluation (the leaf kernel
 #: runs the direct sum's pair function), measured on two CPU cores (paper's dish, 0.3 GHz):
@@ -217,10 +218,11 @@ def warray(a: NDArray, device: str, dtype: Any = None) -> Any:
 
 
 def leaf_grids(segments: Any, src: Any, the_plan: Plan, domain: Domain, k: float, device: str,
-               lo: int = 0, hi: int | None = None) -> NDArray[np.complex128]:
+               lo: int = 0, hi: int | None = None, scratch: Scratch | None = None) -> NDArray[np.complex128]:
     """F_c of leaf clusters lo .. hi - 1 on the leaf level's grid: (hi - lo, n, n, 3) complex.
     ``segments``: the kind's pair of kernels from :func:`raysim.optics.kernels.radiation.segment_kernel`;
-    ``src``: the elements in leaf order (a Warp array of :func:`leaf_ordered`'s)."""
+    ``src``: the elements in leaf order (a Warp array of :func:`leaf_ordered`'s); ``scratch``:
+    where the result is built (its role "leaf"), else a new array."""
     wp = runtime.init()
     from raysim.optics.kernels import radiation
 
@@ -233,20 +235,41 @@ def leaf_grids(segments: Any, src: Any, the_plan: Plan, domain: Domain, k: float
     n_pad = -(-n_nodes // tile) * tile  # pad with copies of the last node
     padded = np.vstack([nodes, np.repeat(nodes[-1:], n_pad - n_nodes, axis=0)])
     C = hi - lo
-    out = wp.empty((C * n_pad, 6), dtype=wp.float64, device=device)
+    shape = (C, n, n, 3)
+    full = np.empty(shape, dtype=np.complex128) if scratch is None else scratch.array("leaf", shape)
+    E = full.reshape(C * n * n, 3).view(np.float64)  # (C n^2, 6): the kernel writes every row once
+    out = warray(E, device) if device == "cpu" else wp.empty(E.shape, dtype=wp.float64, device=device)
     runtime.launch(segments[1] if tile == 4 else segments[0], C * n_pad // tile, [
         warray(padded.T, device), warray(level.begins[lo:hi].astype(np.int32), device, wp.int32),
         warray(level.ends[lo:hi].astype(np.int32), device, wp.int32), warray(level.centres[lo:hi], device),
-        n_pad, src, k, 1.0 / k, warray(radiation.cis_table(), device, wp.vec2d), out], device, min_chunk=16)
-    half = out.numpy().view(np.complex128).reshape(C, n_pad, 3)[:, :n_nodes]
-    return mirror(half.reshape(C, half_rows(n), n, 3), n)
+        n_pad, src, k, 1.0 / k, warray(radiation.cis_table(), device, wp.vec2d),
+        warray(mirror_slots(n, n_pad), device, wp.int32), n * n, out], device, min_chunk=16)
+    if device != "cpu":
+        E[...] = out.numpy()
+    return full
+
+
+def mirror_slots(n: int, n_pad: int) -> NDArray[np.int32]:
+    """(n_pad, 2): for each computed node of an n x n grid (its rows theta <= pi, row-major,
+    padded to n_pad) the whole grid's nodes it fills, by :func:`~raysim.optics.fast.chart.mirror`:
+    its own place, and the node of the mirrored rows that is the same point of the sphere
+    (-1: none; padding nodes fill nothing)."""
+    computed = half_rows(n) * n
+    source = mirror(np.arange(computed).reshape(half_rows(n), n, 1), n).reshape(-1)  # whole grid <- node
+    slots = np.full((n_pad, 2), -1, dtype=np.int32)
+    slots[:computed, 0] = np.arange(computed)  # rows theta <= pi are the whole grid's first rows
+    twins = np.arange(computed, n * n)
+    slots[source[twins], 1] = twins
+    return slots
 
 
 def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Domain, k: float,
-              device: str, q_lo: int = 0, q_hi: int | None = None) -> NDArray[np.complex128]:
+              device: str, q_lo: int = 0, q_hi: int | None = None, into: NDArray[np.complex128] | None = None,
+              scratch: Scratch | None = None) -> NDArray[np.complex128]:
     """The grids (q_hi - q_lo, n, n, 3) of parents q_lo .. q_hi - 1 (level ``child - 1``) from
     ``G`` (their children's grids, in order): spectra zero-padded (whole families at a time),
-    re-phased and summed in order."""
+    re-phased and summed in order. ``into``: the array to write them to (returned), else a new
+    one; ``scratch``: buffers for the refined children, and then ``G`` is overwritten."""
     wp = runtime.init()
     from raysim.optics.kernels import fast, radiation
 
@@ -258,7 +281,9 @@ def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Dom
     C0 = q_hi - q_lo
     base = int(np.searchsorted(low.parent, q_lo))  # G's first child in the level's numbering
     first = (np.searchsorted(low.parent, np.arange(q_lo, q_hi + 1)) - base).astype(np.int32)  # into G
-    out = np.empty((C0, n, n, 3), dtype=np.complex128)
+    out = np.empty((C0, n, n, 3), dtype=np.complex128) if into is None else into
+    if not out.flags.c_contiguous:  # the kernel writes into its memory through a flat view
+        raise ValueError("aggregate: 'into' must be C-contiguous")
     per = max(1, int(CHUNK_BYTES // (48 * n * n * 2)))  # children refined at once
     q = 0
     while q < C0:  # whole families at a time, so each parent is summed in one place
@@ -266,13 +291,18 @@ def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Dom
         while q1 < C0 and first[q1 + 1] - first[q] <= per:
             q1 += 1
         c0, c1 = int(first[q]), int(first[q1])
-        fine = resample(G[c0:c1], n).view(np.float64).reshape(-1, 6)
-        part = wp.empty(((q1 - q) * n * n, 6), dtype=wp.float64, device=device)
+        shape = (c1 - c0, n, n, 3)
+        fine = resample(G[c0:c1], n, out=None if scratch is None else scratch.array("fine", shape),
+                        overwrite=scratch is not None).view(np.float64).reshape(-1, 6)
+        target = out[q:q1].reshape(-1, 3).view(np.float64)  # ((q1 - q) n^2, 6)
+        part = warray(target, device) if device == "cpu" else wp.empty(target.shape, dtype=wp.float64,
+                                                                         device=device)
         runtime.launch(fast.rephase_merge, (q1 - q) * n * n, [
             warray(fine, device), n * n, warray(first[q:q1 + 1], device, wp.int32),
             warray(low.centres[base:], device), warray(up.centres[q_lo + q:q_lo + q1], device), nodes, k,
             table, part], device, min_chunk=256)
-        out[q:q1] = part.numpy().view(np.complex128).reshape(q1 - q, n, n, 3)
+        if device != "cpu":
+            target[...] = part.numpy()
         q = q1
     return out
 
@@ -289,26 +319,38 @@ def stop_grids(segments: Any, ordered: NDArray[np.float64], the_plan: Plan, doma
                device: str) -> Iterator[tuple[int, int, NDArray[np.complex128]]]:
     """The stop level's grids of the elements ``ordered`` (the kind's packed rows, in the plan's
     leaf order: :func:`leaf_ordered`), a chunk of clusters at a time: (q0, q1, grids (q1 - q0,
-    n, n, 3)) of clusters q0 .. q1 - 1. Each chunk is summed from the leaves up one chunk of
-    families per level at a time (:meth:`Plan.chunks`), so the memory held is a chunk per
-    level whatever the frequency."""
+    n, n, 3)) of clusters q0 .. q1 - 1, each a new array (a caller may keep them). Each chunk
+    is summed from the leaves up one chunk of families per level at a time
+    (:meth:`Plan.chunks`), so the memory held is a chunk per level whatever the frequency; the
+    levels below the stop level reuse their buffers from chunk to chunk
+    (:class:`~raysim.optics.fast.scratch.Scratch`)."""
     sorted_src = warray(ordered, device)
+    scratch = Scratch()
     for q0, q1 in the_plan.stop_chunks():
-        yield q0, q1, _grids(segments, sorted_src, the_plan, domain, k, device, the_plan.stop, q0, q1)
+        yield q0, q1, _grids(segments, sorted_src, the_plan, domain, k, device, the_plan.stop, q0, q1,
+                             scratch)
 
 
 def _grids(segments: Any, sorted_src: Any, the_plan: Plan, domain: Domain, k: float, device: str,
-           level: int, q0: int, q1: int) -> NDArray[np.complex128]:
+           level: int, q0: int, q1: int, scratch: Scratch) -> NDArray[np.complex128]:
     """The grids (q1 - q0, n, n, 3) of clusters q0 .. q1 - 1 of ``level``: at the leaves by
-    the kernel, above from their children, a chunk of families at a time."""
+    the kernel, above from their children, a chunk of families at a time. Below the stop
+    level they are built in ``scratch`` (role ("level", level): read by the level above
+    before this level is asked for again); the stop level's are a new array."""
     if level == the_plan.leaf:
-        return leaf_grids(segments, sorted_src, the_plan, domain, k, device, q0, q1)
+        return leaf_grids(segments, sorted_src, the_plan, domain, k, device, q0, q1,
+                          scratch if level != the_plan.stop else None)
     n = the_plan.sizes[level]
-    out = np.empty((q1 - q0, n, n, 3), dtype=np.complex128)
+    shape = (q1 - q0, n, n, 3)
+    if level == the_plan.stop:
+        out = np.empty(shape, dtype=np.complex128)
+    else:
+        out = scratch.array(("level", level), shape)
     for p0, p1 in the_plan.chunks(level, q0, q1):
         part = _grids(segments, sorted_src, the_plan, domain, k, device, level + 1,
-                      *the_plan.children(level, p0, p1))
-        out[p0 - q0:p1 - q0] = aggregate(part, level + 1, the_plan, domain, k, device, p0, p1)
+                      *the_plan.children(level, p0, p1), scratch)
+        aggregate(part, level + 1, the_plan, domain, k, device, p0, p1, into=out[p0 - q0:p1 - q0],
+                  scratch=scratch)
     return out
 
 
@@ -361,7 +403,7 @@ def grid_sums(grids: Iterable[tuple[int, int, NDArray[np.complex128]]], the_plan
             W = (E_theta @ A).reshape(R * c * 3, nk) @ E_phi_T  # (R * c * 3, Q)
             r = distances(points, level.centres[c0:c1])
             phase = np.exp(-1j * k * r).reshape(c, R, Q).transpose(1, 0, 2)  # (R, c, Q)
-            total += np.sum(W.reshape(R, c, 3, Q) * phase[:, :, None, :], axis=1)
+            total += np.einsum("rcaq,rcq->raq", W.reshape(R, c, 3, Q), phase)  # no (R, c, 3, Q) product
     total = np.moveaxis(total, 1, 2).reshape(R * Q, 3)
     return np.concatenate([total.real, total.imag], axis=1)
 
@@ -380,8 +422,14 @@ def series_basis(n: int, domain: Domain) -> tuple[NDArray[np.int64], NDArray[np.
 
 
 def distances(points: NDArray[np.float64], centres: NDArray[np.float64]) -> NDArray[np.float64]:
-    """|P - c| (C, m) m for every centre (C, 3) and point (m, 3)."""
-    return np.sqrt(np.sum((points[None, :, :] - centres[:, None, :]) ** 2, axis=-1))
+    """|P - c| (C, m) m for every centre (C, 3) and point (m, 3): the squares summed a
+    coordinate at a time (x, then y, then z), in place (a (C, m, 3) temporary summed along its
+    short last axis takes ten times as long)."""
+    out = np.zeros((len(centres), len(points)))
+    for axis in range(3):
+        step = np.subtract.outer(centres[:, axis], points[:, axis])  # (c - P)^2 = (P - c)^2 exactly
+        out += np.square(step, out=step)
+    return np.sqrt(out, out=out)
 
 
 def tensor_points(domain: Domain) -> NDArray[np.float64]:
@@ -419,10 +467,13 @@ def interpolated(grids: Iterable[tuple[int, int, NDArray[np.complex128]]], the_p
     pts, table = warray(points, device), warray(radiation.cis_table(), device, wp.vec2d)
     out = wp.zeros((len(angles), 6), dtype=wp.float64, device=device)
     per = max(1, int(CHUNK_BYTES // (48 * m * m * 2)))
+    scratch = Scratch()
     for q0, q1, G in grids:
         for c0 in range(q0, q1, per):
             c1 = min(c0 + per, q1)
-            fine = resample(G[c0 - q0:c1 - q0], m).view(np.float64)  # (c, m, m, 6): (Re, Im) pairs
+            # (c, m, m, 6): (Re, Im) pairs; G is not overwritten (an owner may keep it)
+            buffer = scratch.array("fine", (c1 - c0, m, m, 3))
+            fine = resample(G[c0 - q0:c1 - q0], m, out=buffer).view(np.float64)
             runtime.launch(fast.interpolate_targets, len(angles), [
                 warray(fine, device), p, *args, warray(level.centres[c0:c1], device), pts, k, table, out],
                 device, min_chunk=16)

@@ -243,16 +243,30 @@ def store_complex(E: wp.array2d(dtype=wp.float64), t: int, v: vec6d):
     E[t, 5] = v[5]
 
 
+@wp.func
+def store_node(E: wp.array2d(dtype=wp.float64), base: int, slots: wp.array2d(dtype=wp.int32), node: int,
+               v: vec6d):
+    """v at the whole-grid rows ``base + slots[node, 0]`` and ``base + slots[node, 1]`` of
+    ``E`` (each skipped where it is -1): a computed node and the mirrored node that is the same
+    point of the sphere."""
+    for j in range(2):
+        row = slots[node, j]
+        if row >= 0:
+            store_complex(E, base + row, v)
+
+
 def segment_kernel(load: Any, pair: Any) -> tuple[Any, Any]:
     """The leaf sums of the fast radiator for one kind of element (same ``load`` and ``pair``):
     ``(radiate_segments, radiate_segments4)``, one node or four nodes per thread.
 
-    Every cluster (leaf) sees the same ``nodes`` (3, n_nodes) field points; thread t is node
-    ``t % n_nodes`` of leaf ``t // n_nodes`` and sums the leaf's elements
-    ``begins[leaf]..ends[leaf]-1`` of ``src``, raw (before the kind's prefactor) as
-    :func:`radiation_kernels` does for one point, times exp(+j k |P - centres[leaf]|) (the
-    phase of the leaf's centre taken out), into ``E[t]`` (n_leaves * n_nodes, 6) as three
-    complex numbers (Re x, Im x, Re y, Im y, Re z, Im z: numpy's complex128 layout).
+    Every cluster (leaf) sees the same ``nodes`` (3, n_nodes) field points (the grid's rows
+    theta <= pi, padded); thread t is node ``t % n_nodes`` of leaf ``t // n_nodes`` and sums
+    the leaf's elements ``begins[leaf]..ends[leaf]-1`` of ``src``, raw (before the kind's
+    prefactor) as :func:`radiation_kernels` does for one point, times exp(+j k |P -
+    centres[leaf]|) (the phase of the leaf's centre taken out). The value goes to the leaf's
+    whole grid in ``E`` (n_leaves * n_full, 6), rows ``slots[node]`` of it (:func:`store_node`:
+    the node's own place and its mirror's; padding nodes have none), as three complex numbers
+    (Re x, Im x, Re y, Im y, Re z, Im z: numpy's complex128 layout).
     """
 
     @wp.kernel(module="unique")
@@ -266,6 +280,8 @@ def segment_kernel(load: Any, pair: Any) -> tuple[Any, Any]:
         k: wp.float64,
         k_inv: wp.float64,
         table: wp.array(dtype=wp.vec2d),
+        slots: wp.array2d(dtype=wp.int32),
+        n_full: int,
         E: wp.array2d(dtype=wp.float64),
         offset: int,
     ):
@@ -277,7 +293,7 @@ def segment_kernel(load: Any, pair: Any) -> tuple[Any, Any]:
         for s in range(begins[leaf], ends[leaf]):
             acc += pair(p, load(src, s), k, k_inv, table)
         d = p - wp.vec3d(centres[leaf, 0], centres[leaf, 1], centres[leaf, 2])
-        store_complex(E, t, times(acc, cis(k * wp.sqrt(wp.dot(d, d)), table)))
+        store_node(E, leaf * n_full, slots, node, times(acc, cis(k * wp.sqrt(wp.dot(d, d)), table)))
 
     @wp.kernel(module="unique")
     def radiate_segments4(
@@ -290,6 +306,8 @@ def segment_kernel(load: Any, pair: Any) -> tuple[Any, Any]:
         k: wp.float64,
         k_inv: wp.float64,
         table: wp.array(dtype=wp.vec2d),
+        slots: wp.array2d(dtype=wp.int32),
+        n_full: int,
         E: wp.array2d(dtype=wp.float64),
         offset: int,
     ):
@@ -313,10 +331,11 @@ def segment_kernel(load: Any, pair: Any) -> tuple[Any, Any]:
             a1 += pair(p1, e, k, k_inv, table)
             a2 += pair(p2, e, k, k_inv, table)
             a3 += pair(p3, e, k, k_inv, table)
-        store_complex(E, t, times(a0, cis(wp.length(p0 - c) * k, table)))
-        store_complex(E, t + 1, times(a1, cis(wp.length(p1 - c) * k, table)))
-        store_complex(E, t + 2, times(a2, cis(wp.length(p2 - c) * k, table)))
-        store_complex(E, t + 3, times(a3, cis(wp.length(p3 - c) * k, table)))
+        base = leaf * n_full
+        store_node(E, base, slots, node, times(a0, cis(wp.length(p0 - c) * k, table)))
+        store_node(E, base, slots, node + 1, times(a1, cis(wp.length(p1 - c) * k, table)))
+        store_node(E, base, slots, node + 2, times(a2, cis(wp.length(p2 - c) * k, table)))
+        store_node(E, base, slots, node + 3, times(a3, cis(wp.length(p3 - c) * k, table)))
 
     return radiate_segments, radiate_segments4
 
