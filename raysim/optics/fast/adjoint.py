@@ -53,6 +53,7 @@ from raysim.optics.fast.chart import (
 )
 from raysim.optics.fast.multilevel import warray
 from raysim.optics.fast.radiator import DEFAULT_TOL, describe, plan_for, tol_problem
+from raysim.optics.fast.scratch import Scratch
 
 #: bytes of weights held at once per step (clusters taken in chunks)
 CHUNK_BYTES = 2.5e8
@@ -143,11 +144,13 @@ def _scattered_weights(b: NDArray[np.complex128], angles: NDArray[np.float64], p
 
 
 def disaggregate(beta: NDArray[np.complex128], child: int, the_plan: multilevel.Plan, domain: Domain,
-                 k: float, device: str, q_lo: int = 0, q_hi: int | None = None) -> NDArray[np.complex128]:
+                 k: float, device: str, q_lo: int = 0, q_hi: int | None = None,
+                 scratch: Scratch | None = None) -> NDArray[np.complex128]:
     """The weights (C1, nc, nc, 3) of the children of parents q_lo .. q_hi - 1 (level
     ``child - 1``, whose weights ``beta`` holds in order): step 2 (module docs), the transpose of
     :func:`raysim.optics.fast.multilevel.aggregate` (the re-phasing in a Warp kernel, the
-    refinement's transpose by FFTs)."""
+    refinement's transpose by FFTs). ``scratch``: where the result (role ("level", child)) and
+    the re-phased grids are built, else new arrays."""
     wp = runtime.init()
     from raysim.optics.kernels import fast_adjoint, radiation
 
@@ -159,16 +162,23 @@ def disaggregate(beta: NDArray[np.complex128], child: int, the_plan: multilevel.
     a, b = the_plan.children(child - 1, q_lo, q_hi)
     weights = warray(np.ascontiguousarray(beta).view(np.float64).reshape(-1, 6), device)
     parent_centres = warray(up.centres[q_lo:q_hi], device)
-    out = np.empty((b - a, nc, nc, 3), dtype=np.complex128)
+    shape = (b - a, nc, nc, 3)
+    out = np.empty(shape, dtype=np.complex128) if scratch is None else scratch.array(("level", child), shape)
     per = max(1, int(CHUNK_BYTES // (48 * n * n * 2)))
     for c0 in range(a, b, per):
         c1 = min(c0 + per, b)
-        shifted = wp.empty(((c1 - c0) * n * n, 6), dtype=wp.float64, device=device)
+        grids = (c1 - c0, n, n, 3)
+        host = np.empty(grids, dtype=np.complex128) if scratch is None else scratch.array("shifted", grids)
+        flat = host.reshape(-1, 3).view(np.float64)  # ((c1 - c0) n^2, 6)
+        shifted = (warray(flat, device) if device == "cpu"
+                   else wp.empty(flat.shape, dtype=wp.float64, device=device))
         runtime.launch(fast_adjoint.rephase_split, (c1 - c0) * n * n, [
             weights, n * n, warray((low.parent[c0:c1] - q_lo).astype(np.int32), device, wp.int32),
             warray(low.centres[c0:c1], device), parent_centres, nodes, k, table, shifted], device,
             min_chunk=256)
-        out[c0 - a:c1 - a] = restrict(shifted.numpy().view(np.complex128).reshape(c1 - c0, n, n, 3), nc)
+        if device != "cpu":
+            flat[...] = shifted.numpy()
+        out[c0 - a:c1 - a] = restrict(host, nc, overwrite=True)
     return out
 
 
@@ -205,18 +215,19 @@ def leaf_sums(kernel: Any, src: NDArray[np.float64], beta: NDArray[np.complex128
 
 def _descend(kernel: Any, ordered: NDArray[np.float64], beta: NDArray[np.complex128],
              the_plan: multilevel.Plan, domain: Domain, k: float, device: str, level: int, q0: int, q1: int,
-             result: NDArray[np.float64]) -> None:
+             result: NDArray[np.float64], scratch: Scratch) -> None:
     """Steps 2 and 3 below clusters q0 .. q1 - 1 of ``level`` (their weights ``beta``): their
-    elements' sums written into ``result`` (8, n) in leaf order."""
+    elements' sums written into ``result`` (8, n) in leaf order; each level's weights built in
+    ``scratch`` (read below before the level is asked for again)."""
     if level == the_plan.leaf:
         leaves = the_plan.levels[level]
         result[:, leaves.begins[q0]:leaves.ends[q1 - 1]] = leaf_sums(kernel, ordered, beta, the_plan, domain,
                                                                      k, device, q0, q1)
         return
     for p0, p1 in the_plan.chunks(level, q0, q1):
-        part = disaggregate(beta[p0 - q0:p1 - q0], level + 1, the_plan, domain, k, device, p0, p1)
+        part = disaggregate(beta[p0 - q0:p1 - q0], level + 1, the_plan, domain, k, device, p0, p1, scratch)
         _descend(kernel, ordered, part, the_plan, domain, k, device, level + 1,
-                 *the_plan.children(level, p0, p1), result)
+                 *the_plan.children(level, p0, p1), result, scratch)
 
 
 def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike, k: float,
@@ -261,8 +272,10 @@ def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike,
     result = np.empty((8, src.shape[1]))
     # a chunk of stop clusters at a time, down to the leaves a chunk of families per level at a
     # time (the forward's walk, :meth:`raysim.optics.fast.multilevel.Plan.chunks`)
+    scratch = Scratch()
     for q0, q1 in the_plan.stop_chunks():
-        _descend(kernel, ordered, weights(q0, q1), the_plan, domain, k, dev, the_plan.stop, q0, q1, result)
+        _descend(kernel, ordered, weights(q0, q1), the_plan, domain, k, dev, the_plan.stop, q0, q1, result,
+                 scratch)
     out = np.empty_like(result)
     out[:, the_plan.order] = result  # back from leaf order to the elements' order
     if info is not None:

@@ -140,10 +140,11 @@ def mirror(half: NDArray[np.complex128], n: int) -> NDArray[np.complex128]:
     return full
 
 
-def _kept_blocks(n: int, m: int):
+def kept_blocks(n: int, m: int):
     """The four (coarse, fine) pairs of index blocks, along both angles, through which an n x n
     spectrum (its frequencies below n / 2 in modulus; the Nyquist ones dropped) sits inside an
-    m x m one."""
+    m x m one (m = n - 1: the kept coefficients packed, frequencies 0 .. n/2 - 1, then the
+    negative ones)."""
     h = n // 2
     along = ((slice(0, h), slice(0, h)), (slice(n - h + 1, n), slice(m - h + 1, m)))
     for coarse_u, fine_u in along:
@@ -173,21 +174,22 @@ def resample(G: NDArray[np.complex128], m: int, out: NDArray[np.complex128] | No
         out[..., h:m - h + 1, :, :] = 0.0
         out[..., :h, h:m - h + 1, :] = 0.0
         out[..., m - h + 1:, h:m - h + 1, :] = 0.0
-    for coarse, fine in _kept_blocks(n, m):
+    for coarse, fine in kept_blocks(n, m):
         out[fine] = S[coarse]
     return sfft.ifft2(out, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=True)
 
 
-def restrict(X: NDArray[np.complex128], n: int) -> NDArray[np.complex128]:
+def restrict(X: NDArray[np.complex128], n: int, overwrite: bool = False) -> NDArray[np.complex128]:
     """The transpose of :func:`resample` (m x m -> n x n): weights on the fine grid taken back to
     the coarse one (both DFT matrices are symmetric, so the transpose of zero-padding the
-    spectrum is truncating it, between the same two transforms swapped)."""
+    spectrum is truncating it, between the same two transforms swapped). ``overwrite``: ``X``
+    may be overwritten (its transform is taken in place)."""
     m = X.shape[-2]
     if m == n:
         return X
-    T = sfft.ifft2(X, axes=(-3, -2), workers=FFT_WORKERS)
+    T = sfft.ifft2(X, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=overwrite)
     S = np.zeros((*X.shape[:-3], n, n, X.shape[-1]), dtype=np.complex128)
-    for coarse, fine in _kept_blocks(n, m):
+    for coarse, fine in kept_blocks(n, m):
         S[coarse] = T[fine]
     S = sfft.fft2(S, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=True)
     S *= (m * m) / (n * n)

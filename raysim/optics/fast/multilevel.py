@@ -45,6 +45,7 @@ from raysim.optics.fast.chart import (
     degree_for,
     grid_points,
     half_rows,
+    kept_blocks,
     lagrange,
     mirror,
     resample,
@@ -393,14 +394,20 @@ def grid_sums(grids: Iterable[tuple[int, int, NDArray[np.complex128]]], the_plan
     total = np.zeros((R, 3, Q), dtype=np.complex128)
     nk = len(keep)
     per = max(1, int(CHUNK_BYTES // (16 * 3 * R * Q * 2)))
+    scratch = Scratch()
     for q0, q1, G in grids:
         for c0 in range(q0, q1, per):
             c1 = min(c0 + per, q1)
             c = c1 - c0
-            S = sfft.fft2(G[c0 - q0:c1 - q0], axes=(1, 2), workers=FFT_WORKERS)[:, keep][:, :, keep] / (n * n)
-            # two plain matrix products (one BLAS call each): theta first, then phi
-            A = np.ascontiguousarray(np.transpose(S, (1, 0, 3, 2))).reshape(nk, c * 3 * nk)
-            W = (E_theta @ A).reshape(R * c * 3, nk) @ E_phi_T  # (R * c * 3, Q)
+            S = sfft.fft2(G[c0 - q0:c1 - q0], axes=(1, 2), workers=FFT_WORKERS)
+            # the kept coefficients, in the (k_theta, cluster, component, k_phi) order the two
+            # plain matrix products (one BLAS call each, theta first, then phi) read them in
+            A = scratch.array("coefficients", (nk, c, 3, nk))
+            for coarse, packed in kept_blocks(n, nk):
+                A.transpose(1, 0, 3, 2)[packed] = S[coarse]
+            A *= 1.0 / (n * n)
+            T = np.matmul(E_theta, A.reshape(nk, c * 3 * nk), out=scratch.array("theta", (R, c * 3 * nk)))
+            W = np.matmul(T.reshape(R * c * 3, nk), E_phi_T, out=scratch.array("series", (R * c * 3, Q)))
             r = distances(points, level.centres[c0:c1])
             phase = np.exp(-1j * k * r).reshape(c, R, Q).transpose(1, 0, 2)  # (R, c, Q)
             total += np.einsum("rcaq,rcq->raq", W.reshape(R, c, 3, Q), phase)  # no (R, c, 3, Q) product
