@@ -34,8 +34,3 @@ class Scratch:
             self._buffers.pop(role, None)  # let the old one go before the larger one is made
             buffer = self._buffers[role] = np.empty(max(size, 1), dtype=np.uint8)
         return buffer[:size].view(dt).reshape(shape)
-
-    @property
-    def nbytes(self) -> int:
-        """Bytes held by all the buffers."""
-        return sum(buffer.nbytes for buffer in self._buffers.values())
