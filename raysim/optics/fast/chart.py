@@ -156,15 +156,13 @@ def resample(G: NDArray[np.complex128], m: int, out: NDArray[np.complex128] | No
              overwrite: bool = False) -> NDArray[np.complex128]:
     """The periodic grids ``G`` (..., n, n, c) on the finer m x m grid (m >= n, even n):
     spectra zero-padded. The Nyquist row and column are dropped (a grid chosen by
-    :func:`size_for` holds nothing there). ``out``: a (..., m, m, c) array to build the result
-    in (it is returned; a buffer reused between calls, :mod:`raysim.optics.fast.scratch`);
-    ``overwrite``: ``G`` may be overwritten (its spectrum is taken in place)."""
+    :func:`size_for` holds nothing there). ``out``: a (..., m, m, c) buffer the result may be
+    built in (one reused between calls, :mod:`raysim.optics.fast.scratch`; read the returned
+    array, which is ``G`` itself when m = n); ``overwrite``: ``G`` may be overwritten (its
+    spectrum is taken in place)."""
     n = G.shape[-2]
     if m == n:
-        if out is None:
-            return G
-        out[...] = G
-        return out
+        return G
     S = sfft.fft2(G, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=overwrite)
     S *= (m * m) / (n * n)  # the inverse transform's 1 / m^2 against the forward one's n^2
     if out is None:
