@@ -132,6 +132,43 @@ def test_a_moved_copy_reuses_the_tree_while_its_grids_hold_it(lift_m: float, sha
     assert _rel_rms(out, _direct(pts, moved, "electric")) < 1e-6
 
 
+def test_batches_hold_a_batch_of_elements_and_sum_within_tolerance() -> None:
+    """Elements added in four strips of the dish, with room kept for two strips: the radiator
+    sums the first two as a batch on their own tree as soon as they are in and lets them go,
+    then the last two; the batches' sums added agree with the direct sum to the tolerance, on
+    the grid and on a block of it (the same bits as the whole grid's), and a moved copy sums
+    each batch on the first copy's tree of that batch."""
+    pts = _grid_points()
+    src = _elements("electric")
+    parts = np.array_split(src, 4, axis=1)
+    room = parts[2].nbytes + parts[3].nbytes  # the last two strips are the smaller
+    domain = domain_of(pts, CENTRE)
+    plans: dict = {}
+
+    def batched(points: np.ndarray, pieces: list[np.ndarray]) -> FastRadiator:
+        r = FastRadiator(points, K, tol=1e-6, centre=CENTRE, force=True, domain=domain, plans=plans,
+                         batch_bytes=room)
+        for i, part in enumerate(pieces):
+            r.add_packed(part, "electric")
+            assert len(r.sources["electric"]) == (0 if i in (1, 3) else 1)  # a batch let go
+        return r
+
+    whole = batched(pts, parts)
+    out = whole.sums_of("electric")
+    assert whole.batches["electric"] == 2 and whole.method["electric"].endswith(", 2 batches")
+    assert _rel_rms(out, _direct(pts, src, "electric")) < 1e-6
+    assert len(plans) == 2  # a tree per batch
+    block = batched(pts[100:333], parts).sums_of("electric")
+    assert np.array_equal(block, out[100:333])
+    moved = [part.copy() for part in parts]
+    for part in moved:
+        part[2] += 1e-3 * np.cos(part[0])  # a millimetre ripple: every batch's tree still holds
+    trees = dict(plans)
+    second = batched(pts, moved)
+    assert _rel_rms(second.sums_of("electric"), _direct(pts, np.concatenate(moved, axis=1), "electric")) < 1e-6
+    assert plans.keys() == trees.keys() and all(plans[key] is trees[key] for key in trees)
+
+
 @pytest.mark.parametrize("stop_chunks", [1, 3])
 def test_a_block_of_points_gives_the_same_bits(stop_chunks: int, monkeypatch) -> None:
     """A block of the grid's points gets the whole grid's bits, with the stop level's grids in
