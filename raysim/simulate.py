@@ -45,15 +45,20 @@ if TYPE_CHECKING:
     from raysim.optics.sources import Sources
 
 #: the peak memory of a wave run (PO + PTD, ideal and deformed, fast radiator) is bounded by
-#: WAVE_BASE_BYTES + BYTES_PER_PO_SAMPLE x the PO source samples of one reflector. The walk
-#: holds its chunks of grids (a bounded few GB) beside the elements in leaf order and their
-#: order (80 bytes a sample); the tree's planning about 135 bytes a sample at its peak
-#: (benchmarks/bench_plan_memory.py: 133 at 6 GHz, 127 at 12 GHz). Measured whole runs on the
-#: paper's dish (benchmarks/bench_wave_cost.py, peak RSS): 1.1 GB at 0.3 GHz, 2.2 GB at 1 GHz,
-#: 2.8 GB at 3 GHz (7.5 M samples; the model says 3.6), 5.9 GB at 6 GHz (28.7 M; the model says
-#: 6.5); the direct sum holds less
+#: WAVE_BASE_BYTES + BYTES_PER_PO_SAMPLE x the PO source samples held at once + BYTES_PER_SAMPLE_KEPT
+#: x the PO source samples of one reflector. The fast radiator holds at most a batch of elements
+#: (raysim.optics.fast.radiator.BATCH_BYTES, 72 bytes each): the walk holds its chunks of grids
+#: (a bounded few GB) beside the batch's elements in leaf order and their order (80 bytes a
+#: sample), the tree's planning about 135 bytes a sample at its peak
+#: (benchmarks/bench_plan_memory.py: 133 at 6 GHz, 127 at 12 GHz). Every batch's tree is kept
+#: for the deformed reflector (its order, 8 bytes a sample, and its clusters). Measured whole
+#: runs on the paper's dish (benchmarks/bench_wave_cost.py, peak RSS): 1.1 GB at 0.3 GHz, 2.2 GB
+#: at 1 GHz, 2.8 GB at 3 GHz (7.5 M samples; the model says 3.7), 4.8 GB at 6 GHz (28.7 M; the
+#: model says 7.0), 5.7 GB at 12 GHz (112.5 M, four batches; the model says 8.5); the direct sum
+#: holds less
 WAVE_BASE_BYTES = 2.5e9
 BYTES_PER_PO_SAMPLE = 140.0
+BYTES_PER_SAMPLE_KEPT = 16.0
 #: PO samples per spacing^2 of surface: the face quadrature (raysim.surface.quadrature) puts
 #: n^2 points on a face whose longest edge is n spacings, 4 per spacing^2 on a mesh of right
 #: triangles (the paper's dish: 3.8 at 0.3 GHz, 3.4 at 6 GHz, 4.7 at 0.1 GHz where faces
@@ -71,16 +76,32 @@ def physical_memory() -> float:
     return float(page * pages) if page > 0 and pages > 0 else math.inf
 
 
+def batch_samples() -> float:
+    """The PO source samples a batch of the fast radiator holds at most (its
+    :data:`~raysim.optics.fast.radiator.BATCH_BYTES` of elements, 72 bytes each)."""
+    from raysim.optics.fast.radiator import BATCH_BYTES
+    from raysim.optics.sources import BYTES_PER_ELEMENT
+
+    return BATCH_BYTES / BYTES_PER_ELEMENT
+
+
 def wave_bytes(samples: float) -> float:
     """The most memory (bytes) a wave run takes with ``samples`` PO source samples per
-    reflector: :data:`WAVE_BASE_BYTES` + :data:`BYTES_PER_PO_SAMPLE` x ``samples``."""
-    return WAVE_BASE_BYTES + BYTES_PER_PO_SAMPLE * samples
+    reflector: :data:`WAVE_BASE_BYTES` + :data:`BYTES_PER_PO_SAMPLE` x the samples of a batch
+    (:func:`batch_samples`, or all of them when fewer) + :data:`BYTES_PER_SAMPLE_KEPT` x
+    ``samples``."""
+    held = min(samples, batch_samples())
+    return WAVE_BASE_BYTES + BYTES_PER_PO_SAMPLE * held + BYTES_PER_SAMPLE_KEPT * samples
 
 
 def max_po_samples() -> float:
     """The most PO source samples per reflector a wave run may take here: as many as
-    :func:`wave_bytes` fits in this machine's memory (about 1.6e8 on 25 GB)."""
-    return max(physical_memory() - WAVE_BASE_BYTES, 0.0) / BYTES_PER_PO_SAMPLE
+    :func:`wave_bytes` fits in this machine's memory (about 1.2e9 on 25 GB)."""
+    room = max(physical_memory() - WAVE_BASE_BYTES, 0.0)
+    batch = batch_samples()
+    if room <= (BYTES_PER_PO_SAMPLE + BYTES_PER_SAMPLE_KEPT) * batch:
+        return room / (BYTES_PER_PO_SAMPLE + BYTES_PER_SAMPLE_KEPT)
+    return (room - BYTES_PER_PO_SAMPLE * batch) / BYTES_PER_SAMPLE_KEPT
 
 
 @dataclass(frozen=True)

@@ -134,8 +134,8 @@ def test_the_size_check_counts_the_samples_the_quadrature_makes(D, F, faces, f_g
 
 
 def test_the_size_check_follows_this_machine_memory(monkeypatch):
-    """The cap is what the machine's memory holds: the paper's dish at 3 GHz (about 3.7 GB by
-    the model; 3.0 GB measured) runs on 5 GB and 6 GHz (about 7.3 GB; 5.9 GB measured) is
+    """The cap is what the machine's memory holds: the paper's dish at 3 GHz (about 3.8 GB by
+    the model; 2.8 GB measured) runs on 5 GB and 6 GHz (about 7.2 GB; 4.8 GB measured) is
     refused in one line; a system that does not say its memory (sysconf's -1) refuses
     nothing."""
     import os
