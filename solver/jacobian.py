@@ -30,7 +30,9 @@ from numpy.typing import NDArray
 from scipy.interpolate import BSpline, RectBivariateSpline
 
 from raysim.maps.sphere import SphereGrid
+from raysim.surface.mesh import Reflector
 from solver.aperture import ApertureGrid
+from solver.errors import SolverError
 from solver.forward import WaveForward
 from solver.nonlinear import extend_outside, outside_fill
 
@@ -40,6 +42,11 @@ CHUNK = 65_536
 #: truncated LSQR solves a step to about 1e-2, so products to 1e-4 leave the steps as they
 #: are, while the fields (the misfit the steps are judged by) keep the model's own tolerance
 JACOBIAN_TOL = 1e-4
+#: memory the Jacobian holds per PO sample of the model's reflector (bytes): its surface
+#: elements (the moment and its three derivatives, 508 bytes a sample at 1 GHz on the paper's
+#: dish, measured as resident memory) and the grid-to-samples matrices (200), with some room;
+#: unlike the forward sum, which holds a batch of samples, the Jacobian holds them all
+JACOBIAN_BYTES_PER_SAMPLE = 800.0
 
 
 def _basis(x: NDArray[np.float64], t: NDArray[np.float64], lo: float, hi: float):
@@ -117,6 +124,21 @@ class GridToSamples:
         return self._filled_T(iAy.T @ GC @ iAx)
 
 
+def _check_memory(reflector: Reflector, wavelength: float, samples_per_wavelength: float) -> None:
+    """Refuse (SolverError, one line) a Jacobian whose samples would not fit this machine's
+    memory (:data:`JACOBIAN_BYTES_PER_SAMPLE` each above ``simulate``'s base), before the
+    model's field is computed."""
+    from raysim.simulate import WAVE_BASE_BYTES, physical_memory
+    from raysim.surface.quadrature import plan
+
+    n = plan(reflector, wavelength, samples_per_wavelength).n_samples
+    need = WAVE_BASE_BYTES + JACOBIAN_BYTES_PER_SAMPLE * n
+    if need > physical_memory():
+        raise SolverError(f"Gauss-Newton's Jacobian needs {n:.2g} PO samples, about {need / 1e9:.2g} GB, "
+                          f"more than this machine's {physical_memory() / 1e9:.3g} GB: use the "
+                          "defect correction (--refine-method defect) or a lower frequency")
+
+
 class WaveJacobian:
     """The PO (+ PTD) model's intensity and its exact linearisation at one surface estimate.
 
@@ -143,6 +165,7 @@ class WaveJacobian:
             else model.samples_per_wavelength
         # the model's own reflector and field (PO, PTD's rim, the incident wave when total)
         self.reflector = model.reflector(D, F, surface)
+        _check_memory(self.reflector, self.wave.wavelength, spw)
         self.E = model.field(sphere, F, D, surface).reshape(-1, 3)
         self.elements = po_jacobian.surface_elements(self.reflector, self.wave, spw, model.device)
         self.samples = GridToSamples(grid, self.elements.x, self.elements.y)

@@ -81,6 +81,26 @@ def _paper_jacobian(n_theta, n_phi, seed):
     return jac, rng.standard_normal(int(grid.mask.sum())), rng.standard_normal((n_theta, n_phi))
 
 
+def test_the_jacobian_refuses_a_reflector_memory_cannot_hold(monkeypatch):
+    """The forward sum holds a batch of samples, the Jacobian all of them: on a machine whose
+    memory holds the forward model's run of the paper's dish at 0.1 GHz but not 400 bytes a
+    sample more, the Jacobian refuses in one line before the model's field is computed."""
+    import raysim.simulate as sim
+    from raysim.surface.quadrature import plan
+
+    n = plan(paraboloid(D, F, 5.0), 299_792_458.0 / 0.1e9, po.DEFAULT_SAMPLES_PER_WAVELENGTH).n_samples
+    monkeypatch.setattr(sim, "physical_memory", lambda: sim.WAVE_BASE_BYTES + 400.0 * n)
+    sim.check_wave_size("po+ptd", D, 0.1e9)  # the forward model fits
+
+    def no_field(*args, **kwargs):
+        raise AssertionError("the model's field was computed before the refusal")
+
+    monkeypatch.setattr(WaveForward, "field", no_field)
+    grid = ApertureGrid(D, 48)
+    with pytest.raises(SolverError, match="Gauss-Newton's Jacobian needs .* more than this machine's"):
+        WaveJacobian(WaveForward(0.1e9, ptd=True), SphereGrid(R, 5, 6), F, D, grid, np.zeros(grid.mask.shape))
+
+
 def test_vjp_is_the_transpose_of_the_jvp():
     jac, v, y = _paper_jacobian(5, 6, seed=3)
     lhs, rhs = float(np.sum(y * jac.jvp(v))), float(jac.vjp(y) @ v)
