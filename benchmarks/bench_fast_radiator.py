@@ -37,14 +37,15 @@ def elements(freq_ghz: float, ptd: bool):
     dish = paraboloid(110.0, 33.0, 5.0)
     quad = plan(dish, wave.wavelength, po.DEFAULT_SAMPLES_PER_WAVELENGTH)
     # the chunks as they come (no concatenated copy: at 12 GHz the elements are 8 GB)
-    out = {"electric": [chunk.numpy() for chunk in po.po_elements(dish, wave, quad)]}
+    # made as they are read: at 12 GHz the elements are 8 GB, more than a batch
+    out = {"electric": (chunk.numpy() for chunk in po.po_elements(dish, wave, quad))}
     if ptd:
         from raysim.surface.edges import edge_quadrature
 
         q = edge_quadrature(dish, wave.wavelength / ptd_mod.DEFAULT_POINTS_PER_WAVELENGTH, "rim")
         lit = ptd_mod.lit_points(dish, q, wave, "cpu")
-        out["fringe"] = [np.asarray(ptd_mod.fringe_elements(q, wave, lit, None))]
-    return wave, out
+        out["fringe"] = iter([np.asarray(ptd_mod.fringe_elements(q, wave, lit, None))])
+    return wave, out, quad.n_samples
 
 
 def run(freq: float, grid_shape: tuple[int, int], tol: float, ref_points: int, ptd: bool,
@@ -54,32 +55,42 @@ def run(freq: float, grid_shape: tuple[int, int], tol: float, ref_points: int, p
     from raysim.optics.radiator import Radiator
 
     start = time.perf_counter()
-    wave, srcs = elements(freq, ptd)
+    wave, srcs, n_samples = elements(freq, ptd)
     t_elements = time.perf_counter() - start
     pts = SphereGrid(10.0, *grid_shape).points(33.0).reshape(-1, 3)
-    n_src = sum(chunk.shape[1] for chunks in srcs.values() for chunk in chunks)
-    start = time.perf_counter()
-    fast = FastRadiator(pts, wave.k, tol=tol, centre=(0, 0, 33.0), force=force)
-    for kind in srcs:
-        while srcs[kind]:  # handed over one by one: the radiator frees each once it is gathered
-            fast.add_packed(srcs[kind].pop(0), kind)
-    Ef = fast.field()
-    t_fast = time.perf_counter() - start
-    # the reference sums the elements the fast radiator held (in its leaf order: the sum does not
-    # depend on the order), so they are in memory once
-    srcs = {kind: fast.sources[kind] for kind in fast.sources}
-    method = fast.method
-    del fast
-    full = n_src * len(pts) <= FULL_PAIRS or ref_points <= 0
+    full = n_samples * len(pts) <= FULL_PAIRS or ref_points <= 0
     idx = np.arange(len(pts)) if full else np.linspace(0, len(pts) - 1, ref_points).astype(int)
-    start = time.perf_counter()
+    fast = FastRadiator(pts, wave.k, tol=tol, centre=(0, 0, 33.0), force=force)
     direct = Radiator(pts[idx], wave.k)
+    t_fast = t_direct = 0.0
+    n_src = 0
     for kind, chunks in srcs.items():
-        for chunk in chunks:
+        while True:
+            start = time.perf_counter()
+            chunk = next(chunks, None)
+            t_elements += time.perf_counter() - start
+            if chunk is None:
+                break
+            n_src += chunk.shape[1]
+            # each piece goes to the reference first (it sums what it is given at once) and then
+            # to the fast radiator, which holds it until its batch is summed and then lets it go:
+            # the elements are held at most once (at 12 GHz they are 8 GB, four batches)
+            start = time.perf_counter()
             for c0 in range(0, chunk.shape[1], REF_CHUNK):  # the radiator copies what it is given
                 direct.add_packed(chunk[:, c0:c0 + REF_CHUNK], kind)
+            t_direct += time.perf_counter() - start
+            start = time.perf_counter()
+            fast.add_packed(chunk, kind)
+            t_fast += time.perf_counter() - start
+            del chunk
+    start = time.perf_counter()
+    Ef = fast.field()
+    t_fast += time.perf_counter() - start
+    method = fast.method
+    del fast
+    start = time.perf_counter()
     Ed = direct.field()
-    t_direct = (time.perf_counter() - start) * len(pts) / len(idx)
+    t_direct = (t_direct + time.perf_counter() - start) * len(pts) / len(idx)
     err = float(np.sqrt(np.mean(np.abs(Ef[idx] - Ed) ** 2) / np.mean(np.abs(Ed) ** 2)))
     return {"freq": freq, "elements": n_src, "points": len(pts), "t_elements": t_elements,
             "t_fast": t_fast, "t_direct": t_direct, "direct_full": full, "err": err,

@@ -82,6 +82,7 @@ CASES = {c.name: c for c in (
     Case("paper_3GHz", PAPER, 3e9, 90, 36),
     Case("paper_3GHz_full", PAPER, 3e9, 90, 360),  # the fast radiator's reach (issue 31)
     Case("paper_6GHz_full", PAPER, 6e9, 90, 360),
+    Case("paper_12GHz_full", PAPER, 12e9, 90, 360),  # the elements summed in batches
     Case("dish25_3GHz", DISH25, 3e9),
     Case("panels_3GHz", "panels", 3e9, 90, 60, edges="all", phi_max_deg=60.0),
     # the field's mirror symmetries in x and y (axisymmetric dish and shape, E along x): the
