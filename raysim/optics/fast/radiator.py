@@ -44,7 +44,8 @@ MIN_TOL = 1e-12
 RADIATORS = ("fast", "direct")
 #: elements of a kind kept at most (bytes) before they are summed as one batch (each batch its own
 #: tree): 2 GiB is the paper's dish at 6 GHz in one batch (2.07 GB), so batches only begin above
-#: it; below 0.5 GiB the trees' top levels are repeated for little gain in memory
+#: it, and a batch's planning and walk peak where that run did (4.8 GB; 5.7 GB for the whole
+#: 12 GHz run, with every batch's tree kept)
 BATCH_BYTES = 2 << 30
 
 
