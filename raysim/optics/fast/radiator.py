@@ -130,7 +130,6 @@ class FastRadiator:
         self.results: dict[str, NDArray[np.float64]] = {}
         self.batches: dict[str, int] = {}  # batches of a kind summed and let go
         self.summed: dict[str, NDArray[np.float64]] = {}  # their sums, added up
-        self.batch_ran: dict[str, str] = {}  # the sum the last of them ran
         self.method: dict[str, str] = {}
         self.pairs = 0
         self.seconds = 0.0
@@ -167,7 +166,6 @@ class FastRadiator:
         sums = self._run(kind)
         self.summed[kind] = sums if kind not in self.summed else self.summed[kind] + sums
         self.batches[kind] = self.batches.get(kind, 0) + 1
-        self.batch_ran[kind] = self.method[kind]
         self.sources[kind] = []
         self.leaf_order.pop(kind, None)
         self.seconds += time.perf_counter() - start
@@ -188,11 +186,11 @@ class FastRadiator:
         if kind not in self.results:
             start = time.perf_counter()
             kept = bool(self.sources[kind])
+            # method[kind] names the last sum run: of the elements kept, else of the last batch
             sums = self._run(kind) if kept else np.zeros((self.n, 6))
             if kind in self.summed:
                 sums = sums + self.summed[kind]
-                ran = self.method[kind] if kept else self.batch_ran[kind]
-                self.method[kind] = f"{ran}, {self.batches[kind] + kept} batches"
+                self.method[kind] = f"{self.method[kind]}, {self.batches[kind] + kept} batches"
             self.results[kind] = sums
             self.seconds += time.perf_counter() - start
         return self.results[kind]
