@@ -21,11 +21,18 @@ import warp as wp
 from raysim.optics.kernels.f64 import F64_ONE, F64_TWO
 from raysim.optics.kernels.radiation import (
     electric_bracket,
+    electric_bracket4,
     green,
+    green4,
+    lanes6,
     magnetic_bracket,
+    magnetic_bracket4,
+    offsets4,
     radiation_kernels,
     segment_kernel,
     times,
+    times4,
+    vec4d,
     vec6d,
 )
 
@@ -72,10 +79,26 @@ def magnetic_pair(p: wp.vec3d, e: Dipole, k: wp.float64, k_inv: wp.float64,
     return times(magnetic_bracket(d, inv, inv * k_inv, e.re, e.im), green(k, R2, inv, table))
 
 
-radiate_electric, radiate_electric4 = radiation_kernels(load_dipole, electric_pair)
-radiate_magnetic, radiate_magnetic4 = radiation_kernels(load_dipole, magnetic_pair)
-segments_electric = segment_kernel(load_dipole, electric_pair)
-segments_magnetic = segment_kernel(load_dipole, magnetic_pair)
+@wp.func
+def electric_pair4(px: vec4d, py: vec4d, pz: vec4d, e: Dipole, k: wp.float64, k_inv: wp.float64,
+                   table: wp.array(dtype=wp.vec2d)) -> lanes6:
+    """:func:`electric_pair` at four points in vector lanes."""
+    d = offsets4(px, py, pz, e.r, k_inv)
+    return times4(electric_bracket4(d, e.re, e.im), green4(k, d.R2, d.inv, table))
+
+
+@wp.func
+def magnetic_pair4(px: vec4d, py: vec4d, pz: vec4d, e: Dipole, k: wp.float64, k_inv: wp.float64,
+                   table: wp.array(dtype=wp.vec2d)) -> lanes6:
+    """:func:`magnetic_pair` at four points in vector lanes."""
+    d = offsets4(px, py, pz, e.r, k_inv)
+    return times4(magnetic_bracket4(d, e.re, e.im), green4(k, d.R2, d.inv, table))
+
+
+radiate_electric, radiate_electric4 = radiation_kernels(load_dipole, electric_pair, electric_pair4)
+radiate_magnetic, radiate_magnetic4 = radiation_kernels(load_dipole, magnetic_pair, magnetic_pair4)
+segments_electric = segment_kernel(load_dipole, electric_pair, electric_pair4)
+segments_magnetic = segment_kernel(load_dipole, magnetic_pair, magnetic_pair4)
 
 
 @wp.kernel

@@ -82,21 +82,24 @@ def test_electric_dipole_near_and_far(tile):
     assert err.max() < 1e-12, err.max()
 
 
-def test_magnetic_dipole_near_and_far():
+@pytest.mark.parametrize("tile", [1, 4])
+def test_magnetic_dipole_near_and_far(tile):
     rng = np.random.default_rng(6)
     origin = np.array([-1.0, 4.0, 7.5])
     axis = np.array([1.0, 1.0, 0.2])
     moment = 0.3 + 2.2j
     points = _field_points(origin, rng)
-    radiator = po.Radiator(points, K, "cpu")
+    radiator = po.Radiator(points, K, "cpu", tile=tile)
     w = axis / np.linalg.norm(axis)
     radiator.add(po.CurrentElements(origin[None, :], (moment * w)[None, :], magnetic=True))
     err = _rel_error(radiator.field(), magnetic_dipole_exact(points, origin, axis, moment, K))
     assert err.max() < 1e-12, err.max()
 
 
-def test_many_elements_add_up_across_blocks_and_threads():
-    """Superposition: many dipoles in small blocks, on both kernels, match the exact sum."""
+@pytest.mark.parametrize("magnetic", [False, True])
+def test_many_elements_add_up_across_blocks_and_threads(magnetic):
+    """Superposition: many dipoles in small blocks, on both kernels (one point a thread, and
+    four points in vector lanes), match the exact sum."""
     rng = np.random.default_rng(7)
     n = 37
     origins = rng.uniform(-3, 3, size=(n, 3))
@@ -104,11 +107,11 @@ def test_many_elements_add_up_across_blocks_and_threads():
     axes /= np.linalg.norm(axes, axis=1, keepdims=True)
     moments = rng.normal(size=n) + 1j * rng.normal(size=n)
     points = np.array([0.0, 0.0, 30.0]) + rng.normal(size=(203, 3))
-    exact = sum(electric_dipole_exact(points, o, a, m, K) for o, a, m in zip(origins, axes, moments,
-                                                                            strict=True))
+    dipole = magnetic_dipole_exact if magnetic else electric_dipole_exact
+    exact = sum(dipole(points, o, a, m, K) for o, a, m in zip(origins, axes, moments, strict=True))
     for tile in (1, 4):
         radiator = po.Radiator(points, K, "cpu", block=5, tile=tile)
-        radiator.add(po.CurrentElements(origins, moments[:, None] * axes))
+        radiator.add(po.CurrentElements(origins, moments[:, None] * axes, magnetic=magnetic))
         assert radiator.pairs == n * len(points)
         err = np.linalg.norm(radiator.field() - exact) / np.linalg.norm(exact)
         assert err < 1e-12, (tile, err)
