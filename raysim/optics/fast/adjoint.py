@@ -19,7 +19,8 @@ chain, run from the targets down to the elements on the same plan:
    exp(+j k |P_n - c_leaf|) put back, and out_j = sum_n K_j(P_n) beta_leaf(n) over the leaf's
    own nodes P_n (a segmented adjoint kernel, a thread per element).
 
-Same plan as the forward (:func:`raysim.optics.fast.radiator.plan_for`), so the gradients agree
+Same plan as the forward JVP's (:func:`raysim.optics.fast.radiator.plan_for`; both run their
+pairs one point at a time, so both weigh the leaves alike), so the gradients agree
 with the direct transposed sum to about the forward's tolerance. Every step is a matrix
 product, an FFT, a sparse product or a thread-owned row in a fixed order: the same bits on
 every run.
@@ -252,7 +253,7 @@ def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike,
     the_plan = None
     domain = domain_of(pts, centre) if centre is not None and len(pts) and src.shape[1] else None
     if domain is not None:
-        the_plan = plan_for([src], domain, k, tol)
+        the_plan = plan_for([src], domain, k, tol, kind=None)
     if the_plan is None or (the_plan.cost >= the_plan.direct_cost and not force):
         if info is not None:
             info["method"] = "direct"

@@ -10,7 +10,7 @@ One n per level (its widest cluster's), so every cluster of a level shares one g
    kernel), the other rows by the sphere's symmetry;
 2. up the tree: each child's grid refined to its parent's n by zero-padding its spectrum,
    re-phased by exp(+j k (|P - c_parent| - |P - c_child|)) and summed in order
-   (bit-reproducible);
+   (bit-reproducible), again at the rows theta <= pi, the others by the symmetry;
 3. at the stop level, times exp(-j k |P - c|) and summed over the clusters: on a tensor grid
    of targets (a sphere grid, or a block of one) each cluster's Fourier series evaluated
    exactly on the whole grid by two matrix products; elsewhere each grid refined a few times
@@ -56,15 +56,23 @@ from raysim.optics.fast.chart import (
 from raysim.optics.fast.scratch import Scratch
 
 #: costs of the steps' inner operations in units of one direct pair evaluation (the leaf kernel
-#: runs the direct sum's pair function), measured on two CPU cores (paper's dish, 0.3 GHz):
-#: a p-point stencil term (six real multiply-adds) about a third of a pair; a phase factor
-#: exp(j k r) about one and a half; a complex FFT about a tenth of a pair per point and
-#: halving; an elementwise numpy complex operation about a tenth
-COST_STENCIL = 0.33
-COST_EXP = 1.5
-COST_FFT = 0.1
-COST_NUMPY = 0.1
-COST_BLAS = 0.05  # a complex multiply-add in a matrix product
+#: runs the direct sum's pair function, four points in vector lanes on the CPU), measured on two
+#: CPU cores (paper's dish, 1 GHz: the leaf step ran 140 M pairs/s, the aggregation 80 M of these
+#: units/s with the constants before the lanes, 1.8 times too few): a p-point stencil term (six
+#: real multiply-adds, scalar) about 1.2 pairs; a phase factor exp(j k r) about 2.7; a complex
+#: FFT about a fifth of a pair per point and halving; an elementwise numpy complex operation
+#: about a fifth; a complex multiply-add in a matrix product a twentieth (the last step's
+#: products measured at the pair rate)
+COST_STENCIL = 1.2
+COST_EXP = 2.7
+COST_FFT = 0.18
+COST_NUMPY = 0.18
+COST_BLAS = 0.05
+#: a pair evaluation's cost in those units: PO's electric and magnetic elements have kernels in
+#: vector lanes (:mod:`raysim.optics.kernels.radiation`); the other kinds, and the transposed
+#: sums, run one point at a time, about three times as long a pair
+PAIR_COST = {"electric": 1.0, "magnetic": 1.0}
+SCALAR_PAIR_COST = 3.0
 GRID_BYTES = 2e8  # one level's grids held at once (a chunk of it; one chunk per level is live)
 CHUNK_BYTES = 2.5e8  # refined grids held at once while aggregating or interpolating
 MIN_LEAF = 8  # elements per non-empty leaf on average, at least
@@ -137,13 +145,16 @@ def _fft_cost(n: int) -> float:
 
 
 def plan(pieces: Sequence[NDArray[np.float64]], domain: Domain, k: float, tol: float,
-         last: tuple[tuple[int, int], ...], max_depth: int = 12, count: int | None = None) -> Plan | None:
+         last: tuple[tuple[int, int], ...], max_depth: int = 12, count: int | None = None,
+         pair_cost: float = 1.0) -> Plan | None:
     """The cheapest (leaf, stop, last step) for the elements of ``pieces`` (rows 0..2 their
     positions, m: :func:`raysim.optics.fast.tree.build`), each level's step held to about
     ``tol``; None when no level is separated from the targets. ``last``: the (oversampling,
     stencil p) pairs the last step may use. ``count``: the number of elements when the pieces
     hold an even subset of them (a cost estimate: the tree and the costs are those of ``count``
-    elements, the clusters' extents those of the subset)."""
+    elements, the clusters' extents those of the subset). ``pair_cost``: what one of this
+    kind's pair evaluations costs in the units of the constants above (a pair in vector lanes:
+    :data:`PAIR_COST`); the direct sum's cost and the leaf step's scale with it."""
     n = sum(piece.shape[1] for piece in pieces) if count is None else int(count)
     digits = -math.log10(tol)
     depth = 0
@@ -152,14 +163,14 @@ def plan(pieces: Sequence[NDArray[np.float64]], domain: Domain, k: float, tol: f
     order, levels = quadtree.build(pieces, depth)
     sizes = [_size(level.centres, level.radii, domain, k, digits) for level in levels]
     M = domain.count
-    direct = float(n) * M
+    direct = float(n) * M * pair_cost
     best: tuple[float, int, int, int, int] | None = None
     for leaf in range(depth + 1):
         nl = sizes[leaf]
         if nl is None:
             continue
         nodes = half_rows(nl) * nl
-        cost = float(n) * nodes + len(levels[leaf].keys) * nodes * COST_EXP
+        cost = float(n) * nodes * pair_cost + len(levels[leaf].keys) * nodes * COST_EXP
         for stop in range(leaf, -1, -1):
             ns = sizes[stop]
             if ns is None:
@@ -276,7 +287,9 @@ def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Dom
 
     low, up = the_plan.levels[child], the_plan.levels[child - 1]
     n = the_plan.sizes[child - 1]
-    nodes = warray(grid_points(n, domain), device)
+    n_half = half_rows(n) * n  # the nodes computed; the kernel fills their mirrors too
+    nodes = warray(grid_points(n, domain, half_rows(n)), device)
+    slots = warray(mirror_slots(n, n_half), device, wp.int32)
     table = warray(radiation.cis_table(), device, wp.vec2d)
     q_hi = len(up.keys) if q_hi is None else q_hi
     C0 = q_hi - q_lo
@@ -298,8 +311,8 @@ def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Dom
         target = out[q:q1].reshape(-1, 3).view(np.float64)  # ((q1 - q) n^2, 6)
         part = warray(target, device) if device == "cpu" else wp.empty(target.shape, dtype=wp.float64,
                                                                          device=device)
-        runtime.launch(fast.rephase_merge, (q1 - q) * n * n, [
-            warray(fine, device), n * n, warray(first[q:q1 + 1], device, wp.int32),
+        runtime.launch(fast.rephase_merge, (q1 - q) * n_half, [
+            warray(fine, device), n_half, n * n, slots, warray(first[q:q1 + 1], device, wp.int32),
             warray(low.centres[base:], device), warray(up.centres[q_lo + q:q_lo + q1], device), nodes, k,
             table, part], device, min_chunk=256)
         if device != "cpu":

@@ -218,7 +218,7 @@ class FastRadiator:
             if shared is not None and multilevel.holds(shared, pieces, self.domain, self.k):
                 the_plan = shared
             else:
-                the_plan = plan_for(pieces, self.domain, self.k, self.tol)
+                the_plan = plan_for(pieces, self.domain, self.k, self.tol, kind=kind)
                 if self.plans is not None and the_plan is not None:
                     self.plans[tree] = the_plan
         if the_plan is None or (the_plan.cost >= the_plan.direct_cost and not self.force):
@@ -276,14 +276,17 @@ class FastRadiator:
 
 
 def plan_for(pieces: Sequence[NDArray[np.float64]], domain: Domain, k: float, tol: float,
-             count: int | None = None) -> multilevel.Plan | None:
+             count: int | None = None, kind: str | None = "electric") -> multilevel.Plan | None:
     """The multilevel plan for relative accuracy ``tol`` of the elements of ``pieces`` ((rows,
     n_i) arrays whose rows 0..2 are the positions, m: a kind's packed elements, or
     ``positions.T``): each of the sum's interpolation steps (one per level and the last) is
-    held to a share of it, and the last step's stencil to a quarter."""
+    held to a share of it, and the last step's stencil to a quarter. ``kind``: whose pair
+    function the leaf step runs (its cost weighs the leaves against the levels above); None:
+    the transposed sum's."""
     last = tuple((u, stencil_for(tol / 4.0, u)) for u in OVERSAMPLINGS)
     steps = 8  # the tree's levels at most, in practice, plus the last step
-    return multilevel.plan(pieces, domain, k, tol / steps, last, count=count)
+    pair_cost = multilevel.PAIR_COST.get(kind or "", multilevel.SCALAR_PAIR_COST)
+    return multilevel.plan(pieces, domain, k, tol / steps, last, count=count, pair_cost=pair_cost)
 
 
 def describe(the_plan: multilevel.Plan) -> str:

@@ -58,19 +58,24 @@ def interpolate_targets(
 
 @wp.kernel
 def rephase_merge(
-    fine: wp.array2d(dtype=wp.float64),  # (children * n_nodes, 6): refined child grids, complex pairs
-    n_nodes: int,
+    fine: wp.array2d(dtype=wp.float64),  # (children * n_full, 6): refined child grids, complex pairs
+    n_nodes: int,  # nodes computed per grid: its rows theta <= pi
+    n_full: int,  # nodes of a whole grid
+    slots: wp.array2d(dtype=wp.int32),  # (n_nodes, 2): the whole grid's rows a node fills
     first: wp.array(dtype=wp.int32),  # (parents + 1,): children of parent q are first[q]..first[q+1]-1
     child_centres: wp.array2d(dtype=wp.float64),  # (children, 3) m
     parent_centres: wp.array2d(dtype=wp.float64),  # (parents, 3) m
-    nodes: wp.array2d(dtype=wp.float64),  # (n_nodes, 3) m: the parent grid's points
+    nodes: wp.array2d(dtype=wp.float64),  # (n_nodes, 3) m: the parent grid's computed points
     k: wp.float64,
     table: wp.array(dtype=wp.vec2d),
-    out: wp.array2d(dtype=wp.float64),  # (parents * n_nodes, 6): complex pairs
+    out: wp.array2d(dtype=wp.float64),  # (parents * n_full, 6): complex pairs
     offset: int,
 ):
     """The parent grids: each child's refined grid times exp(+j k (|P - c_parent| - |P - c_child|)),
-    summed over the children in order (one thread per parent node)."""
+    summed over the children in order (one thread per computed parent node). Only the rows
+    theta <= pi are computed; each value also fills its mirror node (the same point of the
+    sphere: :func:`raysim.optics.fast.multilevel.mirror_slots`), which the refined children
+    hold alike, so the whole grid is what computing every node would give, at half the cost."""
     t = wp.tid() + offset
     q = t // n_nodes
     node = t - q * n_nodes
@@ -81,11 +86,14 @@ def rephase_merge(
     for c in range(first[q], first[q + 1]):
         r_child = wp.length(P - wp.vec3d(child_centres[c, 0], child_centres[c, 1], child_centres[c, 2]))
         e = cis(k * (r_parent - r_child), table)  # exp(+j k (r_p - r_c)) = e[0] + j e[1]
-        row = (c - base) * n_nodes + node
+        row = (c - base) * n_full + node
         for a in range(3):
             re = fine[row, 2 * a]
             im = fine[row, 2 * a + 1]
             total[2 * a] = total[2 * a] + e[0] * re - e[1] * im
             total[2 * a + 1] = total[2 * a + 1] + e[0] * im + e[1] * re
-    for a in range(6):
-        out[t, a] = total[a]
+    for j in range(2):
+        slot = slots[node, j]
+        if slot >= 0:
+            for a in range(6):
+                out[q * n_full + slot, a] = total[a]
