@@ -222,8 +222,9 @@ def magnetic_bracket4(d: Offsets4, mr: wp.vec3d, mi: wp.vec3d) -> lanes6:
     cix = wp.cw_mul(d.y * mi[2] - d.z * mi[1], d.inv)
     ciy = wp.cw_mul(d.z * mi[0] - d.x * mi[2], d.inv)
     ciz = wp.cw_mul(d.x * mi[1] - d.y * mi[0], d.inv)
-    return wp.matrix_from_rows(crx + wp.cw_mul(d.u, cix), cry + wp.cw_mul(d.u, ciy), crz + wp.cw_mul(d.u, ciz),
-                               cix - wp.cw_mul(d.u, crx), ciy - wp.cw_mul(d.u, cry), ciz - wp.cw_mul(d.u, crz))
+    return wp.matrix_from_rows(
+        crx + wp.cw_mul(d.u, cix), cry + wp.cw_mul(d.u, ciy), crz + wp.cw_mul(d.u, ciz),
+        cix - wp.cw_mul(d.u, crx), ciy - wp.cw_mul(d.u, cry), ciz - wp.cw_mul(d.u, crz))
 
 
 @wp.func
