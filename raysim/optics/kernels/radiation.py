@@ -283,53 +283,38 @@ def radiation_kernels(load: Any, pair: Any, pair4: Any = None) -> tuple[Any, Any
         offset: int,
     ):
         t = (wp.tid() + offset) * 4
-        p0 = wp.vec3d(field[0, t], field[1, t], field[2, t])
-        p1 = wp.vec3d(field[0, t + 1], field[1, t + 1], field[2, t + 1])
-        p2 = wp.vec3d(field[0, t + 2], field[1, t + 2], field[2, t + 2])
-        p3 = wp.vec3d(field[0, t + 3], field[1, t + 3], field[2, t + 3])
-        a0 = vec6d()
-        a1 = vec6d()
-        a2 = vec6d()
-        a3 = vec6d()
-        for s in range(begin, end):
-            e = load(src, s)
-            a0 += pair(p0, e, k, k_inv, table)
-            a1 += pair(p1, e, k, k_inv, table)
-            a2 += pair(p2, e, k, k_inv, table)
-            a3 += pair(p3, e, k, k_inv, table)
-        for c in range(6):
-            E[c, t] = E[c, t] + a0[c]
-            E[c, t + 1] = E[c, t + 1] + a1[c]
-            E[c, t + 2] = E[c, t + 2] + a2[c]
-            E[c, t + 3] = E[c, t + 3] + a3[c]
+        if wp.static(pair4 is not None):  # decided when the kernel is built
+            px = vec4d(field[0, t], field[0, t + 1], field[0, t + 2], field[0, t + 3])
+            py = vec4d(field[1, t], field[1, t + 1], field[1, t + 2], field[1, t + 3])
+            pz = vec4d(field[2, t], field[2, t + 1], field[2, t + 2], field[2, t + 3])
+            acc = lanes6()
+            for s in range(begin, end):
+                acc += pair4(px, py, pz, load(src, s), k, k_inv, table)
+            for c in range(6):
+                for j in range(4):
+                    E[c, t + j] = E[c, t + j] + acc[c, j]
+        else:
+            p0 = wp.vec3d(field[0, t], field[1, t], field[2, t])
+            p1 = wp.vec3d(field[0, t + 1], field[1, t + 1], field[2, t + 1])
+            p2 = wp.vec3d(field[0, t + 2], field[1, t + 2], field[2, t + 2])
+            p3 = wp.vec3d(field[0, t + 3], field[1, t + 3], field[2, t + 3])
+            a0 = vec6d()
+            a1 = vec6d()
+            a2 = vec6d()
+            a3 = vec6d()
+            for s in range(begin, end):
+                e = load(src, s)
+                a0 += pair(p0, e, k, k_inv, table)
+                a1 += pair(p1, e, k, k_inv, table)
+                a2 += pair(p2, e, k, k_inv, table)
+                a3 += pair(p3, e, k, k_inv, table)
+            for c in range(6):
+                E[c, t] = E[c, t] + a0[c]
+                E[c, t + 1] = E[c, t + 1] + a1[c]
+                E[c, t + 2] = E[c, t + 2] + a2[c]
+                E[c, t + 3] = E[c, t + 3] + a3[c]
 
-    if pair4 is None:
-        return radiate, radiate4
-
-    @wp.kernel(module="unique")
-    def radiate_lanes(
-        field: wp.array2d(dtype=wp.float64),
-        src: wp.array2d(dtype=wp.float64),
-        begin: int,
-        end: int,
-        k: wp.float64,
-        k_inv: wp.float64,
-        table: wp.array(dtype=wp.vec2d),
-        E: wp.array2d(dtype=wp.float64),
-        offset: int,
-    ):
-        t = (wp.tid() + offset) * 4
-        px = vec4d(field[0, t], field[0, t + 1], field[0, t + 2], field[0, t + 3])
-        py = vec4d(field[1, t], field[1, t + 1], field[1, t + 2], field[1, t + 3])
-        pz = vec4d(field[2, t], field[2, t + 1], field[2, t + 2], field[2, t + 3])
-        acc = lanes6()
-        for s in range(begin, end):
-            acc += pair4(px, py, pz, load(src, s), k, k_inv, table)
-        for c in range(6):
-            for j in range(4):
-                E[c, t + j] = E[c, t + j] + acc[c, j]
-
-    return radiate, radiate_lanes
+    return radiate, radiate4
 
 
 vec8d = wp.types.vector(length=8, dtype=wp.float64)
@@ -458,61 +443,39 @@ def segment_kernel(load: Any, pair: Any, pair4: Any = None) -> tuple[Any, Any]:
         leaf = t // n_nodes
         node = t - leaf * n_nodes
         c = wp.vec3d(centres[leaf, 0], centres[leaf, 1], centres[leaf, 2])
-        p0 = wp.vec3d(nodes[0, node], nodes[1, node], nodes[2, node])
-        p1 = wp.vec3d(nodes[0, node + 1], nodes[1, node + 1], nodes[2, node + 1])
-        p2 = wp.vec3d(nodes[0, node + 2], nodes[1, node + 2], nodes[2, node + 2])
-        p3 = wp.vec3d(nodes[0, node + 3], nodes[1, node + 3], nodes[2, node + 3])
-        a0 = vec6d()
-        a1 = vec6d()
-        a2 = vec6d()
-        a3 = vec6d()
-        for s in range(begins[leaf], ends[leaf]):
-            e = load(src, s)
-            a0 += pair(p0, e, k, k_inv, table)
-            a1 += pair(p1, e, k, k_inv, table)
-            a2 += pair(p2, e, k, k_inv, table)
-            a3 += pair(p3, e, k, k_inv, table)
         base = leaf * n_full
-        store_node(E, base, slots, node, times(a0, cis(wp.length(p0 - c) * k, table)))
-        store_node(E, base, slots, node + 1, times(a1, cis(wp.length(p1 - c) * k, table)))
-        store_node(E, base, slots, node + 2, times(a2, cis(wp.length(p2 - c) * k, table)))
-        store_node(E, base, slots, node + 3, times(a3, cis(wp.length(p3 - c) * k, table)))
+        if wp.static(pair4 is not None):  # decided when the kernel is built
+            px = vec4d(nodes[0, node], nodes[0, node + 1], nodes[0, node + 2], nodes[0, node + 3])
+            py = vec4d(nodes[1, node], nodes[1, node + 1], nodes[1, node + 2], nodes[1, node + 3])
+            pz = vec4d(nodes[2, node], nodes[2, node + 1], nodes[2, node + 2], nodes[2, node + 3])
+            acc = lanes6()
+            for s in range(begins[leaf], ends[leaf]):
+                acc += pair4(px, py, pz, load(src, s), k, k_inv, table)
+            for j in range(4):
+                p = wp.vec3d(px[j], py[j], pz[j])
+                v = vec6d(acc[0, j], acc[1, j], acc[2, j], acc[3, j], acc[4, j], acc[5, j])
+                store_node(E, base, slots, node + j, times(v, cis(wp.length(p - c) * k, table)))
+        else:
+            p0 = wp.vec3d(nodes[0, node], nodes[1, node], nodes[2, node])
+            p1 = wp.vec3d(nodes[0, node + 1], nodes[1, node + 1], nodes[2, node + 1])
+            p2 = wp.vec3d(nodes[0, node + 2], nodes[1, node + 2], nodes[2, node + 2])
+            p3 = wp.vec3d(nodes[0, node + 3], nodes[1, node + 3], nodes[2, node + 3])
+            a0 = vec6d()
+            a1 = vec6d()
+            a2 = vec6d()
+            a3 = vec6d()
+            for s in range(begins[leaf], ends[leaf]):
+                e = load(src, s)
+                a0 += pair(p0, e, k, k_inv, table)
+                a1 += pair(p1, e, k, k_inv, table)
+                a2 += pair(p2, e, k, k_inv, table)
+                a3 += pair(p3, e, k, k_inv, table)
+            store_node(E, base, slots, node, times(a0, cis(wp.length(p0 - c) * k, table)))
+            store_node(E, base, slots, node + 1, times(a1, cis(wp.length(p1 - c) * k, table)))
+            store_node(E, base, slots, node + 2, times(a2, cis(wp.length(p2 - c) * k, table)))
+            store_node(E, base, slots, node + 3, times(a3, cis(wp.length(p3 - c) * k, table)))
 
-    if pair4 is None:
-        return radiate_segments, radiate_segments4
-
-    @wp.kernel(module="unique")
-    def radiate_segments_lanes(
-        nodes: wp.array2d(dtype=wp.float64),
-        begins: wp.array(dtype=wp.int32),
-        ends: wp.array(dtype=wp.int32),
-        centres: wp.array2d(dtype=wp.float64),
-        n_nodes: int,
-        src: wp.array2d(dtype=wp.float64),
-        k: wp.float64,
-        k_inv: wp.float64,
-        table: wp.array(dtype=wp.vec2d),
-        slots: wp.array2d(dtype=wp.int32),
-        n_full: int,
-        E: wp.array2d(dtype=wp.float64),
-        offset: int,
-    ):
-        t = (wp.tid() + offset) * 4
-        leaf = t // n_nodes
-        node = t - leaf * n_nodes
-        px = vec4d(nodes[0, node], nodes[0, node + 1], nodes[0, node + 2], nodes[0, node + 3])
-        py = vec4d(nodes[1, node], nodes[1, node + 1], nodes[1, node + 2], nodes[1, node + 3])
-        pz = vec4d(nodes[2, node], nodes[2, node + 1], nodes[2, node + 2], nodes[2, node + 3])
-        acc = lanes6()
-        for s in range(begins[leaf], ends[leaf]):
-            acc += pair4(px, py, pz, load(src, s), k, k_inv, table)
-        c = wp.vec3d(centres[leaf, 0], centres[leaf, 1], centres[leaf, 2])
-        for j in range(4):
-            p = wp.vec3d(px[j], py[j], pz[j])
-            v = vec6d(acc[0, j], acc[1, j], acc[2, j], acc[3, j], acc[4, j], acc[5, j])
-            store_node(E, leaf * n_full, slots, node + j, times(v, cis(wp.length(p - c) * k, table)))
-
-    return radiate_segments, radiate_segments_lanes
+    return radiate_segments, radiate_segments4
 
 
 def segment_adjoint_kernel(load: Any, pair: Any) -> Any:
