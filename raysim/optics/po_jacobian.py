@@ -159,14 +159,20 @@ def vjp(elements: SurfaceElements, points: ArrayLike, c: ArrayLike, device: str 
     if acc is None:
         if info is not None:
             info["method"] = "direct"
-        field_arr = wp.array(np.ascontiguousarray(np.vstack([pts.T, b.real.T, b.imag.T])),
-                             dtype=wp.float64, device=dev)
+        # the kernel takes the points four at a time (vector lanes): pad them to a multiple of
+        # four with copies of the last point and zero weights, which add exactly nothing
+        pad = -len(pts) % 4
+        field = np.vstack([pts.T, b.real.T, b.imag.T])
+        if pad and len(pts):
+            field = np.hstack([field, np.repeat(field[:, -1:], pad, axis=1)])
+            field[3:, -pad:] = 0.0
+        field_arr = wp.array(np.ascontiguousarray(field), dtype=wp.float64, device=dev)
         src = wp.array(np.ascontiguousarray(sources), dtype=wp.float64, device=dev)
         out = wp.zeros((po_derivative.ADJOINT_OUT, n), dtype=wp.float64, device=dev)
         table = wp.array(radiation.cis_table(), dtype=wp.vec2d, device=dev)
-        step = int(block or (2048 if dev == "cpu" else 16384))
-        for begin in range(0, len(pts), step):
-            end = min(begin + step, len(pts))
+        step = 4 * (int(block or (2048 if dev == "cpu" else 16384)) // 4 or 1)
+        for begin in range(0, field.shape[1], step):
+            end = min(begin + step, field.shape[1])
             runtime.launch(po_derivative.adjoint_sum, n,
                            [field_arr, src, begin, end, elements.k, 1.0 / elements.k, table, out],
                            dev, min_chunk=16)

@@ -153,7 +153,8 @@ def vjp(state: EdgeState, wave: Illumination, points: ArrayLike, c: ArrayLike,
         from raysim.optics.fast import adjoint
 
         acc = adjoint.transposed_sum(po_derivative.segments_fringe_adjoint, rows, pts, b, wave.k,
-                                     centre, dev, tol=tol * FAST_TOL_FACTOR, force=force, info=info)
+                                     centre, dev, tol=tol * FAST_TOL_FACTOR, force=force, info=info,
+                                     kind="fringe")
     if acc is None:
         if info is not None:
             info["method"] = "direct"

@@ -19,8 +19,8 @@ chain, run from the targets down to the elements on the same plan:
    exp(+j k |P_n - c_leaf|) put back, and out_j = sum_n K_j(P_n) beta_leaf(n) over the leaf's
    own nodes P_n (a segmented adjoint kernel, a thread per element).
 
-Same plan as the forward JVP's (:func:`raysim.optics.fast.radiator.plan_for`; both run their
-pairs one point at a time, so both weigh the leaves alike), so the gradients agree
+Same plan as the forward JVP's (:func:`raysim.optics.fast.radiator.plan_for` for the kind the
+JVP sums: both weigh their leaves alike), so the gradients agree
 with the direct transposed sum to about the forward's tolerance. Every step is a matrix
 product, an FFT, a sparse product or a thread-owned row in a fixed order: the same bits on
 every run.
@@ -197,9 +197,15 @@ def leaf_sums(kernel: Any, src: NDArray[np.float64], beta: NDArray[np.complex128
     e0, e1 = int(full.begins[lo]), int(full.ends[hi - 1])
     n = the_plan.sizes[the_plan.leaf]
     nodes = grid_points(n, domain, half_rows(n))
-    n_nodes = len(nodes)
-    half = fold(beta, n).reshape(hi - lo, n_nodes, 3)
-    split = np.concatenate([half.real, half.imag], axis=-1)  # (C, n_nodes, 6): Re 3, Im 3
+    # the leaf kernel takes the nodes four at a time (vector lanes): pad them to a multiple of
+    # four with copies of the last node and zero weights, which add exactly nothing
+    n_half = len(nodes)
+    n_nodes = -(-n_half // 4) * 4
+    nodes = np.vstack([nodes, np.repeat(nodes[-1:], n_nodes - n_half, axis=0)])
+    half = fold(beta, n).reshape(hi - lo, n_half, 3)
+    split = np.zeros((hi - lo, n_nodes, 6))  # Re 3, Im 3
+    split[:, :n_half, :3] = half.real
+    split[:, :n_half, 3:] = half.imag
     table = warray(radiation.cis_table(), device, wp.vec2d)
     # the leaf centre's phase put back once per (leaf, node), not once per element
     weights = wp.empty((hi - lo, n_nodes, 6), dtype=wp.float64, device=device)
@@ -233,7 +239,8 @@ def _descend(kernel: Any, ordered: NDArray[np.float64], beta: NDArray[np.complex
 
 def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike, k: float,
                    centre: ArrayLike | None, device: str = "cpu", tol: float = DEFAULT_TOL,
-                   force: bool = False, info: dict | None = None) -> NDArray[np.float64] | None:
+                   force: bool = False, info: dict | None = None,
+                   kind: str = "shift") -> NDArray[np.float64] | None:
     """The transposed sum (8, n_elements) by the multilevel plan, or None where the direct sum
     should run (as the forward's rules: targets not on one sphere about ``centre`` (m), no
     separated level, or an estimated cost above the direct sum's unless ``force``).
@@ -241,7 +248,9 @@ def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike,
     ``kernel``: the kind's segmented adjoint kernel; ``src`` (rows, n) the elements in the
     kind's packed layout (positions in rows 0..2, m); ``points`` (M, 3) m; ``b`` (M, 3) complex
     weights on the targets; ``k`` rad/m. ``info``, when given, receives ``method`` (the plan or
-    ``direct``) and ``seconds``.
+    ``direct``) and ``seconds``. ``kind``: the forward kind whose JVP this transposes (``shift``
+    for PO, ``fringe`` for PTD's rim): its plan is the forward's, so each sum is the exact
+    transpose of the other.
     """
     if (problem := tol_problem(tol)) is not None:
         raise RaysimError(problem)
@@ -253,7 +262,7 @@ def transposed_sum(kernel: Any, src: ArrayLike, points: ArrayLike, b: ArrayLike,
     the_plan = None
     domain = domain_of(pts, centre) if centre is not None and len(pts) and src.shape[1] else None
     if domain is not None:
-        the_plan = plan_for([src], domain, k, tol, kind=None)
+        the_plan = plan_for([src], domain, k, tol, kind=kind)
     if the_plan is None or (the_plan.cost >= the_plan.direct_cost and not force):
         if info is not None:
             info["method"] = "direct"

@@ -68,10 +68,15 @@ COST_EXP = 2.7
 COST_FFT = 0.18
 COST_NUMPY = 0.18
 COST_BLAS = 0.05
-#: a pair evaluation's cost in those units: PO's electric and magnetic elements have kernels in
-#: vector lanes (:mod:`raysim.optics.kernels.radiation`); the other kinds, and the transposed
-#: sums, run one point at a time, about three times as long a pair
-PAIR_COST = {"electric": 1.0, "magnetic": 1.0}
+#: a pair evaluation's cost in those units, per kind. PO's electric and magnetic elements run in
+#: vector lanes (:mod:`raysim.optics.kernels.radiation`), the units themselves. The Jacobian's
+#: shift elements do too, but their pair is heavier (an electric bracket and its derivative:
+#: 24 against 79 M pairs/s on shared cores, 1.4 times their one-point kernel) and their
+#: transposed sum, which shares their plan (each the exact transpose of the other), runs at
+#: about 1.5 units (2.6 times its one-point kernel); a Gauss-Newton iteration runs one of
+#: each, so 2.5. Other kinds (PTD's fringe elements, with their transposed sum) run one point
+#: at a time, about three times as long a pair
+PAIR_COST = {"electric": 1.0, "magnetic": 1.0, "shift": 2.5}
 SCALAR_PAIR_COST = 3.0
 GRID_BYTES = 2e8  # one level's grids held at once (a chunk of it; one chunk per level is live)
 CHUNK_BYTES = 2.5e8  # refined grids held at once while aggregating or interpolating

@@ -276,16 +276,16 @@ class FastRadiator:
 
 
 def plan_for(pieces: Sequence[NDArray[np.float64]], domain: Domain, k: float, tol: float,
-             count: int | None = None, kind: str | None = "electric") -> multilevel.Plan | None:
+             count: int | None = None, kind: str = "electric") -> multilevel.Plan | None:
     """The multilevel plan for relative accuracy ``tol`` of the elements of ``pieces`` ((rows,
     n_i) arrays whose rows 0..2 are the positions, m: a kind's packed elements, or
     ``positions.T``): each of the sum's interpolation steps (one per level and the last) is
     held to a share of it, and the last step's stencil to a quarter. ``kind``: whose pair
-    function the leaf step runs (its cost weighs the leaves against the levels above); None:
-    the transposed sum's."""
+    function the leaf step runs (its cost weighs the leaves against the levels above; a
+    transposed sum plans as the kind it transposes)."""
     last = tuple((u, stencil_for(tol / 4.0, u)) for u in OVERSAMPLINGS)
     steps = 8  # the tree's levels at most, in practice, plus the last step
-    pair_cost = multilevel.PAIR_COST.get(kind or "", multilevel.SCALAR_PAIR_COST)
+    pair_cost = multilevel.PAIR_COST.get(kind, multilevel.SCALAR_PAIR_COST)
     return multilevel.plan(pieces, domain, k, tol / steps, last, count=count, pair_cost=pair_cost)
 
 

@@ -30,6 +30,7 @@ from raysim.optics.kernels.radiation import (
     offsets4,
     radiation_kernels,
     segment_kernel,
+    splat3,
     times,
     times4,
     vec4d,
@@ -84,7 +85,7 @@ def electric_pair4(px: vec4d, py: vec4d, pz: vec4d, e: Dipole, k: wp.float64, k_
                    table: wp.array(dtype=wp.vec2d)) -> lanes6:
     """:func:`electric_pair` at four points in vector lanes."""
     d = offsets4(px, py, pz, e.r, k_inv)
-    return times4(electric_bracket4(d, e.re, e.im), green4(k, d.R2, d.inv, table))
+    return times4(electric_bracket4(d, splat3(e.re), splat3(e.im)), green4(k, d.R2, d.inv, table))
 
 
 @wp.func

@@ -37,13 +37,24 @@ from raysim.optics.kernels.f64 import F64_ONE, F64_THREE, F64_TWO
 from raysim.optics.kernels.po import Dipole, load_dipole
 from raysim.optics.kernels.ptd import EdgeElement, fringe_pair, load_edge
 from raysim.optics.kernels.radiation import (
+    Offsets4,
     adjoint_kernel,
     electric_bracket,
+    electric_bracket4,
     green,
+    green4,
+    lanes3,
+    lanes6,
+    lanes8,
+    offsets4,
     radiation_kernels,
     segment_adjoint_kernel,
     segment_kernel,
+    splat,
+    splat3,
     times,
+    times4,
+    vec4d,
     vec6d,
     vec8d,
 )
@@ -119,8 +130,53 @@ def shift_pair(p: wp.vec3d, e: ShiftElement, k: wp.float64, k_inv: wp.float64,
     return times(bracket, green(k, R2, inv, table))
 
 
-radiate_shift, radiate_shift4 = radiation_kernels(load_shift, shift_pair)
-segments_shift = segment_kernel(load_shift, shift_pair)
+@wp.func
+def moved4(d: Offsets4, k: wp.float64, mre: wp.vec3d, mim: wp.vec3d, w: wp.vec3d) -> lanes6:
+    """:func:`moved` at four points in vector lanes (the element's m and w the same in all)."""
+    rx = wp.cw_mul(d.x, d.inv)
+    ry = wp.cw_mul(d.y, d.inv)
+    rz = wp.cw_mul(d.z, d.inv)
+    c = rx * w[0] + ry * w[1] + rz * w[2]
+    mr_r = rx * mre[0] + ry * mre[1] + rz * mre[2]
+    mr_i = rx * mim[0] + ry * mim[1] + rz * mim[2]
+    wm_r = wp.dot(w, mre)
+    wm_i = wp.dot(w, mim)
+    u = d.u
+    u2 = wp.cw_mul(u, u)
+    u3 = wp.cw_mul(u2, u)
+    b_r = splat(F64_ONE) - u2 * F64_THREE
+    b_i = -(u * F64_THREE)
+    ck = c * k
+    alpha_r = wp.cw_mul(u3 * F64_THREE - u * F64_TWO, ck)
+    alpha_i = wp.cw_mul(u2 * F64_THREE - splat(F64_ONE), ck)
+    poly_r = u * F64_SIX - u3 * F64_FIFTEEN
+    poly_i = splat(F64_ONE) - u2 * F64_FIFTEEN
+    beta_r = (wp.cw_mul(wp.cw_mul(poly_r, mr_r) - wp.cw_mul(poly_i, mr_i), c)
+              - wp.cw_mul(b_r * wm_r - b_i * wm_i, u)) * k
+    beta_i = (wp.cw_mul(wp.cw_mul(poly_r, mr_i) + wp.cw_mul(poly_i, mr_r), c)
+              - wp.cw_mul(b_r * wm_i + b_i * wm_r, u)) * k
+    gamma_r = wp.cw_mul(wp.cw_mul(b_r, mr_r) - wp.cw_mul(b_i, mr_i), u) * (-k)
+    gamma_i = wp.cw_mul(wp.cw_mul(b_r, mr_i) + wp.cw_mul(b_i, mr_r), u) * (-k)
+    return wp.matrix_from_rows(
+        alpha_r * mre[0] - alpha_i * mim[0] + wp.cw_mul(beta_r, rx) + gamma_r * w[0],
+        alpha_r * mre[1] - alpha_i * mim[1] + wp.cw_mul(beta_r, ry) + gamma_r * w[1],
+        alpha_r * mre[2] - alpha_i * mim[2] + wp.cw_mul(beta_r, rz) + gamma_r * w[2],
+        alpha_r * mim[0] + alpha_i * mre[0] + wp.cw_mul(beta_i, rx) + gamma_i * w[0],
+        alpha_r * mim[1] + alpha_i * mre[1] + wp.cw_mul(beta_i, ry) + gamma_i * w[1],
+        alpha_r * mim[2] + alpha_i * mre[2] + wp.cw_mul(beta_i, rz) + gamma_i * w[2])
+
+
+@wp.func
+def shift_pair4(px: vec4d, py: vec4d, pz: vec4d, e: ShiftElement, k: wp.float64, k_inv: wp.float64,
+                table: wp.array(dtype=wp.vec2d)) -> lanes6:
+    """:func:`shift_pair` at four points in vector lanes."""
+    d = offsets4(px, py, pz, e.r, k_inv)
+    bracket = electric_bracket4(d, splat3(e.pre), splat3(e.pim)) + moved4(d, k, e.mre, e.mim, -e.v)
+    return times4(bracket, green4(k, d.R2, d.inv, table))
+
+
+radiate_shift, radiate_shift4 = radiation_kernels(load_shift, shift_pair, shift_pair4)
+segments_shift = segment_kernel(load_shift, shift_pair, shift_pair4)
 
 
 @wp.struct
@@ -159,6 +215,22 @@ def adjoint_pair(P: wp.vec3d, bre: wp.vec3d, bim: wp.vec3d, a: AdjointSource, k:
 
 
 @wp.func
+def adjoint_pair4(px: vec4d, py: vec4d, pz: vec4d, bre: lanes3, bim: lanes3, a: AdjointSource,
+                  k: wp.float64, k_inv: wp.float64, table: wp.array(dtype=wp.vec2d)) -> lanes8:
+    """:func:`adjoint_pair` at four points in vector lanes, each with its own weight b."""
+    e = a.dipole
+    d = offsets4(px, py, pz, e.r, k_inv)
+    g = green4(k, d.R2, d.inv, table)
+    U = times4(electric_bracket4(d, bre, bim), g)
+    D = times4(moved4(d, k, e.re, e.im, a.w), g)
+    s_r = (wp.cw_mul(bre[0], D[0]) + wp.cw_mul(bre[1], D[1]) + wp.cw_mul(bre[2], D[2])) \
+        - (wp.cw_mul(bim[0], D[3]) + wp.cw_mul(bim[1], D[4]) + wp.cw_mul(bim[2], D[5]))
+    s_i = (wp.cw_mul(bre[0], D[3]) + wp.cw_mul(bre[1], D[4]) + wp.cw_mul(bre[2], D[5])) \
+        + (wp.cw_mul(bim[0], D[0]) + wp.cw_mul(bim[1], D[1]) + wp.cw_mul(bim[2], D[2]))
+    return wp.matrix_from_rows(U[0], U[1], U[2], U[3], U[4], U[5], s_r, s_i)
+
+
+@wp.func
 def fringe_adjoint_pair(P: wp.vec3d, bre: wp.vec3d, bim: wp.vec3d, e: EdgeElement,
                         k: wp.float64, k_inv: wp.float64,
                         table: wp.array(dtype=wp.vec2d)) -> vec8d:
@@ -170,8 +242,8 @@ def fringe_adjoint_pair(P: wp.vec3d, bre: wp.vec3d, bim: wp.vec3d, e: EdgeElemen
     return out
 
 
-adjoint_sum = adjoint_kernel(load_adjoint, adjoint_pair)
+adjoint_sum = adjoint_kernel(load_adjoint, adjoint_pair, adjoint_pair4)
 fringe_adjoint = adjoint_kernel(load_edge, fringe_adjoint_pair)
 # the same pairs summed over each leaf's chart grid: the fast radiator's transposed sum
-segments_adjoint = segment_adjoint_kernel(load_adjoint, adjoint_pair)
+segments_adjoint = segment_adjoint_kernel(load_adjoint, adjoint_pair, adjoint_pair4)
 segments_fringe_adjoint = segment_adjoint_kernel(load_edge, fringe_adjoint_pair)

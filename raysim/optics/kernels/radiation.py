@@ -136,12 +136,20 @@ vec4d = wp.vec4d
 lanes6 = wp.types.matrix(shape=(6, 4), dtype=wp.float64)
 #: a complex scalar at four field points: rows Re, Im
 lanes2 = wp.types.matrix(shape=(2, 4), dtype=wp.float64)
+#: a real 3-vector at four field points: rows x, y, z
+lanes3 = wp.types.matrix(shape=(3, 4), dtype=wp.float64)
 
 
 @wp.func
 def splat(x: wp.float64) -> vec4d:
     """x in all four lanes."""
     return vec4d(x, x, x, x)
+
+
+@wp.func
+def splat3(v: wp.vec3d) -> lanes3:
+    """The vector v at all four points."""
+    return wp.matrix_from_rows(splat(v[0]), splat(v[1]), splat(v[2]))
 
 
 @wp.func
@@ -196,21 +204,25 @@ def offsets4(px: vec4d, py: vec4d, pz: vec4d, s: wp.vec3d, k_inv: wp.float64) ->
 
 
 @wp.func
-def electric_bracket4(d: Offsets4, pr: wp.vec3d, pi: wp.vec3d) -> lanes6:
-    """:func:`electric_bracket` lane by lane."""
+def electric_bracket4(d: Offsets4, pr: lanes3, pi: lanes3) -> lanes6:
+    """:func:`electric_bracket` lane by lane, for a moment p = pr + j pi that may differ from
+    lane to lane (the transposed sum's weights; :func:`splat3` of an element's own)."""
     u2 = wp.cw_mul(d.u, d.u)
     inv2 = wp.cw_mul(d.inv, d.inv)
-    dr = wp.cw_mul(d.x * pr[0] + d.y * pr[1] + d.z * pr[2], inv2)
-    di = wp.cw_mul(d.x * pi[0] + d.y * pi[1] + d.z * pi[2], inv2)
+    dr = wp.cw_mul(wp.cw_mul(d.x, pr[0]) + wp.cw_mul(d.y, pr[1]) + wp.cw_mul(d.z, pr[2]), inv2)
+    di = wp.cw_mul(wp.cw_mul(d.x, pi[0]) + wp.cw_mul(d.y, pi[1]) + wp.cw_mul(d.z, pi[2]), inv2)
     a_r = splat(F64_ONE) - u2
     b_r = splat(F64_ONE) - u2 * F64_THREE
     b_i = -(d.u * F64_THREE)
     tr = wp.cw_mul(b_r, dr) - wp.cw_mul(b_i, di)
     ti = wp.cw_mul(b_r, di) + wp.cw_mul(b_i, dr)
     return wp.matrix_from_rows(
-        a_r * pr[0] + d.u * pi[0] - wp.cw_mul(tr, d.x), a_r * pr[1] + d.u * pi[1] - wp.cw_mul(tr, d.y),
-        a_r * pr[2] + d.u * pi[2] - wp.cw_mul(tr, d.z), a_r * pi[0] - d.u * pr[0] - wp.cw_mul(ti, d.x),
-        a_r * pi[1] - d.u * pr[1] - wp.cw_mul(ti, d.y), a_r * pi[2] - d.u * pr[2] - wp.cw_mul(ti, d.z))
+        wp.cw_mul(a_r, pr[0]) + wp.cw_mul(d.u, pi[0]) - wp.cw_mul(tr, d.x),
+        wp.cw_mul(a_r, pr[1]) + wp.cw_mul(d.u, pi[1]) - wp.cw_mul(tr, d.y),
+        wp.cw_mul(a_r, pr[2]) + wp.cw_mul(d.u, pi[2]) - wp.cw_mul(tr, d.z),
+        wp.cw_mul(a_r, pi[0]) - wp.cw_mul(d.u, pr[0]) - wp.cw_mul(ti, d.x),
+        wp.cw_mul(a_r, pi[1]) - wp.cw_mul(d.u, pr[1]) - wp.cw_mul(ti, d.y),
+        wp.cw_mul(a_r, pi[2]) - wp.cw_mul(d.u, pr[2]) - wp.cw_mul(ti, d.z))
 
 
 @wp.func
@@ -318,16 +330,21 @@ def radiation_kernels(load: Any, pair: Any, pair4: Any = None) -> tuple[Any, Any
 
 
 vec8d = wp.types.vector(length=8, dtype=wp.float64)
+#: eight real numbers at four field points (the transposed sums' pairs in lanes)
+lanes8 = wp.types.matrix(shape=(8, 4), dtype=wp.float64)
 
 
-def adjoint_kernel(load: Any, pair: Any) -> Any:
+def adjoint_kernel(load: Any, pair: Any, pair4: Any = None) -> Any:
     """The transposed sum of one kind of element: per element, over the field points.
 
     ``field`` (9, n) holds each field point P and a complex weight b (Re 3, Im 3);
     ``pair(P, b_re, b_im, element, k, k_inv, table)`` returns up to eight real numbers
-    (``vec8d``) that are linear in b. The kernel adds their sum over the points
+    (``vec8d``) that are linear in b; ``pair4(px, py, pz, b_re, b_im, element, k, k_inv,
+    table)``, where a kind has one, the same at four points in vector lanes (``lanes3``
+    weights, a :data:`lanes8` result). The kernel adds their sum over the points
     ``begin..end-1`` to ``out[:, s]`` (8, n_elements) for element s = tid + offset: the
-    adjoint of a radiation sum, field points as sources.
+    adjoint of a radiation sum, field points as sources. With ``pair4`` the points are taken
+    four at a time, so end - begin must be a multiple of four (pad with zero weights).
     """
 
     @wp.kernel(module="unique")
@@ -344,14 +361,32 @@ def adjoint_kernel(load: Any, pair: Any) -> Any:
     ):
         s = wp.tid() + offset
         e = load(src, s)
-        acc = vec8d()
-        for i in range(begin, end):
-            p = wp.vec3d(field[0, i], field[1, i], field[2, i])
-            bre = wp.vec3d(field[3, i], field[4, i], field[5, i])
-            bim = wp.vec3d(field[6, i], field[7, i], field[8, i])
-            acc += pair(p, bre, bim, e, k, k_inv, table)
-        for c in range(8):
-            out[c, s] = out[c, s] + acc[c]
+        if wp.static(pair4 is not None):  # decided when the kernel is built
+            lanes = lanes8()
+            for i in range(begin, end, 4):
+                px = vec4d(field[0, i], field[0, i + 1], field[0, i + 2], field[0, i + 3])
+                py = vec4d(field[1, i], field[1, i + 1], field[1, i + 2], field[1, i + 3])
+                pz = vec4d(field[2, i], field[2, i + 1], field[2, i + 2], field[2, i + 3])
+                bre = wp.matrix_from_rows(
+                    vec4d(field[3, i], field[3, i + 1], field[3, i + 2], field[3, i + 3]),
+                    vec4d(field[4, i], field[4, i + 1], field[4, i + 2], field[4, i + 3]),
+                    vec4d(field[5, i], field[5, i + 1], field[5, i + 2], field[5, i + 3]))
+                bim = wp.matrix_from_rows(
+                    vec4d(field[6, i], field[6, i + 1], field[6, i + 2], field[6, i + 3]),
+                    vec4d(field[7, i], field[7, i + 1], field[7, i + 2], field[7, i + 3]),
+                    vec4d(field[8, i], field[8, i + 1], field[8, i + 2], field[8, i + 3]))
+                lanes += pair4(px, py, pz, bre, bim, e, k, k_inv, table)
+            for c in range(8):
+                out[c, s] = out[c, s] + ((lanes[c, 0] + lanes[c, 1]) + (lanes[c, 2] + lanes[c, 3]))
+        else:
+            acc = vec8d()
+            for i in range(begin, end):
+                p = wp.vec3d(field[0, i], field[1, i], field[2, i])
+                bre = wp.vec3d(field[3, i], field[4, i], field[5, i])
+                bim = wp.vec3d(field[6, i], field[7, i], field[8, i])
+                acc += pair(p, bre, bim, e, k, k_inv, table)
+            for c in range(8):
+                out[c, s] = out[c, s] + acc[c]
 
     return adjoint
 
@@ -478,15 +513,17 @@ def segment_kernel(load: Any, pair: Any, pair4: Any = None) -> tuple[Any, Any]:
     return radiate_segments, radiate_segments4
 
 
-def segment_adjoint_kernel(load: Any, pair: Any) -> Any:
+def segment_adjoint_kernel(load: Any, pair: Any, pair4: Any = None) -> Any:
     """The leaf step of the fast radiator's transposed sum for one kind of element (the
-    ``load`` and ``pair`` of :func:`adjoint_kernel`): one thread per element.
+    ``load``, ``pair`` and ``pair4`` of :func:`adjoint_kernel`): one thread per element.
 
     Every leaf sees the same ``nodes`` (3, n_nodes) field points (m). Element s (in leaf order)
     belongs to leaf ``leaf_of[s]`` and sums ``pair(P_n, b_n, element)`` over that leaf's nodes,
     b_n = ``weights[leaf * n_nodes + n]`` (Re 3, Im 3): the leaf's anterpolated weights with the
     leaf centre's phase exp(+j k |P_n - c_leaf|) already put back (once per node, by the
-    caller, not once per element). The sum is written to ``out[:, s]`` (8, n_elements).
+    caller, not once per element). The sum is written to ``out[:, s]`` (8, n_elements). With
+    ``pair4`` the nodes are taken four at a time (n_nodes a multiple of four: pad with zero
+    weights).
     """
 
     @wp.kernel(module="unique")
@@ -505,14 +542,33 @@ def segment_adjoint_kernel(load: Any, pair: Any) -> Any:
         s = wp.tid() + offset
         e = load(src, s)
         base = leaf_of[s] * n_nodes
-        acc = vec8d()
-        for n in range(n_nodes):
-            p = wp.vec3d(nodes[0, n], nodes[1, n], nodes[2, n])
-            row = base + n
-            bre = wp.vec3d(weights[row, 0], weights[row, 1], weights[row, 2])
-            bim = wp.vec3d(weights[row, 3], weights[row, 4], weights[row, 5])
-            acc += pair(p, bre, bim, e, k, k_inv, table)
-        for c in range(8):
-            out[c, s] = acc[c]
+        if wp.static(pair4 is not None):  # decided when the kernel is built
+            lanes = lanes8()
+            for n in range(0, n_nodes, 4):
+                px = vec4d(nodes[0, n], nodes[0, n + 1], nodes[0, n + 2], nodes[0, n + 3])
+                py = vec4d(nodes[1, n], nodes[1, n + 1], nodes[1, n + 2], nodes[1, n + 3])
+                pz = vec4d(nodes[2, n], nodes[2, n + 1], nodes[2, n + 2], nodes[2, n + 3])
+                row = base + n
+                bre = wp.matrix_from_rows(
+                    vec4d(weights[row, 0], weights[row + 1, 0], weights[row + 2, 0], weights[row + 3, 0]),
+                    vec4d(weights[row, 1], weights[row + 1, 1], weights[row + 2, 1], weights[row + 3, 1]),
+                    vec4d(weights[row, 2], weights[row + 1, 2], weights[row + 2, 2], weights[row + 3, 2]))
+                bim = wp.matrix_from_rows(
+                    vec4d(weights[row, 3], weights[row + 1, 3], weights[row + 2, 3], weights[row + 3, 3]),
+                    vec4d(weights[row, 4], weights[row + 1, 4], weights[row + 2, 4], weights[row + 3, 4]),
+                    vec4d(weights[row, 5], weights[row + 1, 5], weights[row + 2, 5], weights[row + 3, 5]))
+                lanes += pair4(px, py, pz, bre, bim, e, k, k_inv, table)
+            for c in range(8):
+                out[c, s] = (lanes[c, 0] + lanes[c, 1]) + (lanes[c, 2] + lanes[c, 3])
+        else:
+            acc = vec8d()
+            for n in range(n_nodes):
+                p = wp.vec3d(nodes[0, n], nodes[1, n], nodes[2, n])
+                row = base + n
+                bre = wp.vec3d(weights[row, 0], weights[row, 1], weights[row, 2])
+                bim = wp.vec3d(weights[row, 3], weights[row, 4], weights[row, 5])
+                acc += pair(p, bre, bim, e, k, k_inv, table)
+            for c in range(8):
+                out[c, s] = acc[c]
 
     return adjoint_segments
