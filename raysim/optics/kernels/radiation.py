@@ -127,8 +127,8 @@ def times(v: vec6d, c: wp.vec2d) -> vec6d:
 # Four field points in the lanes of 4-vectors. Warp's CPU code keeps a pair function's vec3d
 # and vec6d values as small structs and computes them one scalar at a time; written lane-wise
 # (every quantity a vec4d over four field points, a field a 6 x 4 matrix) the compiler keeps
-# them in vector registers, and PO's pairs run about 3.5 times as fast on the same cores (166
-# against 46 M pairs/s on two cores, benchmarks/bench_po.py). Each lane does the one-point
+# them in vector registers, and PO's pairs run about 3.3 times as fast on the same cores (155.6
+# against 47.3 M pairs/s on two cores, benchmarks/bench_po.py --skip-paper). Each lane does the one-point
 # function's operations in the same order, so the sums agree with the one-point kernel's to
 # rounding (bit for bit where the compiler fuses no multiply-add in either).
 vec4d = wp.vec4d
