@@ -146,12 +146,14 @@ def _scattered_weights(b: NDArray[np.complex128], angles: NDArray[np.float64], p
 
 def disaggregate(beta: NDArray[np.complex128], child: int, the_plan: multilevel.Plan, domain: Domain,
                  k: float, device: str, q_lo: int = 0, q_hi: int | None = None,
-                 scratch: Scratch | None = None) -> NDArray[np.complex128]:
+                 scratch: Scratch | None = None) -> NDArray[np.complex128] | multilevel.LeafGrids:
     """The weights (C1, nc, nc, 3) of the children of parents q_lo .. q_hi - 1 (level
-    ``child - 1``, whose weights ``beta`` holds in order): step 2 (module docs), the transpose of
-    :func:`raysim.optics.fast.multilevel.aggregate` (the re-phasing in a Warp kernel, the
-    refinement's transpose by FFTs). ``scratch``: where the result (role ("level", child)) and
-    the re-phased grids are built, else new arrays."""
+    ``child - 1``, whose weights ``beta`` holds in order), or, for leaves on grids of their own
+    sizes, their weights on those grids (a :class:`~raysim.optics.fast.multilevel.LeafGrids`):
+    step 2 (module docs), the transpose of :func:`raysim.optics.fast.multilevel.aggregate` (the
+    re-phasing in a Warp kernel, the refinement's transpose by FFTs). ``scratch``: where the
+    result (role ("level", child), or per size) and the re-phased grids are built, else new
+    arrays."""
     wp = runtime.init()
     from raysim.optics.kernels import fast_adjoint, radiation
 
@@ -163,8 +165,13 @@ def disaggregate(beta: NDArray[np.complex128], child: int, the_plan: multilevel.
     a, b = the_plan.children(child - 1, q_lo, q_hi)
     weights = warray(np.ascontiguousarray(beta).view(np.float64).reshape(-1, 6), device)
     parent_centres = warray(up.centres[q_lo:q_hi], device)
-    shape = (b - a, nc, nc, 3)
-    out = np.empty(shape, dtype=np.complex128) if scratch is None else scratch.array(("level", child), shape)
+    classes = the_plan.leaf_classes(a, b) if child == the_plan.leaf else [(nc, np.arange(b - a))]
+    own = len(classes) > 1 or len(classes[0][1]) != b - a  # leaves on grids of their own sizes
+    outs = []
+    for size, members in classes:
+        shape = (len(members), size, size, 3)
+        role = ("level", child, size) if own else ("level", child)
+        outs.append(np.empty(shape, dtype=np.complex128) if scratch is None else scratch.array(role, shape))
     per = max(1, int(CHUNK_BYTES // (48 * n * n * 2)))
     for c0 in range(a, b, per):
         c1 = min(c0 + per, b)
@@ -179,44 +186,75 @@ def disaggregate(beta: NDArray[np.complex128], child: int, the_plan: multilevel.
             min_chunk=256)
         if device != "cpu":
             flat[...] = shifted.numpy()
-        out[c0 - a:c1 - a] = restrict(host, nc, overwrite=True)
+        if not own:
+            outs[0][c0 - a:c1 - a] = restrict(host, nc, overwrite=True)
+            continue
+        for (size, members), out in zip(classes, outs, strict=True):
+            i0, i1 = np.searchsorted(members, (c0 - a, c1 - a))
+            if i1 > i0:
+                out[i0:i1] = restrict(host[members[i0:i1] - (c0 - a)], size, overwrite=True)
+    if not own:
+        return outs[0]
+    return multilevel.LeafGrids([(size, members, out)
+                                 for (size, members), out in zip(classes, outs, strict=True)])
+
+
+def leaf_sums(kernel: Any, src: NDArray[np.float64], beta: NDArray[np.complex128] | multilevel.LeafGrids,
+              the_plan: multilevel.Plan, domain: Domain, k: float, device: str, lo: int = 0,
+              hi: int | None = None) -> NDArray[np.float64]:
+    """Step 3 (module docs) for leaves lo .. hi - 1 (their weights ``beta``, on the leaf
+    level's grid or on grids of their own sizes): (8, m) for their elements, in leaf order
+    (``src`` holds every element in leaf order). ``kernel``: from
+    :func:`raysim.optics.kernels.radiation.segment_adjoint_kernel`."""
+    full = the_plan.levels[the_plan.leaf]
+    hi = len(full.keys) if hi is None else hi
+    e0, e1 = int(full.begins[lo]), int(full.ends[hi - 1])
+    if not isinstance(beta, multilevel.LeafGrids):
+        leaves = np.arange(lo, hi)
+        return _class_sums(kernel, src[:, e0:e1], beta, leaves, the_plan, domain, k, device)
+    out = np.empty((8, e1 - e0))
+    for _, members, weights in beta.classes:
+        leaves = lo + members
+        counts = full.ends[leaves] - full.begins[leaves]
+        # the class's elements: each leaf's range, one after another
+        starts = np.repeat(full.begins[leaves] - np.cumsum(counts) + counts, counts)
+        columns = starts + np.arange(int(counts.sum()))
+        out[:, columns - e0] = _class_sums(kernel, src[:, columns], weights, leaves, the_plan, domain, k,
+                                           device)
     return out
 
 
-def leaf_sums(kernel: Any, src: NDArray[np.float64], beta: NDArray[np.complex128],
-              the_plan: multilevel.Plan, domain: Domain, k: float, device: str, lo: int = 0,
-              hi: int | None = None) -> NDArray[np.float64]:
-    """Step 3 (module docs) for leaves lo .. hi - 1 (their weights ``beta``): (8, m) for their
-    elements, in leaf order (``src`` holds every element in leaf order). ``kernel``: from
-    :func:`raysim.optics.kernels.radiation.segment_adjoint_kernel`."""
+def _class_sums(kernel: Any, src: NDArray[np.float64], beta: NDArray[np.complex128],
+                leaves: NDArray[np.int64], the_plan: multilevel.Plan, domain: Domain, k: float,
+                device: str) -> NDArray[np.float64]:
+    """Step 3 for the ``leaves`` (indices, ascending) whose weights ``beta`` (C, n, n, 3) are on
+    one n x n grid; ``src`` their elements (leaf by leaf): (8, len) for those elements."""
     wp = runtime.init()
     from raysim.optics.kernels import fast_adjoint, radiation
 
     full = the_plan.levels[the_plan.leaf]
-    hi = len(full.keys) if hi is None else hi
-    e0, e1 = int(full.begins[lo]), int(full.ends[hi - 1])
-    n = the_plan.sizes[the_plan.leaf]
+    C, n = len(leaves), beta.shape[1]
     nodes = grid_points(n, domain, half_rows(n))
     # the leaf kernel takes the nodes four at a time (vector lanes): pad them to a multiple of
     # four with copies of the last node and zero weights, which add exactly nothing
     n_half = len(nodes)
     n_nodes = -(-n_half // 4) * 4
     nodes = np.vstack([nodes, np.repeat(nodes[-1:], n_nodes - n_half, axis=0)])
-    half = fold(beta, n).reshape(hi - lo, n_half, 3)
-    split = np.zeros((hi - lo, n_nodes, 6))  # Re 3, Im 3
+    half = fold(beta, n).reshape(C, n_half, 3)
+    split = np.zeros((C, n_nodes, 6))  # Re 3, Im 3
     split[:, :n_half, :3] = half.real
     split[:, :n_half, 3:] = half.imag
     table = warray(radiation.cis_table(), device, wp.vec2d)
     # the leaf centre's phase put back once per (leaf, node), not once per element
-    weights = wp.empty((hi - lo, n_nodes, 6), dtype=wp.float64, device=device)
-    runtime.launch(fast_adjoint.phase_rows, (hi - lo) * n_nodes, [
-        warray(nodes, device), warray(split, device), warray(full.centres[lo:hi], device), 1.0, k, table,
+    weights = wp.empty((C, n_nodes, 6), dtype=wp.float64, device=device)
+    runtime.launch(fast_adjoint.phase_rows, C * n_nodes, [
+        warray(nodes, device), warray(split, device), warray(full.centres[leaves], device), 1.0, k, table,
         weights], device, min_chunk=1024)
-    leaf_of = np.repeat(np.arange(hi - lo), full.ends[lo:hi] - full.begins[lo:hi]).astype(np.int32)
-    out = wp.zeros((8, e1 - e0), dtype=wp.float64, device=device)
-    runtime.launch(kernel, e1 - e0, [
+    leaf_of = np.repeat(np.arange(C), full.ends[leaves] - full.begins[leaves]).astype(np.int32)
+    out = wp.zeros((8, src.shape[1]), dtype=wp.float64, device=device)
+    runtime.launch(kernel, src.shape[1], [
         warray(nodes.T, device), warray(leaf_of, device, wp.int32), weights.reshape((-1, 6)), n_nodes,
-        warray(src[:, e0:e1], device), k, 1.0 / k, table, out], device, min_chunk=16)
+        warray(src, device), k, 1.0 / k, table, out], device, min_chunk=16)
     return out.numpy()
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 import scipy.fft as sfft
@@ -203,12 +204,13 @@ def fold(full: NDArray[np.complex128], n: int) -> NDArray[np.complex128]:
     return half
 
 
-def degree_for(bandwidth: float, digits: float) -> float:
+def degree_for(bandwidth: Any, digits: float) -> Any:
     """The harmonic degree L that holds a field of phase bandwidth ``bandwidth`` (rad per rad
-    of angle) to about 10^-digits: an excess bandwidth of the multipole rule's form (Song and
-    Chew: c d^(2/3) (k a)^(1/3)) plus a floor of d for the amplitude's own variation; the
-    constant 1.2 is measured (tests/raysim/optics/test_fast_radiator.py keeps it honest)."""
-    return bandwidth + 1.2 * digits ** (2.0 / 3.0) * max(bandwidth, 1.0) ** (1.0 / 3.0) + digits
+    of angle; a number or an array of them) to about 10^-digits: an excess bandwidth of the
+    multipole rule's form (Song and Chew: c d^(2/3) (k a)^(1/3)) plus a floor of d for the
+    amplitude's own variation; the constant 1.2 is measured
+    (tests/raysim/optics/test_fast_radiator.py keeps it honest)."""
+    return bandwidth + 1.2 * digits ** (2.0 / 3.0) * np.maximum(bandwidth, 1.0) ** (1.0 / 3.0) + digits
 
 
 def size_for(degree: float) -> int:

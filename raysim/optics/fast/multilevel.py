@@ -101,6 +101,18 @@ class Plan:
     cost: float
     direct_cost: float
     digits: float  # each step's accuracy, -log10 of its tolerance (sets the grid sizes)
+    #: each leaf cluster's own grid size (at most ``sizes[leaf]``), used when the plan
+    #: aggregates (stop < leaf); None: every leaf on the level's grid
+    leaf_sizes: NDArray[np.int64] | None = None
+
+    def leaf_classes(self, lo: int, hi: int) -> list[tuple[int, NDArray[np.int64]]]:
+        """Leaf clusters lo .. hi - 1 in classes of one grid size: (n, their indices from lo,
+        ascending), by size. One class of the level's size where the plan does not aggregate
+        (its last step reads every stop grid at one size)."""
+        if self.leaf_sizes is None or self.stop == self.leaf:
+            return [(self.sizes[self.leaf], np.arange(hi - lo))]
+        own = self.leaf_sizes[lo:hi]
+        return [(int(n), np.flatnonzero(own == n)) for n in np.unique(own)]
 
     def children(self, level: int, q0: int, q1: int) -> tuple[int, int]:
         """The clusters of ``level + 1`` whose parents are clusters q0 .. q1 - 1 of ``level``."""
@@ -133,20 +145,33 @@ def _runs(first: NDArray[np.int64], n: int, q0: int) -> list[tuple[int, int]]:
     return out
 
 
-def _size(centres: NDArray[np.float64], radii: NDArray[np.float64], domain: Domain, k: float,
-          digits: float) -> int | None:
-    """The grid size n of a level whose clusters have ``centres`` (C, 3) m and ``radii`` (C,)
-    m; None when a cluster is not separated from the target sphere."""
+def _sizes(centres: NDArray[np.float64], radii: NDArray[np.float64], domain: Domain, k: float,
+           digits: float) -> NDArray[np.int64] | None:
+    """The grid size n (C,) each of the clusters with ``centres`` (C, 3) m and ``radii`` (C,) m
+    needs: its own bandwidth B = k a R / r_min; None when a cluster is not separated from the
+    target sphere."""
     R = domain.radius
     r_min = np.linalg.norm(centres - np.asarray(domain.centre), axis=1) - R - radii
     if np.any(r_min <= 0.05 * R):
         return None  # a cluster touches the target sphere: not separated
-    B = float(np.max(k * radii * R / r_min))
-    return size_for(degree_for(B, digits))
+    B = k * radii * R / r_min
+    degrees = np.ceil(degree_for(B, digits)).astype(np.int64)  # size_for takes its ceiling
+    table = {int(d): size_for(float(d)) for d in np.unique(degrees)}
+    return np.array([table[int(d)] for d in degrees], dtype=np.int64).reshape(len(B))
 
 
-def _fft_cost(n: int) -> float:
-    return 3.0 * n * n * max(math.log2(n), 1.0) * COST_FFT
+def _size(centres: NDArray[np.float64], radii: NDArray[np.float64], domain: Domain, k: float,
+          digits: float) -> int | None:
+    """The grid size n of a level whose clusters have ``centres`` (C, 3) m and ``radii`` (C,)
+    m (its widest cluster's, so every cluster of the level shares one grid); None when a
+    cluster is not separated from the target sphere."""
+    each = _sizes(centres, radii, domain, k, digits)
+    return None if each is None else int(each.max(initial=size_for(0.0)))
+
+
+def _fft_cost(n: Any) -> Any:
+    """A 3-component n x n grid's FFT in pair units (n a number or an array of them)."""
+    return 3.0 * np.square(n) * np.maximum(np.log2(n), 1.0) * COST_FFT
 
 
 def plan(pieces: Sequence[NDArray[np.float64]], domain: Domain, k: float, tol: float,
@@ -166,16 +191,23 @@ def plan(pieces: Sequence[NDArray[np.float64]], domain: Domain, k: float, tol: f
     while depth < max_depth and n / (4 ** (depth + 1)) >= MIN_LEAF:
         depth += 1
     order, levels = quadtree.build(pieces, depth)
-    sizes = [_size(level.centres, level.radii, domain, k, digits) for level in levels]
+    each = [_sizes(level.centres, level.radii, domain, k, digits) for level in levels]
+    sizes = [None if e is None else int(e.max(initial=size_for(0.0))) for e in each]
     M = domain.count
     direct = float(n) * M * pair_cost
     best: tuple[float, int, int, int, int] | None = None
     for leaf in range(depth + 1):
-        nl = sizes[leaf]
-        if nl is None:
+        nl, own = sizes[leaf], each[leaf]
+        if nl is None or own is None:
             continue
+        level = levels[leaf]
+        # stopping at the leaves, every leaf on the level's grid (the last step reads one size);
+        # aggregating, each leaf on its own grid, refined to its parent's
         nodes = half_rows(nl) * nl
-        cost = float(n) * nodes * pair_cost + len(levels[leaf].keys) * nodes * COST_EXP
+        cost = float(n) * nodes * pair_cost + len(level.keys) * nodes * COST_EXP
+        own_nodes = (own // 2 + 1) * own
+        own_cost = pair_cost * float(np.dot(level.ends - level.begins, own_nodes)) + \
+            COST_EXP * float(own_nodes.sum())
         for stop in range(leaf, -1, -1):
             ns = sizes[stop]
             if ns is None:
@@ -183,16 +215,20 @@ def plan(pieces: Sequence[NDArray[np.float64]], domain: Domain, k: float, tol: f
             if stop < leaf:  # one more aggregation step, level stop + 1 -> stop
                 child = sizes[stop + 1]
                 assert child is not None
-                cost += len(levels[stop + 1].keys) * (_fft_cost(child) + _fft_cost(ns)
-                                                      + ns * ns * (COST_EXP + 4 * COST_NUMPY))
+                children = float(np.sum(_fft_cost(own))) if stop + 1 == leaf else \
+                    len(levels[stop + 1].keys) * _fft_cost(child)
+                if stop + 1 == leaf:
+                    cost = own_cost
+                parents = _fft_cost(ns) + ns * ns * (COST_EXP + 4 * COST_NUMPY)
+                cost += children + len(levels[stop + 1].keys) * parents
             for u, p in ((0, 0),) if domain.tensor else last:
                 final = len(levels[stop].keys) * _last_cost(ns, u, p, domain)
                 if best is None or cost + final < best[0]:
                     best = (cost + final, leaf, stop, u, p)
     if best is None:
         return None
-    return Plan(order, levels, best[1], best[2], [s or 0 for s in sizes], best[3], best[4], best[0], direct,
-                digits)
+    return Plan(order, levels, best[1], best[2], [s or 0 for s in sizes], best[3], best[4], float(best[0]),
+                direct, digits, each[best[1]])
 
 
 def holds(the_plan: Plan, pieces: Sequence[NDArray[np.float64]], domain: Domain, k: float) -> bool:
@@ -211,8 +247,12 @@ def holds(the_plan: Plan, pieces: Sequence[NDArray[np.float64]], domain: Domain,
         radii = np.maximum.reduceat(dist, level.begins)
         if np.all(radii <= level.radii):
             continue
-        need = _size(level.centres, np.maximum(radii, level.radii), domain, k, the_plan.digits)
-        if need is None or need > the_plan.sizes[index]:
+        need = _sizes(level.centres, np.maximum(radii, level.radii), domain, k, the_plan.digits)
+        if need is None:
+            return False
+        own = index == the_plan.leaf and the_plan.leaf_sizes is not None and the_plan.stop < the_plan.leaf
+        held = the_plan.leaf_sizes if own else the_plan.sizes[index]  # the grids each cluster sums on
+        if np.any(need > held):
             return False
     return True
 
@@ -234,36 +274,65 @@ def warray(a: NDArray, device: str, dtype: Any = None) -> Any:
     return wp.array(np.ascontiguousarray(a), dtype=dtype or wp.float64, device=device, copy=device != "cpu")
 
 
+@dataclass(frozen=True)
+class LeafGrids:
+    """The grids of a range of leaf clusters when they are on grids of their own sizes
+    (:meth:`Plan.leaf_classes`): per class, (n, the clusters' indices in the range, ascending,
+    their grids (count, n, n, 3))."""
+
+    classes: list[tuple[int, NDArray[np.int64], NDArray[np.complex128]]]
+
+
 def leaf_grids(segments: Any, src: Any, the_plan: Plan, domain: Domain, k: float, device: str,
-               lo: int = 0, hi: int | None = None, scratch: Scratch | None = None) -> NDArray[np.complex128]:
-    """F_c of leaf clusters lo .. hi - 1 on the leaf level's grid: (hi - lo, n, n, 3) complex.
+               lo: int = 0, hi: int | None = None,
+               scratch: Scratch | None = None) -> NDArray[np.complex128] | LeafGrids:
+    """F_c of leaf clusters lo .. hi - 1: on the leaf level's grid, (hi - lo, n, n, 3) complex,
+    or, where the plan gives the leaves grids of their own sizes, a :class:`LeafGrids`.
     ``segments``: the kind's pair of kernels from :func:`raysim.optics.kernels.radiation.segment_kernel`;
     ``src``: the elements in leaf order (a Warp array of :func:`leaf_ordered`'s); ``scratch``:
-    where the result is built (its role "leaf"), else a new array."""
+    where the grids are built (role "leaf", or ("leaf", n) per class), else new arrays."""
+    hi = len(the_plan.levels[the_plan.leaf].keys) if hi is None else hi
+    classes = the_plan.leaf_classes(lo, hi)
+    if len(classes) == 1 and len(classes[0][1]) == hi - lo:  # every leaf on one grid, in order
+        n = classes[0][0]
+        shape = (hi - lo, n, n, 3)
+        full = np.empty(shape, dtype=np.complex128) if scratch is None else scratch.array("leaf", shape)
+        _leaf_class(segments, src, the_plan, domain, k, device, lo + classes[0][1], n, full)
+        return full
+    out = []
+    for n, members in classes:
+        shape = (len(members), n, n, 3)
+        grids = np.empty(shape, dtype=np.complex128) if scratch is None else scratch.array(("leaf", n), shape)
+        _leaf_class(segments, src, the_plan, domain, k, device, lo + members, n, grids)
+        out.append((n, members, grids))
+    return LeafGrids(out)
+
+
+def _leaf_class(segments: Any, src: Any, the_plan: Plan, domain: Domain, k: float, device: str,
+                clusters: NDArray[np.int64], n: int, full: NDArray[np.complex128]) -> None:
+    """F_c of the leaf ``clusters`` (indices, ascending) on the n x n grid, into ``full``
+    (len(clusters), n, n, 3): the kind's pair function at the rows theta <= pi (four nodes a
+    thread on the CPU), each value also written to its mirror node."""
     wp = runtime.init()
     from raysim.optics.kernels import radiation
 
     level = the_plan.levels[the_plan.leaf]
-    hi = len(level.keys) if hi is None else hi
-    n = the_plan.sizes[the_plan.leaf]
     nodes = grid_points(n, domain, half_rows(n))
     n_nodes = len(nodes)
     tile = 4 if device == "cpu" else 1  # as the direct radiator: four nodes a thread on the CPU
     n_pad = -(-n_nodes // tile) * tile  # pad with copies of the last node
     padded = np.vstack([nodes, np.repeat(nodes[-1:], n_pad - n_nodes, axis=0)])
-    C = hi - lo
-    shape = (C, n, n, 3)
-    full = np.empty(shape, dtype=np.complex128) if scratch is None else scratch.array("leaf", shape)
+    C = len(clusters)
     E = full.reshape(C * n * n, 3).view(np.float64)  # (C n^2, 6): the kernel writes every row once
     out = warray(E, device) if device == "cpu" else wp.empty(E.shape, dtype=wp.float64, device=device)
     runtime.launch(segments[1] if tile == 4 else segments[0], C * n_pad // tile, [
-        warray(padded.T, device), warray(level.begins[lo:hi].astype(np.int32), device, wp.int32),
-        warray(level.ends[lo:hi].astype(np.int32), device, wp.int32), warray(level.centres[lo:hi], device),
+        warray(padded.T, device), warray(level.begins[clusters].astype(np.int32), device, wp.int32),
+        warray(level.ends[clusters].astype(np.int32), device, wp.int32),
+        warray(level.centres[clusters], device),
         n_pad, src, k, 1.0 / k, warray(radiation.cis_table(), device, wp.vec2d),
         warray(mirror_slots(n, n_pad), device, wp.int32), n * n, out], device, min_chunk=16)
     if device != "cpu":
         E[...] = out.numpy()
-    return full
 
 
 def mirror_slots(n: int, n_pad: int) -> NDArray[np.int32]:
@@ -280,13 +349,14 @@ def mirror_slots(n: int, n_pad: int) -> NDArray[np.int32]:
     return slots
 
 
-def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Domain, k: float,
+def aggregate(G: NDArray[np.complex128] | LeafGrids, child: int, the_plan: Plan, domain: Domain, k: float,
               device: str, q_lo: int = 0, q_hi: int | None = None, into: NDArray[np.complex128] | None = None,
               scratch: Scratch | None = None) -> NDArray[np.complex128]:
     """The grids (q_hi - q_lo, n, n, 3) of parents q_lo .. q_hi - 1 (level ``child - 1``) from
-    ``G`` (their children's grids, in order): spectra zero-padded (whole families at a time),
-    re-phased and summed in order. ``into``: the array to write them to (returned), else a new
-    one; ``scratch``: buffers for the refined children, and then ``G`` is overwritten."""
+    ``G`` (their children's grids, in order, or leaves on grids of their own sizes): spectra
+    zero-padded (whole families at a time), re-phased and summed in order. ``into``: the array
+    to write them to (returned), else a new one; ``scratch``: buffers for the refined
+    children, and then ``G`` is overwritten."""
     wp = runtime.init()
     from raysim.optics.kernels import fast, radiation
 
@@ -310,20 +380,44 @@ def aggregate(G: NDArray[np.complex128], child: int, the_plan: Plan, domain: Dom
         while q1 < C0 and first[q1 + 1] - first[q] <= per:
             q1 += 1
         c0, c1 = int(first[q]), int(first[q1])
-        shape = (c1 - c0, n, n, 3)
-        fine = resample(G[c0:c1], n, out=None if scratch is None else scratch.array("fine", shape),
-                        overwrite=scratch is not None).view(np.float64).reshape(-1, 6)
+        fine, where = _refined(G, c0, c1, n, scratch)
         target = out[q:q1].reshape(-1, 3).view(np.float64)  # ((q1 - q) n^2, 6)
         part = warray(target, device) if device == "cpu" else wp.empty(target.shape, dtype=wp.float64,
                                                                          device=device)
         runtime.launch(fast.rephase_merge, (q1 - q) * n_half, [
-            warray(fine, device), n_half, n * n, slots, warray(first[q:q1 + 1], device, wp.int32),
+            warray(fine, device), warray(where, device, wp.int32), n_half, n * n, slots,
+            warray(first[q:q1 + 1], device, wp.int32),
             warray(low.centres[base:], device), warray(up.centres[q_lo + q:q_lo + q1], device), nodes, k,
             table, part], device, min_chunk=256)
         if device != "cpu":
             target[...] = part.numpy()
         q = q1
     return out
+
+
+def _refined(G: NDArray[np.complex128] | LeafGrids, c0: int, c1: int, n: int,
+             scratch: Scratch | None) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
+    """Children c0 .. c1 - 1 of ``G`` refined to n x n: (their grids, (c1 - c0) n^2 rows of six
+    reals, one class of grid size after another; where each child's grid is in them)."""
+    shape = (c1 - c0, n, n, 3)
+    buffer = None if scratch is None else scratch.array("fine", shape)
+    if not isinstance(G, LeafGrids):
+        fine = resample(G[c0:c1], n, out=buffer, overwrite=scratch is not None)
+        return fine.view(np.float64).reshape(-1, 6), np.arange(c1 - c0, dtype=np.int32)
+    fine = np.empty(shape, dtype=np.complex128) if buffer is None else buffer
+    where = np.empty(c1 - c0, dtype=np.int32)
+    at = 0
+    for _, members, grids in G.classes:
+        i0, i1 = np.searchsorted(members, (c0, c1))
+        if i1 == i0:
+            continue
+        block = fine[at:at + i1 - i0]
+        refined = resample(grids[i0:i1], n, out=block, overwrite=scratch is not None)
+        if not np.may_share_memory(refined, block):  # the transform returned a new array
+            block[...] = refined
+        where[members[i0:i1] - c0] = np.arange(at, at + i1 - i0)
+        at += i1 - i0
+    return fine.view(np.float64).reshape(-1, 6), where
 
 
 def leaf_ordered(pieces: list[NDArray[np.float64]], the_plan: Plan) -> NDArray[np.float64]:

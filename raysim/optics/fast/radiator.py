@@ -292,6 +292,9 @@ def plan_for(pieces: Sequence[NDArray[np.float64]], domain: Domain, k: float, to
 def describe(the_plan: multilevel.Plan) -> str:
     """One line naming the plan's levels, grid sizes and last step (FieldMap ``radiator_ran``)."""
     sizes = f"{the_plan.sizes[the_plan.stop]}..{the_plan.sizes[the_plan.leaf]}"
+    own = the_plan.leaf_sizes
+    if own is not None and the_plan.stop < the_plan.leaf and own.min() < own.max():
+        sizes += f" (leaves {own.min()}..{own.max()})"  # each leaf on a grid of its own size
     last = "series on the grid" if the_plan.oversampling == 0 else \
         f"x{the_plan.oversampling} p {the_plan.p}"
     return f"fast (levels {the_plan.stop}..{the_plan.leaf}, grids {sizes}, last {last})"

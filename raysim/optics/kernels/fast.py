@@ -59,6 +59,7 @@ def interpolate_targets(
 @wp.kernel
 def rephase_merge(
     fine: wp.array2d(dtype=wp.float64),  # (children * n_full, 6): refined child grids, complex pairs
+    where: wp.array(dtype=wp.int32),  # (children,): the grid of fine that holds each child's
     n_nodes: int,  # nodes computed per grid: its rows theta <= pi
     n_full: int,  # nodes of a whole grid
     slots: wp.array2d(dtype=wp.int32),  # (n_nodes, 2): the whole grid's rows a node fills
@@ -86,7 +87,7 @@ def rephase_merge(
     for c in range(first[q], first[q + 1]):
         r_child = wp.length(P - wp.vec3d(child_centres[c, 0], child_centres[c, 1], child_centres[c, 2]))
         e = cis(k * (r_parent - r_child), table)  # exp(+j k (r_p - r_c)) = e[0] + j e[1]
-        row = (c - base) * n_full + node
+        row = where[c - base] * n_full + node
         for a in range(3):
             re = fine[row, 2 * a]
             im = fine[row, 2 * a + 1]

@@ -91,6 +91,26 @@ def test_fast_vjp_is_the_transpose_of_the_fast_jvp(elements, points) -> None:
     assert abs(lhs - rhs) <= 1e-6 * abs(rhs)
 
 
+def test_leaves_on_grids_of_their_own_sizes_keep_the_transpose(elements, points, monkeypatch) -> None:
+    """Where the plan aggregates, each leaf sums on a grid sized for its own bandwidth (several
+    sizes on this dish); the fast VJP is still the exact transpose of the fast JVP: <J v, w>
+    = <v, J^T w> to rounding, not merely to the tolerance."""
+    from raysim.optics import po_jacobian
+    from raysim.optics.fast import multilevel
+
+    monkeypatch.setattr(multilevel, "COST_BLAS", 1.0)  # the last step dear: the plan aggregates
+    rng = np.random.default_rng(6)
+    n = len(elements)
+    dz, hx, hy = (rng.standard_normal(n) * 1e-3 for _ in range(3))
+    jv = po_jacobian.jvp(elements, points, dz, hx, hy, radiator="fast", tol=1e-6, centre=CENTRE, force=True)
+    w = rng.standard_normal((len(points), 3)) + 1j * rng.standard_normal((len(points), 3))
+    (gz, gx, gy), method = _fast(elements, points, w)
+    assert "(leaves " in method, method
+    lhs = float(np.real(np.sum(np.conj(w) * jv)))
+    rhs = float(gz @ dz + gx @ hx + gy @ hy)
+    assert abs(lhs - rhs) <= 1e-11 * abs(rhs)
+
+
 def test_error_shrinks_with_tolerance(elements, points, weights, direct) -> None:
     errors = [_rel_rms(_fast(elements, points, weights, tol)[0][0], direct[0]) for tol in (1e-2, 1e-4, 1e-7)]
     assert errors[0] < 1e-2 and errors[1] < 1e-4 and errors[2] < 1e-7

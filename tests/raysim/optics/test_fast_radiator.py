@@ -222,6 +222,7 @@ def test_every_step_of_the_tree(stop: int, last: tuple[int, int], monkeypatch) -
     src = _elements("magnetic")
     plan = multilevel.plan([src], domain_of(pts, CENTRE), K, 1e-6 / 8, (last,))
     assert plan is not None and plan.leaf == 4
+    assert len(np.unique(plan.leaf_sizes)) > 1  # each leaf aggregated from a grid of its own size
     whole = _planned(pts, src, "magnetic", stop, last)
     assert _rel_rms(whole, _direct(pts, src, "magnetic")) < 1e-6
     monkeypatch.setattr(multilevel, "CHUNK_BYTES", 2e5)
