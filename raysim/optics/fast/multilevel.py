@@ -206,8 +206,9 @@ def plan(pieces: Sequence[NDArray[np.float64]], domain: Domain, k: float, tol: f
         nodes = half_rows(nl) * nl
         cost = float(n) * nodes * pair_cost + len(level.keys) * nodes * COST_EXP
         own_nodes = (own // 2 + 1) * own
-        own_cost = pair_cost * float(np.dot(level.ends - level.begins, own_nodes)) + \
-            COST_EXP * float(own_nodes.sum())
+        # the leaves' elements: of the pieces, scaled to ``count`` where they are a subset of them
+        held = (level.ends - level.begins) * (n / max(len(order), 1))
+        own_cost = pair_cost * float(np.dot(held, own_nodes)) + COST_EXP * float(own_nodes.sum())
         for stop in range(leaf, -1, -1):
             ns = sizes[stop]
             if ns is None:

@@ -318,3 +318,21 @@ def test_jacobian_jvp_through_the_fast_radiator_is_the_transpose_of_the_direct_v
     lhs = float(np.real(np.sum(np.conj(w) * fast)))
     rhs = float(gz @ dz + gx @ hx + gy @ hy)
     assert abs(lhs - rhs) <= 1e-6 * abs(rhs)
+
+
+def test_a_cost_estimate_from_a_subset_of_the_elements_is_the_whole_sets(monkeypatch) -> None:
+    """The plan's cost from every fourth element, counted as all of them (how `check` and
+    Gauss-Newton's budget estimate the large runs), is about the cost of the plan on all of
+    them, where the leaves are on grids of their own sizes too (the plan aggregates; the
+    subset's clusters are a little narrower, so its grids a little smaller)."""
+    from raysim.optics.fast import multilevel
+    from raysim.optics.fast.radiator import plan_for
+
+    monkeypatch.setattr(multilevel, "COST_BLAS", 1.0)  # the last step dear: the plan aggregates
+    pos = _dish_positions(np.pi / K / 2)  # a quarter wavelength apart
+    domain = domain_of(_grid_points(), CENTRE)
+    whole = plan_for([pos.T], domain, K, 1e-6)
+    subset = plan_for([pos[::4].T], domain, K, 1e-6, count=len(pos))
+    assert whole is not None and subset is not None
+    assert whole.stop < whole.leaf and len(np.unique(whole.leaf_sizes)) > 1
+    assert abs(subset.cost / whole.cost - 1) < 0.15, (subset.cost, whole.cost)
