@@ -166,7 +166,7 @@ def disaggregate(beta: NDArray[np.complex128], child: int, the_plan: multilevel.
     weights = warray(np.ascontiguousarray(beta).view(np.float64).reshape(-1, 6), device)
     parent_centres = warray(up.centres[q_lo:q_hi], device)
     classes = the_plan.leaf_classes(a, b) if child == the_plan.leaf else [(nc, np.arange(b - a))]
-    own = len(classes) > 1 or len(classes[0][1]) != b - a  # leaves on grids of their own sizes
+    own = len(classes) > 1  # leaves of several sizes (one class: every child, in order)
     outs = []
     for size, members in classes:
         shape = (len(members), size, size, 3)
@@ -186,8 +186,8 @@ def disaggregate(beta: NDArray[np.complex128], child: int, the_plan: multilevel.
             min_chunk=256)
         if device != "cpu":
             flat[...] = shifted.numpy()
-        if not own:
-            outs[0][c0 - a:c1 - a] = restrict(host, nc, overwrite=True)
+        if not own:  # the one class's size: a chunk's leaves may all be narrower than the level's widest
+            outs[0][c0 - a:c1 - a] = restrict(host, classes[0][0], overwrite=True)
             continue
         for (size, members), out in zip(classes, outs, strict=True):
             i0, i1 = np.searchsorted(members, (c0 - a, c1 - a))

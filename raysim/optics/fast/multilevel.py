@@ -160,15 +160,6 @@ def _sizes(centres: NDArray[np.float64], radii: NDArray[np.float64], domain: Dom
     return np.array([table[int(d)] for d in degrees], dtype=np.int64).reshape(len(B))
 
 
-def _size(centres: NDArray[np.float64], radii: NDArray[np.float64], domain: Domain, k: float,
-          digits: float) -> int | None:
-    """The grid size n of a level whose clusters have ``centres`` (C, 3) m and ``radii`` (C,)
-    m (its widest cluster's, so every cluster of the level shares one grid); None when a
-    cluster is not separated from the target sphere."""
-    each = _sizes(centres, radii, domain, k, digits)
-    return None if each is None else int(each.max(initial=size_for(0.0)))
-
-
 def _fft_cost(n: Any) -> Any:
     """A 3-component n x n grid's FFT in pair units (n a number or an array of them)."""
     return 3.0 * np.square(n) * np.maximum(np.log2(n), 1.0) * COST_FFT
@@ -216,12 +207,12 @@ def plan(pieces: Sequence[NDArray[np.float64]], domain: Domain, k: float, tol: f
             if stop < leaf:  # one more aggregation step, level stop + 1 -> stop
                 child = sizes[stop + 1]
                 assert child is not None
-                children = float(np.sum(_fft_cost(own))) if stop + 1 == leaf else \
-                    len(levels[stop + 1].keys) * _fft_cost(child)
-                if stop + 1 == leaf:
-                    cost = own_cost
+                if stop + 1 == leaf:  # the leaves on their own grids, each refined to its parent's
+                    cost = own_cost + float(np.sum(_fft_cost(own)))
+                else:
+                    cost += len(levels[stop + 1].keys) * _fft_cost(child)
                 parents = _fft_cost(ns) + ns * ns * (COST_EXP + 4 * COST_NUMPY)
-                cost += children + len(levels[stop + 1].keys) * parents
+                cost += len(levels[stop + 1].keys) * parents
             for u, p in ((0, 0),) if domain.tensor else last:
                 final = len(levels[stop].keys) * _last_cost(ns, u, p, domain)
                 if best is None or cost + final < best[0]:
@@ -294,7 +285,7 @@ def leaf_grids(segments: Any, src: Any, the_plan: Plan, domain: Domain, k: float
     where the grids are built (role "leaf", or ("leaf", n) per class), else new arrays."""
     hi = len(the_plan.levels[the_plan.leaf].keys) if hi is None else hi
     classes = the_plan.leaf_classes(lo, hi)
-    if len(classes) == 1 and len(classes[0][1]) == hi - lo:  # every leaf on one grid, in order
+    if len(classes) == 1:  # every leaf on one grid, in order
         n = classes[0][0]
         shape = (hi - lo, n, n, 3)
         full = np.empty(shape, dtype=np.complex128) if scratch is None else scratch.array("leaf", shape)

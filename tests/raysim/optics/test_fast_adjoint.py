@@ -91,14 +91,19 @@ def test_fast_vjp_is_the_transpose_of_the_fast_jvp(elements, points) -> None:
     assert abs(lhs - rhs) <= 1e-6 * abs(rhs)
 
 
-def test_leaves_on_grids_of_their_own_sizes_keep_the_transpose(elements, points, monkeypatch) -> None:
+@pytest.mark.parametrize("one_family", [False, True])
+def test_leaves_on_grids_of_their_own_sizes_keep_the_transpose(elements, points, one_family,
+                                                               monkeypatch) -> None:
     """Where the plan aggregates, each leaf sums on a grid sized for its own bandwidth (several
     sizes on this dish); the fast VJP is still the exact transpose of the fast JVP: <J v, w>
-    = <v, J^T w> to rounding, not merely to the tolerance."""
+    = <v, J^T w> to rounding, not merely to the tolerance. Also walked one family at a time,
+    where a family's leaves may all share a size below the level's widest."""
     from raysim.optics import po_jacobian
     from raysim.optics.fast import multilevel
 
     monkeypatch.setattr(multilevel, "COST_BLAS", 1.0)  # the last step dear: the plan aggregates
+    if one_family:
+        monkeypatch.setattr(multilevel, "GRID_BYTES", 1.0)  # one cluster a chunk at every level
     rng = np.random.default_rng(6)
     n = len(elements)
     dz, hx, hy = (rng.standard_normal(n) * 1e-3 for _ in range(3))
