@@ -285,12 +285,17 @@ REFINE_METHODS = ("auto", "defect", "gauss-newton")
 #: 0.6 GHz (6.6e8), 1 step x 27 in 9.3 min. Those were 3.6e10 of the units before PO's pairs ran
 #: in vector lanes; the fast plan now counts lane pairs, and its estimates of these radiations
 #: are 1.16 to 1.22 times the old ones (4.8e7, 2.4e8, 7.9e8), while the JVP's and VJP's pairs,
-#: which fill the iterations, still run one point at a time: so the same minutes and the same
-#: steps are 4.4e10
+#: which fill the iterations, then still ran one point at a time: so the same minutes and the
+#: same steps were 4.4e10. Re-timed with every sum in lanes (5 December 2026, two cores,
+#: ``benchmarks/bench_gauss_newton.py --noise 0 --methods auto``): 0.3 GHz 2 x 46 in 484 s
+#: (1.75 % RRMS); with the leaves on grids of their own sizes the estimates fall (2.15e8 and
+#: 6.9e8 a radiation): 0.3 GHz 2 x 51 in 453 s (1.66 %), 0.6 GHz 1 x 31 in 504 s (0.76 %); the
+#: budget stays
 AUTO_BUDGET_PAIRS = 4.4e10
 #: the fewest LSQR iterations in all "auto" runs Gauss-Newton with: on the paper's dish the
 #: weak directions need tens of iterations (one step of 27 at 0.6 GHz takes the defect
-#: correction's 2.21 % RRMS to 1.24 %), so below this the defect correction alone is kept
+#: correction's 2.21 % RRMS to 1.24 %, one of 31 to 0.76 %), so below this the defect
+#: correction alone is kept
 AUTO_MIN_LSQR = 20
 
 
@@ -379,7 +384,7 @@ def choose_method(name: str, model: ForwardModel | None, scan, iterations: int,
     # LSQR iterations the budget affords in all, up to what the options ask for; spent in as
     # few steps of up to opts.inner as they fill: below ~1 GHz the deformation is a small
     # fraction of the wavelength, the model nearly linear, and each new step restarts LSQR's
-    # Krylov space (0.3 GHz on the paper's dish: 2 x 46 reach 1.73 % RRMS, 3 x 30 1.91 %)
+    # Krylov space (0.3 GHz on the paper's dish: 2 x 46 reach 1.73 % RRMS, 3 x 30 1.91 %; 2 x 51 1.66 %)
     affordable = int(AUTO_BUDGET_PAIRS // (2.0 * pairs))
     total = min(affordable, opts.iterations * opts.inner)
     steps = max(1, min(opts.iterations, -(-total // opts.inner)))

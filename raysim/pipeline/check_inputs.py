@@ -38,8 +38,8 @@ WAVE_CHOICES = ("auto", "po", "po+ptd", "go+edge")
 DEFORMATIONS = ("auto", "scene", "mix")
 DEFAULT_RMS_M = 100e-6
 #: pair evaluations (PO's pairs in vector lanes, the units of the fast radiator's cost estimate):
-#: about four minutes on two cores (137 M a second, measured at 1 and 3 GHz: the paper's dish at
-#: 3 GHz, 3.3e10, took 260 s), the time 1.2e10 pairs took before the lanes kernels / a GPU
+#: about four minutes on two cores (about 145 M a second, measured at 1 and 3 GHz: the paper's
+#: dish at 3 GHz, 3.0e10, took 207 s), the time 1.2e10 pairs took before the lanes kernels / a GPU
 PO_PAIR_BUDGET = {"cpu": 3.6e10, "cuda": 1e12}
 WAVE_FACE_M = 4.0  # quadrature faces of the wave data (the refinement's PO model uses 5 m)
 SPHERE_RADIUS_OF_F = 0.3  # a mesh's probe sphere by default: R = 0.3 F (the paper's 10 / 33)
