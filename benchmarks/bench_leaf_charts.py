@@ -37,9 +37,9 @@ from numpy.typing import NDArray
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from raysim.constants import C0  # noqa: E402
 from raysim.optics.fast.chart import half_rows, size_for  # noqa: E402
 
-C0 = 299_792_458.0
 FOCAL, RADIUS = 33.0, 10.0
 CENTRE = np.array([0.0, 0.0, FOCAL])
 PLACES = {"vertex": (1.0, 0.5), "half way": (30.0, 5.0), "rim": (53.0, 8.0)}
@@ -93,6 +93,7 @@ def torus_nodes(S: NDArray, p: NDArray, c: NDArray, k: float, tol: float, n: int
 
 
 def chebyshev(m: int, lo: float, hi: float) -> NDArray:
+    """The m Chebyshev points of the first kind on [lo, hi]."""
     return lo + (hi - lo) * (1.0 - np.cos(np.pi * (np.arange(m) + 0.5) / m)) / 2.0
 
 
