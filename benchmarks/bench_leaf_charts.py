@@ -38,7 +38,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from raysim.constants import C0  # noqa: E402
-from raysim.optics.fast.chart import half_rows, size_for  # noqa: E402
+from raysim.maps.sphere import SphereGrid  # noqa: E402
+from raysim.optics.fast.chart import Domain, grid_points, half_rows, size_for  # noqa: E402
 
 FOCAL, RADIUS = 33.0, 10.0
 CENTRE = np.array([0.0, 0.0, FOCAL])
@@ -70,17 +71,10 @@ def field(P: NDArray, S: NDArray, p: NDArray, c: NDArray, k: float) -> NDArray:
     return E.sum(axis=1) * np.exp(1j * k * np.linalg.norm(P - c, axis=1))[:, None]
 
 
-def sphere(theta: NDArray, phi: NDArray) -> NDArray:
-    """Points of the target sphere at (theta from -z, phi)."""
-    s = np.sin(theta)
-    return CENTRE + RADIUS * np.stack([s * np.cos(phi), s * np.sin(phi), -np.cos(theta)], axis=-1)
-
-
 def torus_nodes(S: NDArray, p: NDArray, c: NDArray, k: float, tol: float, n: int = 256) -> tuple[int, int]:
     """(L, computed nodes) of the whole-sphere grid that holds the field to ``tol``."""
-    t = 2.0 * np.pi * np.arange(n) / n
-    th, ph = np.meshgrid(t, t, indexing="ij")
-    G = field(sphere(th, ph).reshape(-1, 3), S, p, c, k).reshape(n, n, 3)
+    torus = grid_points(n, Domain(tuple(CENTRE), RADIUS, n * n))  # the fast radiator's own grid
+    G = field(torus, S, p, c, k).reshape(n, n, 3)
     power = (np.abs(np.fft.fft2(G, axes=(0, 1))) ** 2).sum(axis=-1)
     f = np.abs(np.fft.fftfreq(n, 1.0 / n))
     band = np.maximum(f[:, None], f[None, :])
@@ -108,8 +102,7 @@ def lagrange_weights(nodes: NDArray, x: NDArray) -> NDArray:
 
 def cone_nodes(S: NDArray, p: NDArray, c: NDArray, k: float, tol: float) -> tuple[int, int, int]:
     """(m, m_s, m * m * m_s): the fewest cone-segment Chebyshev nodes holding the field to ``tol``."""
-    th, ph = np.meshgrid(np.radians(np.arange(0.5, 90.0)), np.radians(np.arange(0.5, 360.0)), indexing="ij")
-    P = sphere(th, ph).reshape(-1, 3)
+    P = SphereGrid(RADIUS, 90, 360).points(FOCAL).reshape(-1, 3)  # the paper's targets
     axis = (CENTRE - c) / np.linalg.norm(CENTRE - c)
     e1 = np.cross(axis, [0.0, 1.0, 0.0])
     e1 /= np.linalg.norm(e1)
