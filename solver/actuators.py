@@ -19,6 +19,7 @@ four panels) moves every panel it holds, with the same stroke.
 from __future__ import annotations
 
 import csv
+import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -122,6 +123,9 @@ def corners_layout(layout) -> ActuatorLayout:
 def screws_layout(layout, positions=DEFAULT_SCREWS) -> ActuatorLayout:
     """Screws at (u, v) on every panel, one panel each: u = (r - r_in) / (r_out - r_in) across
     the ring, v = (phi - phi_a) / (phi_b - phi_a) along it, each in [0, 1]."""
+    if not 1 <= len(positions) <= len(MONOMIALS):
+        raise ActuatorError(f"{len(positions)} screws per panel: give 1 to {len(MONOMIALS)} (a "
+                            "panel's shape has at most that many terms)")
     points = []
     for panel in range(layout.n_panels):
         for u, v in positions:
@@ -139,18 +143,30 @@ def screws_layout(layout, positions=DEFAULT_SCREWS) -> ActuatorLayout:
     return acts
 
 
+ACTUATOR_KEYS = ("id", "x_m", "y_m", "panels", "min_m", "max_m")
+#: columns ``raysim correct`` writes beside the actuators' own (read back, not used)
+WRITTEN_KEYS = ("command_", )
+
+
 def read_actuators(path: str | Path, layout) -> ActuatorLayout:
     """Read actuators from a CSV (columns id, x_m, y_m, panels, and optional min_m, max_m;
     ``panels`` the panel ids separated by spaces or ';') or a TOML file (``[[actuator]]`` tables
-    with the same keys, ``panels`` a list). Positions in metres in the aperture plane."""
+    with the same keys, ``panels`` a list). Positions in metres in the aperture plane. The
+    commands files ``raysim correct`` writes read back as actuator files (their command
+    columns are skipped); any other column or key is refused, as a misspelt range would
+    otherwise go unseen."""
     path = Path(path)
+    if path.is_dir():
+        raise ActuatorError(f"{path}: is a folder, give an actuator file (CSV or TOML)")
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ActuatorError(f"{path}: {exc.strerror}") from exc
+    except UnicodeDecodeError:
+        raise ActuatorError(f"{path}: not a text file (an actuator file is CSV or TOML, UTF-8)") from None
     try:
         if path.suffix.lower() == ".toml":
-            rows = tomllib.loads(text).get("actuator", [])
+            rows = _toml_rows(tomllib.loads(text), path)
         else:
             rows = list(csv.DictReader(line for line in text.splitlines()
                                        if not line.lstrip().startswith("#")))
@@ -161,6 +177,12 @@ def read_actuators(path: str | Path, layout) -> ActuatorLayout:
                             "[[actuator]] tables)")
     ids, xy, ranges, members = [], [], [], []
     for k, row in enumerate(rows):
+        unknown = [str(key) for key in row if key not in ACTUATOR_KEYS
+                   and not str(key).startswith(WRITTEN_KEYS)]
+        if unknown:
+            raise ActuatorError(f"{path}: actuator row {k + 1} has unknown "
+                                f"{'key' if path.suffix.lower() == '.toml' else 'column'} "
+                                f"{', '.join(unknown)} (known: {', '.join(ACTUATOR_KEYS)})")
         try:
             ids.append(str(row["id"]))
             xy.append((float(row["x_m"]), float(row["y_m"])))
@@ -174,7 +196,23 @@ def read_actuators(path: str | Path, layout) -> ActuatorLayout:
         except (KeyError, ValueError, TypeError) as exc:
             raise ActuatorError(f"{path}: actuator row {k + 1} needs id, x_m, y_m, panels "
                                 f"(numbers; panels as ids): {exc}") from exc
+        if any(math.isnan(v) for v in ranges[-1]):
+            raise ActuatorError(f"{path}: actuator {ids[-1]}: min_m and max_m must be numbers "
+                                "(leave them out for an unbounded actuator)")
     return build_layout(ids, np.array(xy), members, np.array(ranges), layout, str(path))
+
+
+def _toml_rows(data: dict, path: Path) -> list:
+    """The ``[[actuator]]`` tables of an actuator TOML file; top-level keys the commands file
+    writes (unit, RMS before and after) are allowed, any other is refused."""
+    unknown = [key for key in data if key != "actuator" and key != "unit" and not key.startswith("rms_")]
+    if unknown:
+        raise ActuatorError(f"{path}: unknown top-level key {', '.join(unknown)} (actuators go in "
+                            "[[actuator]] tables)")
+    rows = data.get("actuator", [])
+    if not isinstance(rows, list) or not all(isinstance(row, dict) for row in rows):
+        raise ActuatorError(f"{path}: 'actuator' must be an array of tables ([[actuator]])")
+    return rows
 
 
 def build_layout(ids, xy, members, ranges, layout, source: str = "actuators") -> ActuatorLayout:
@@ -183,7 +221,8 @@ def build_layout(ids, xy, members, ranges, layout, source: str = "actuators") ->
         raise ActuatorError(f"{source}: actuator ids repeat")
     rim = layout.rim_radius
     for name, (x, y) in zip(ids, xy, strict=True):
-        if not np.isfinite(x) or not np.isfinite(y) or np.hypot(x, y) > rim * (1 + 1e-9):
+        # a micrometre of slack: positions written to the micrometre read back inside
+        if not np.isfinite(x) or not np.isfinite(y) or np.hypot(x, y) > rim * (1 + 1e-9) + 1e-6:
             raise ActuatorError(f"{source}: actuator {name} at ({x:g}, {y:g}) m lies outside the "
                                 f"dish (rim radius {rim:g} m)")
     supports: list[list[tuple[int, float, float]]] = [[] for _ in range(layout.n_panels)]

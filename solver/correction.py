@@ -105,9 +105,16 @@ def correct(grid, delta: NDArray[np.float64], layout, actuators: ActuatorLayout,
         lo, hi = actuators.ranges[held, 0], actuators.ranges[held, 1]
         if np.any(lo > 0) or np.any(hi < 0):
             raise ActuatorError("an actuator's range excludes 0 (min_m > 0 or max_m < 0)")
-        sol = _bounded(Ah, d, lo, hi)
-        clipped = int(np.sum((sol <= lo + 1e-15) & np.isfinite(lo)) + np.sum((sol >= hi - 1e-15)
-                                                                                & np.isfinite(hi)))
+        # a range that includes 0 and is one value is a locked actuator: it stays at 0
+        free = lo < hi
+        if not free.all():
+            notes.append(f"{int((~free).sum())} actuators locked (min_m = max_m = 0): commanded 0")
+        sol = np.zeros(len(lo))
+        if free.any():
+            lo, hi = lo[free], hi[free]
+            sol[free] = moved = _bounded(Ah[:, free], d, lo, hi)
+            clipped = int(np.sum((moved <= lo + 1e-15) & np.isfinite(lo))
+                          + np.sum((moved >= hi - 1e-15) & np.isfinite(hi)))
     commands[held] = sol
     after_flat = np.full(before.size, np.nan)
     after_flat[on] = d + A @ commands

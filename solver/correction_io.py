@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import csv
 import io
+import json
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,22 +51,41 @@ class CorrectionRun:
 
 
 def layout_for(surface_map, scene_path: str | os.PathLike[str] | None, source: str):
-    """The panel layout: from ``scene_path`` or the scene the SurfaceMap's source FieldMap records."""
+    """The panel layout: from ``scene_path`` or the scene the SurfaceMap's source FieldMap records
+    (a relative source path is read from the SurfaceMap's own folder, ``source``'s). The
+    scene's dish must be the map's: the same diameter."""
     from raysim.scene.scene import load_scene, scene_of
 
     if scene_path is not None:
         scene = load_scene(scene_path)
     else:
         scene = None
-        src = surface_map.attrs.get("source_fieldmap")
-        if src and Path(str(src)).is_file():
+        src = source_fieldmap(surface_map, source)
+        if src is not None:
             from raysim.maps.fieldmap import load as load_fieldmap
 
             scene = scene_of(load_fieldmap(src))
     if scene is None or scene.panels is None:
         raise RaysimError(f"{source}: no panel layout (give --scene with a [panels] table, or a "
                           "SurfaceMap whose source FieldMap records one); per-panel commands need it")
+    D = float(surface_map.attrs["diameter"])
+    rim = 2.0 * scene.panels.rim_radius
+    if not math.isclose(rim, D, rel_tol=1e-6):
+        raise RaysimError(f"{source}: the map is of a {D:g} m dish, the panel layout of a {rim:g} m "
+                          "one; give the scene of the dish that was measured")
     return scene.panels
+
+
+def source_fieldmap(surface_map, source: str) -> Path | None:
+    """The FieldMap a SurfaceMap was inverted from, when it records one that exists: an absolute
+    path as it is, a relative one from the SurfaceMap's folder."""
+    src = str(surface_map.attrs.get("source_fieldmap", "") or "")
+    if not src:
+        return None
+    path = Path(src).expanduser()
+    if not path.is_absolute():
+        path = Path(source).parent / path
+    return path if path.is_file() else None
 
 
 def actuators_for(layout, kind: str | None, path: str | os.PathLike[str] | None,
@@ -89,20 +110,27 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
     if not 0 <= zernike_order <= 20:
         raise SolverError(f"--zernike-order must be 0..20, got {zernike_order}")
     freqs = tuple(float(f) for f in frequencies)
-    if any(not f > 0 for f in freqs):
-        raise SolverError("--frequency must be > 0 Hz")
+    if any(not (f > 0 and math.isfinite(f)) for f in freqs):
+        raise SolverError("--frequency must be a finite number > 0 Hz")
+    if stroke is not None and not (stroke > 0 and math.isfinite(stroke)):
+        raise SolverError("--stroke must be a finite number > 0")
+    if stroke is not None and actuators is not None:
+        raise SolverError("--stroke bounds generated layouts; an actuator file gives each "
+                          "actuator's range in its min_m and max_m")
     terms = parse_terms(remove)
     out = Path(outdir)
     inputs = {Path(p).resolve() for p in (surface_path, scene, actuators) if p is not None}
     for name in OUTPUTS:
         if (out / name).resolve() in inputs:
             raise SolverError(f"{out / name}: is an input; write the correction to another folder")
+        if (out / name).is_dir():
+            raise SolverError(f"{out / name}: is a folder; write the correction to another folder")
     smap = surface.load(surface_path)
+    if not np.isfinite(smap["deformation"].values).any():
+        raise SolverError(f"{surface_path}: the map holds no finite deformation; nothing to correct")
     layout = layout_for(smap, scene, str(surface_path))
     acts = actuators_for(layout, layout_kind, actuators, screws)
     if stroke is not None:
-        if not stroke > 0:
-            raise SolverError("--stroke must be > 0")
         acts = ActuatorLayout(acts.ids, acts.xy, acts.supports,
                               np.tile([-stroke, stroke], (acts.n_actuators, 1)), acts.kind)
     grid = surface.grid_of(smap)
@@ -111,17 +139,20 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
     run = CorrectionRun(corr, acts, unit, freqs, ruze(corr.rms_before, freqs),
                         ruze(corr.rms_after, freqs), zernike_fit(grid, corr.before, zernike_order),
                         zernike_fit(grid, corr.after, zernike_order), [])
-    out.mkdir(parents=True, exist_ok=True)
     header = header_lines(run, terms)
-    write_text(out / "commands.csv", commands_csv(run, header))
-    write_text(out / "commands.toml", commands_toml(run, header))
-    write_text(out / "zernike.csv", zernike_csv(run, header))
-    write_text(out / "summary.txt", "\n".join([SIGN.format(unit=unit), *summary_lines(run)]) + "\n")
     attrs = {k: v for k, v in smap.attrs.items() if k not in ("rms_m", "rrms")}
     attrs.update(correction="predicted surface after the actuator commands",
                  correction_rms_before_m=corr.rms_before, correction_rms_after_m=corr.rms_after,
                  removed_terms=",".join(terms) or "none", command_sign=SIGN.format(unit=unit))
-    residual = surface.surfacemap(grid, np.nan_to_num(corr.after), attrs)
+    # NaN stays NaN: points without data and the gaps between panels are no corrected surface
+    residual = surface.surfacemap(grid, corr.after, attrs)
+    texts = {"commands.csv": commands_csv(run, header), "commands.toml": commands_toml(run, header),
+             "zernike.csv": zernike_csv(run, header),
+             "summary.txt": "\n".join([SIGN.format(unit=unit), *summary_lines(run)]) + "\n"}
+    # every file is made before the first is written, so a failure leaves the folder as it was
+    out.mkdir(parents=True, exist_ok=True)
+    for name, text in texts.items():
+        write_text(out / name, text)
     surface.save(residual, out / "residual.nc")
     run.files = [out / n for n in OUTPUTS]
     return run
@@ -144,8 +175,9 @@ def _rows(run: CorrectionRun) -> list[dict]:
     c = run.correction
     rows = []
     for i, name in enumerate(run.actuators.ids):
-        row = {"id": name, "x_m": f"{run.actuators.xy[i, 0]:.4f}",
-               "y_m": f"{run.actuators.xy[i, 1]:.4f}",
+        # positions to the micrometre: the files are read back as actuator files
+        row = {"id": name, "x_m": f"{run.actuators.xy[i, 0]:.6f}",
+               "y_m": f"{run.actuators.xy[i, 1]:.6f}",
                "panels": " ".join(str(p) for p in run.actuators.panels_of(i)),
                f"command_{run.unit}": f"{c.commands[i] / scale:.4f}"}
         if c.command_std is not None:
@@ -174,7 +206,7 @@ def commands_toml(run: CorrectionRun, header: list[str]) -> str:
         lines.append("[[actuator]]")
         for k, v in row.items():
             if k == "id":
-                lines.append(f'id = "{v}"')
+                lines.append(f"id = {json.dumps(v)}")  # a TOML basic string, escapes included
             elif k == "panels":
                 lines.append(f"panels = [{', '.join(v.split())}]")
             else:
@@ -192,12 +224,19 @@ def zernike_csv(run: CorrectionRun, header: list[str]) -> str:
     return buf.getvalue()
 
 
+def _left(c: Correction) -> str:
+    """What share of the RMS the correction leaves, in words."""
+    if c.rms_before > 0:
+        return f"{100 * c.rms_after / c.rms_before:.1f} % left"
+    return "a flat surface, nothing to correct"
+
+
 def summary_lines(run: CorrectionRun) -> list[str]:
     c = run.correction
     lines = [f"{run.actuators.n_actuators} actuators ({run.actuators.kind}); "
              f"{run.actuators.shape_description()}",
              f"RMS {c.rms_before / 1e-6:.2f} um before, {c.rms_after / 1e-6:.2f} um predicted after "
-             f"({100 * c.rms_after / c.rms_before:.1f} % left; rigid-panel floor, out of reach of "
+             f"({_left(c)}; rigid-panel floor, out of reach of "
              f"rigid panel motions: {c.within_panel_rms / 1e-6:.2f} um)",
              f"commands: max |c| {np.max(np.abs(c.commands)) / UNITS[run.unit]:.3f} {run.unit}"
              + (f", {c.clipped} at their range limit" if c.clipped else "")]

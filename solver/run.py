@@ -63,7 +63,7 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
                     refine_iterations=refine, gain=gain, iterations=iterations, device=device,
                     model=model, progress=progress, refine_method=refine_method,
                     gauss_newton=gauss_newton, log=log, radiator=radiator, radiator_tol=radiator_tol)
-    result.attrs["source_fieldmap"] = str(field_path)
+    result.attrs["source_fieldmap"] = str(Path(field_path).resolve())  # any folder can find it
     surface.save(result, output)
     if layout is not None:
         grid = surface.grid_of(result)

@@ -233,6 +233,7 @@ def workspace(tmp_path_factory):
         "panel_scene.toml": _scene(PANELS.format(edges="[0.0, 5.0, 10.0]").replace(
             "panels_per_ring = [1]", "panels_per_ring = [6, 12]")),
         "panel_one.toml": _scene(PANELS.format(edges="[0.0, 10.0]")),
+        "panel_other_dish.toml": _scene(PANELS.format(edges="[0.0, 5.0]"), diameter_m__20="diameter_m = 10"),
         "acts_outside.csv": "id,x_m,y_m,panels\na1,12.0,0.0,0\n",
         "acts_lonely.csv": "id,x_m,y_m,panels\na1,2.0,0.5,0\n",
     }
@@ -511,6 +512,10 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["correct", "missing.nc", "-o", "corr", "--scene", "panel_scene.toml"], "missing.nc"),
         (["correct", "s.nc", "-o", "corr"], "no panel layout"),
         (["correct", "s.nc", "-o", "corr", "--scene", "scene.toml"], "no panel layout"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "panel_other_dish.toml"],
+         "the map is of a 20 m dish, the panel layout of a 10 m one"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--actuators",
+          "acts_outside.csv", "--stroke", "1e-5"], "--stroke bounds generated layouts"),
         (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--actuators",
           "acts_outside.csv"], "lies outside the dish"),
         (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--actuators",
@@ -521,7 +526,9 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--unit", "inch"],
          "unknown --unit 'inch'"),
         (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--frequency", "-1"],
-         "--frequency must be > 0 Hz"),
+         "--frequency must be a finite number > 0 Hz"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--frequency", "inf"],
+         "--frequency must be a finite number > 0 Hz"),
         (["correct", "s.nc", "-o", "notes.txt", "--scene", "panel_scene.toml"], "give a folder"),
         (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--remove", "coma"],
          "unknown term 'coma'"),
@@ -545,6 +552,7 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
     # where nothing can be written, before any work
     "--json (issue 34)": [
         (["budget", "plan.toml", "--json", "plan.toml"], "is the plan"),
+        (["budget", "plan.toml", "--json", "rig.toml"], "is the plan or rig file"),
         (["budget", "plan.toml", "--json", "."], "is a folder, give a file name"),
         (["check", "scene.toml", "-o", "rep_new", "--json", "scene.toml"], "is the source"),
         (["check", "scene.toml", "-o", "rep_new", "--json", "user_folder"], "is a folder"),

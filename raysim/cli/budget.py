@@ -31,6 +31,7 @@ def budget_command(
 ) -> None:
     """Predict the deformation RMS a scan plan leaves, by mode, from the inversion's linear
     operator (no Monte Carlo), and the readings per point a target RMS needs."""
+    from hardware.plan import load_plan
     from raysim.pipeline.budget import budget_rows, mode_lines, parse_levels, table_rows
     from solver.errors import SolverError
 
@@ -39,7 +40,9 @@ def budget_command(
     if not 0 <= refine <= 50:
         raise SolverError(f"--refine must be an integer in 0..50, got {refine}")
     check_json_path(json_path, [("plan", plan)])
-    rows = budget_rows(plan, parse_levels(noise_db), readings, rim, rim_std_um * 1e-6,
+    scan_plan = load_plan(plan)
+    check_json_path(json_path, scan_plan.inputs())  # the rig and mesh files the plan names too
+    rows = budget_rows(scan_plan, parse_levels(noise_db), readings, rim, rim_std_um * 1e-6,
                        gain == "known", refine > 0,
                        None if target_um is None else target_um * 1e-6)
     lines = table_rows(rows)

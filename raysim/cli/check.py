@@ -61,10 +61,11 @@ def check(
     surface error the GO assumption costs (the wave data inverted with GO, and with the
     wave-aware refinement), and the panel gaps' signature. Prints the verdict and a table.
     """
-    from raysim.pipeline.check import summary_rows, verdict_lines, write_check
+    from raysim.pipeline.check import source_inputs, summary_rows, verdict_lines, write_check
     from raysim.pipeline.check_inputs import parse_grid
 
     check_json_path(json_path, [("source", source)])
+    check_json_path(json_path, source_inputs(source))  # and the files a scene names
     with progress_bar() as bar:
         task = bar.add_task("check", total=1.0)
 

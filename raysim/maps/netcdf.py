@@ -45,6 +45,8 @@ def canonical_order(ds: xr.Dataset, dims: tuple[str, str], unit: str, source: st
 def read(path: str | os.PathLike[str], error: type[Exception]) -> xr.Dataset:
     """Load a NetCDF file whole into memory; raise ``error`` with one line if it cannot be read."""
     path = Path(path)
+    if path.is_dir():
+        raise error(f"{path}: is a folder, give a NetCDF file")
     if not path.is_file():
         raise error(f"{path}: no such file")
     try:

@@ -25,7 +25,7 @@ import numpy as np
 import xarray as xr
 
 from raysim.errors import SurfaceMapError
-from raysim.maps.aperture import ApertureGrid
+from raysim.maps.aperture import ApertureGrid, cell_centres
 from raysim.maps.netcdf import canonical_order, read, write_atomic
 from raysim.version import VERSION_ATTR, __version__
 
@@ -108,7 +108,33 @@ def validate(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
     for name in REQUIRED_ATTRS:
         if name not in ds.attrs:
             raise SurfaceMapError(f"{source}: missing attribute '{name}'")
+    _check_grid(ds, source)
+    for name in ("deformation", *OPTIONAL_VARS):
+        if name in ds.data_vars and np.isinf(ds[name].values).any():
+            raise SurfaceMapError(f"{source}: variable '{name}' holds infinite values (NaN marks "
+                                  "points without data)")
+    if "deformation_std" in ds.data_vars and (ds["deformation_std"].values < 0).any():
+        raise SurfaceMapError(f"{source}: variable 'deformation_std' holds negative values")
     return ds
+
+
+def _check_grid(ds: xr.Dataset, source: str) -> None:
+    """The coordinates must be the aperture grid of the ``diameter`` attribute: N cell centres
+    across it on both axes (every reader places the values by that grid)."""
+    try:
+        D = float(ds.attrs["diameter"])
+    except (TypeError, ValueError):
+        raise SurfaceMapError(f"{source}: attribute 'diameter' must be a number (m)") from None
+    if not (np.isfinite(D) and D > 0):
+        raise SurfaceMapError(f"{source}: attribute 'diameter' must be > 0 m, got {D:g}")
+    nx, ny = int(ds.sizes["x"]), int(ds.sizes["y"])
+    if nx != ny or nx < 2:
+        raise SurfaceMapError(f"{source}: the grid must be square, N x N with N >= 2 (x {nx}, y {ny})")
+    expected = cell_centres(D, nx)
+    for coord in ("x", "y"):
+        if not np.allclose(ds[coord].values, expected, rtol=0.0, atol=1e-6 * D):
+            raise SurfaceMapError(f"{source}: coordinate '{coord}' is not the {nx} cell centres "
+                                  f"across the diameter {D:g} m (-D/2 + (i + 1/2) D / N)")
 
 
 def grid_of(ds: xr.Dataset) -> ApertureGrid:

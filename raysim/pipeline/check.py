@@ -270,7 +270,7 @@ def write_check(source: str | os.PathLike[str], out_dir: str | os.PathLike[str],
     from raysim.pipeline.check_page import write_page
     from raysim.pipeline.report import output_folder, staging
 
-    target = output_folder(out_dir, _inputs(source), CHECK_FILES, "a raysim check")
+    target = output_folder(out_dir, source_inputs(source), CHECK_FILES, "a raysim check")
     ds = check(source, **options)
     with staging(target) as out:
         save(ds, out / "check.nc")
@@ -278,7 +278,7 @@ def write_check(source: str | os.PathLike[str], out_dir: str | os.PathLike[str],
     return target / "check.html", ds
 
 
-def _inputs(source) -> list[tuple[str, Path]]:
+def source_inputs(source) -> list[tuple[str, Path]]:
     """(what, path) of the files a check reads, for the output checks."""
     from raysim.files import find_input
 
@@ -301,4 +301,4 @@ def save(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
     return path
 
 
-__all__ = ["CheckError", "check", "save", "summary_rows", "verdict_lines", "write_check"]
+__all__ = ["CheckError", "check", "save", "source_inputs", "summary_rows", "verdict_lines", "write_check"]

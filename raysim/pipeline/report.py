@@ -114,6 +114,9 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
             start = time.perf_counter()
             surface = run_inversion(field, solver=solver, grid=grid, refine=refine, device=device)
             timings["invert"] = time.perf_counter() - start
+            # the FieldMap it came from (``raysim correct`` finds the panel layout there): the
+            # report's own field.nc, read from the SurfaceMap's folder, or the one given
+            surface.attrs["source_fieldmap"] = str(Path(source).resolve()) if is_field else "field.nc"
             _save_surface(surface, out / "surface.nc")
         say("drawing", 0.8)
         write_report(field, surface, out, timings=timings)

@@ -293,3 +293,165 @@ def test_the_command_writes_every_file_and_prints_the_summary(tmp_path):
     values = [float(line.rsplit(",", 1)[1]) for line in text.splitlines()[1:]
               if line and not line.startswith(("#", "id"))]
     assert max(abs(v) for v in values) <= 20e-6 / 25.4e-6 + 1e-4   # the range, in mil
+
+
+def test_the_commands_files_read_back_as_actuator_files(tmp_path):
+    # rim corners written to the micrometre must read back inside the dish, the command columns
+    # and the TOML header are skipped, and an id with a quote and a backslash survives TOML
+    acts = corners_layout(LAYOUT)
+    ids = ('q"x\\' + acts.ids[0], *acts.ids[1:])
+    named = build_layout(ids, acts.xy, [acts.panels_of(a) for a in range(acts.n_actuators)],
+                         np.tile([-np.inf, np.inf], (acts.n_actuators, 1)), LAYOUT)
+    scene = tmp_path / "scene.toml"
+    scene.write_text(SCENE)
+    first = tmp_path / "first.toml"
+    first.write_text("".join(
+        f'[[actuator]]\nid = "{named.ids[a].replace(chr(92), 2 * chr(92)).replace(chr(34), chr(92) + chr(34))}"'
+        f"\nx_m = {float(named.xy[a, 0])!r}\ny_m = {float(named.xy[a, 1])!r}\n"
+        f"panels = {named.panels_of(a)}\n" for a in range(named.n_actuators)))
+    path = _surface_file(tmp_path, _rng_map())
+    run = run_correct(path, tmp_path / "out", scene=scene, actuators=first)
+    written = tomllib.loads((tmp_path / "out" / "commands.toml").read_text())
+    assert written["actuator"][0]["id"] == ids[0]
+    expected = _dense_reference(run.correction.before, LAYOUT, acts)
+    for name in ("commands.csv", "commands.toml"):
+        again = run_correct(path, tmp_path / name.replace(".", "_"), scene=scene,
+                            actuators=tmp_path / "out" / name)
+        assert again.actuators.ids == ids
+        np.testing.assert_allclose(again.correction.commands, expected, atol=1e-9)
+
+
+def test_locked_actuators_stay_at_zero_and_the_others_fit_without_them():
+    acts = corners_layout(LAYOUT)
+    locked = np.zeros(acts.n_actuators, dtype=bool)
+    locked[[3, 17, 40]] = True
+    ranges = np.where(locked[:, None], 0.0, np.array([-1.0, 1.0]))
+    bounded = build_layout(acts.ids, acts.xy, [acts.panels_of(a) for a in range(acts.n_actuators)],
+                           ranges, LAYOUT)
+    result = correct(GRID, _rng_map(), LAYOUT, bounded)
+    assert np.all(result.commands[locked] == 0.0)
+    assert any("3 actuators locked" in note for note in result.notes)
+    M, target = _dense_system(result.before, LAYOUT, acts)  # the bounds of +-1 m never bind
+    sol, *_ = np.linalg.lstsq(M[:, ~locked], -target, rcond=None)
+    np.testing.assert_allclose(result.commands[~locked], sol, atol=1e-9)
+
+
+def _nan_file(tmp_path, delta):
+    """A SurfaceMap file of ``delta`` with its NaN kept (points without data)."""
+    attrs = {"solver": "test", "boundary": "test", "harmonic_part": "test", "removed_terms": "",
+             "focal_length": 33.0, "diameter": D, "sphere_radius": 10.0}
+    return surface.save(surface.surfacemap(GRID, delta, attrs), tmp_path / "gappy.nc")
+
+
+def test_gaps_and_points_without_data_stay_nan_in_the_residual(tmp_path):
+    scene = tmp_path / "scene.toml"
+    scene.write_text(SCENE.replace("gap_m = 0.01", "gap_m = 0.5"))
+    delta = _rng_map()
+    delta[40:44, 10:20] = np.nan  # a patch without data
+    run_correct(_nan_file(tmp_path, delta), tmp_path / "out", scene=scene)
+    residual = surface.load(tmp_path / "out" / "residual.nc")["deformation"].values
+    X, Y = GRID.XY
+    gaps = PanelLayout((0.0, 13.75, 27.5, 41.25, 55.0), (6, 12, 18, 24), 0.5).panel_at(X, Y) < 0
+    surface_points = GRID.mask & ~gaps & np.isfinite(delta)
+    assert np.isnan(residual[GRID.mask & gaps]).all() and (GRID.mask & gaps).sum() > 100
+    assert np.isnan(residual[40:44, 10:20]).all()
+    assert np.isfinite(residual[surface_points]).all()
+
+
+def test_a_map_of_another_dish_or_grid_or_without_data_is_refused(tmp_path):
+    from raysim.errors import RaysimError, SurfaceMapError
+    from solver.errors import SolverError
+
+    scene = tmp_path / "scene.toml"
+    scene.write_text(SCENE.replace("diameter_m = 110.0", "diameter_m = 50.0")
+                     .replace("[0.0, 13.75, 27.5, 41.25, 55.0]", "[0.0, 5.0, 10.0, 15.0, 25.0]"))
+    path = _surface_file(tmp_path, _rng_map())
+    with pytest.raises(RaysimError, match="110 m dish, the panel layout of a 50 m one"):
+        run_correct(path, tmp_path / "out", scene=scene)
+    scene.write_text(SCENE)
+    nothing = _nan_file(tmp_path, np.full(GRID.XY[0].shape, np.nan))
+    with pytest.raises(SolverError, match="no finite deformation"):
+        run_correct(nothing, tmp_path / "out", scene=scene)
+    assert not (tmp_path / "out").exists()
+    ds = surface.load(path)
+    for edit, match in ((lambda d: d.isel(x=slice(20, 60), y=slice(20, 60)), "cell centres"),
+                        (lambda d: d.isel(x=slice(0, 90)), "square"),
+                        (lambda d: d.assign(deformation=d.deformation.fillna(0) + np.inf), "infinite")):
+        bad = edit(ds)
+        bad.to_netcdf(tmp_path / "bad.nc")
+        with pytest.raises(SurfaceMapError, match=match):
+            surface.load(tmp_path / "bad.nc")
+
+
+def test_a_failing_run_leaves_the_output_folder_as_it_was(tmp_path):
+    from solver.errors import SolverError
+
+    scene = tmp_path / "scene.toml"
+    scene.write_text(SCENE)
+    out = tmp_path / "out"
+    (out / "residual.nc").mkdir(parents=True)
+    (out / "summary.txt").write_text("an earlier run\n")
+    with pytest.raises(SolverError, match="is a folder"):
+        run_correct(_surface_file(tmp_path, _rng_map()), out, scene=scene)
+    assert sorted(p.name for p in out.iterdir()) == ["residual.nc", "summary.txt"]
+    assert (out / "summary.txt").read_text() == "an earlier run\n"
+
+
+def test_a_flat_map_needs_no_correction(tmp_path):
+    scene = tmp_path / "scene.toml"
+    scene.write_text(SCENE)
+    run = run_correct(_surface_file(tmp_path, GRID.masked(np.zeros(GRID.XY[0].shape))),
+                      tmp_path / "out", scene=scene)
+    assert np.all(run.correction.commands == 0.0)
+    assert "nothing to correct" in (tmp_path / "out" / "summary.txt").read_text()
+
+
+@pytest.mark.parametrize(("text", "suffix", "match"), [
+    ("id,x_m,y_m,panels,min_mm\na,1.0,1.0,0,0.1\n", ".csv", "unknown column min_mm"),
+    ("id,x_m,y_m,panels,min_m,max_m\na,1.0,1.0,0,nan,nan\n", ".csv", "must be numbers"),
+    ("actuator = 5\n", ".toml", "array of tables"),
+    ('units = "mm"\n[[actuator]]\nid = "a"\nx_m = 1.0\ny_m = 1.0\npanels = [0]\n', ".toml",
+     "unknown top-level key units"),
+    (b"\xff\xfe\x00binary", ".csv", "not a text file"),
+])
+def test_unreadable_or_misspelt_actuator_files_are_refused(tmp_path, text, suffix, match):
+    path = tmp_path / f"acts{suffix}"
+    if isinstance(text, bytes):
+        path.write_bytes(text)
+    else:
+        path.write_text(text)
+    with pytest.raises(ActuatorError, match=match):
+        read_actuators(path, LAYOUT)
+
+
+def test_options_that_cannot_apply_are_refused(tmp_path):
+    from solver.errors import SolverError
+
+    path = _surface_file(tmp_path, _rng_map())
+    acts = tmp_path / "acts.csv"
+    acts.write_text("id,x_m,y_m,panels\na,1.0,1.0,0\n")
+    with pytest.raises(SolverError, match="--stroke bounds generated layouts"):
+        run_correct(path, tmp_path / "out", actuators=acts, stroke=1e-5)
+    with pytest.raises(SolverError, match="finite"):
+        run_correct(path, tmp_path / "out", frequencies=[float("inf")])
+    with pytest.raises(ActuatorError, match="give 1 to 6"):
+        screws_layout(LAYOUT, ((0.1, 0.1),) * 7)
+
+
+def test_a_relative_source_fieldmap_is_read_from_the_maps_own_folder(tmp_path, monkeypatch):
+    from solver.correction_io import source_fieldmap
+
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "f.nc").write_bytes(b"")
+    (tmp_path / "elsewhere.nc").write_bytes(b"")
+    monkeypatch.chdir(tmp_path)  # a file of the same name here must not be taken
+    (tmp_path / "f.nc").write_bytes(b"")
+
+    class Map:
+        attrs = {"source_fieldmap": "f.nc"}
+
+    assert source_fieldmap(Map(), str(tmp_path / "run" / "s.nc")) == tmp_path / "run" / "f.nc"
+    Map.attrs = {"source_fieldmap": str(tmp_path / "elsewhere.nc")}
+    assert source_fieldmap(Map(), "run/s.nc") == tmp_path / "elsewhere.nc"
+    Map.attrs = {"source_fieldmap": "gone.nc"}
+    assert source_fieldmap(Map(), "run/s.nc") is None
