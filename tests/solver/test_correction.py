@@ -447,11 +447,11 @@ def test_a_relative_source_fieldmap_is_read_from_the_maps_own_folder(tmp_path, m
     monkeypatch.chdir(tmp_path)  # a file of the same name here must not be taken
     (tmp_path / "f.nc").write_bytes(b"")
 
-    class Map:
-        attrs = {"source_fieldmap": "f.nc"}
+    def recorded(value):
+        from types import SimpleNamespace
 
-    assert source_fieldmap(Map(), str(tmp_path / "run" / "s.nc")) == tmp_path / "run" / "f.nc"
-    Map.attrs = {"source_fieldmap": str(tmp_path / "elsewhere.nc")}
-    assert source_fieldmap(Map(), "run/s.nc") == tmp_path / "elsewhere.nc"
-    Map.attrs = {"source_fieldmap": "gone.nc"}
-    assert source_fieldmap(Map(), "run/s.nc") is None
+        return SimpleNamespace(attrs={"source_fieldmap": value})
+
+    assert source_fieldmap(recorded("f.nc"), str(tmp_path / "run" / "s.nc")) == tmp_path / "run" / "f.nc"
+    assert source_fieldmap(recorded(str(tmp_path / "elsewhere.nc")), "run/s.nc") == tmp_path / "elsewhere.nc"
+    assert source_fieldmap(recorded("gone.nc"), "run/s.nc") is None
