@@ -151,6 +151,7 @@ def validate(ds: xr.Dataset, source: str = "FieldMap") -> xr.Dataset:
     phi = np.asarray(ds["phi"].values, dtype=np.float64)
     if phi.size > 1 and phi[-1] - phi[0] >= 2 * np.pi:
         raise FieldMapError(f"{source}: phi spans more than 360 deg")
+    _check_edges(ds, source)
     for name in REQUIRED_VARS:
         if name not in ds.data_vars:
             raise FieldMapError(f"{source}: missing variable '{name}'")
@@ -191,6 +192,29 @@ def validate(ds: xr.Dataset, source: str = "FieldMap") -> xr.Dataset:
     if _float_attr(ds, "sphere_radius", source) >= _float_attr(ds, "focal_length", source):
         raise FieldMapError(f"{source}: sphere_radius must be smaller than focal_length")
     return ds
+
+
+def _check_edges(ds: xr.Dataset, source: str) -> None:
+    """Where the producer recorded the grid's edges (``theta_min`` ... ``phi_max``, rad), the
+    coordinates must be the cell centres between them: every reader builds the grid from the
+    edges (:func:`grid_of`), so a map cut with xarray that kept the old edges would be read
+    stretched over them."""
+    for coord in ("theta", "phi"):
+        lo, hi = f"{coord}_min", f"{coord}_max"
+        if lo not in ds.attrs or hi not in ds.attrs:
+            continue
+        a, b = _float_attr(ds, lo, source), _float_attr(ds, hi, source)
+        values = np.asarray(ds[coord].values, dtype=np.float64)
+        n = values.size
+        if not (np.isfinite(a) and np.isfinite(b) and b > a) or n == 0:
+            raise FieldMapError(f"{source}: attributes '{lo}' and '{hi}' must be finite angles "
+                                f"(rad) with {lo} < {hi}")
+        step = (b - a) / n
+        centres = a + (np.arange(n) + 0.5) * step
+        if not np.allclose(values, centres, rtol=0.0, atol=1e-3 * step):
+            raise FieldMapError(f"{source}: coordinate '{coord}' is not the {n} cell centres between "
+                                f"the attributes {lo} = {a:g} and {hi} = {b:g} rad (a map cut "
+                                f"or moved after it was written: set {lo} and {hi} to its new edges)")
 
 
 def _check_intensity(values: np.ndarray, name: str, source: str) -> None:

@@ -70,6 +70,9 @@ def test_write_is_atomic_and_keeps_the_old_file_on_failure(tmp_path: Path, monke
         (lambda ds: ds.assign_coords(theta=ds.theta.assign_attrs(units="deg")), "'theta' must be in rad"),
         (lambda ds: ds.assign_coords(theta=ds.theta * 30), "theta beyond 90 deg"),
         (lambda ds: ds.assign_attrs(focal_length="thirty"), "'focal_length' must be a number"),
+        # cut with xarray, the old edges kept: read over them, the data would be stretched
+        (lambda ds: ds.isel(theta=slice(0, 5)), "'theta' is not the 5 cell centres between"),
+        (lambda ds: ds.isel(phi=slice(0, 9)), "'phi' is not the 9 cell centres between"),
     ],
 )
 def test_broken_maps_are_refused_with_one_line(tmp_path: Path, damage, message):
@@ -89,6 +92,8 @@ def test_unreadable_files_are_field_map_errors(tmp_path: Path):
         load(junk)
     with pytest.raises(FieldMapError, match="no such file"):
         load(tmp_path / "missing.nc")
+    with pytest.raises(FieldMapError, match="is a folder"):
+        load(tmp_path)
 
 
 def test_shape_and_vocabulary_are_checked():
