@@ -59,7 +59,7 @@ from solver.options import (
 )
 from solver.record import Outcome, accuracy_attrs, surface_attrs
 from solver.refinement import RefinementSetup, choose_model, refinement_setup
-from solver.resample import usable_rows
+from solver.resample import cap_rows, usable_rows
 from solver.unobservable import Unobservable, unobservable
 from solver.wave import amplitude_weight
 
@@ -265,7 +265,8 @@ def measured_fa(scan: Scan, gain: GainChoice) -> MeasuredFA:
                               stated) if gain.estimated
                 else GainEstimate(1.0, 0.0, 1.0))
     fa = intensity_ratio_fa(scan.intensity / estimate.scale, scan.intensity_ideal)
-    missing = int(np.count_nonzero(~np.isfinite(fa[:n_rows])))
+    # with the polar cap's cells when the scan starts short of the pole (filled likewise)
+    missing = int(np.count_nonzero(~np.isfinite(fa[:n_rows]))) + cap_rows(scan.sphere) * scan.sphere.n_phi
     return MeasuredFA(debias(fa, v if gain.estimated else 0.5 * v), gain, estimate, v, source,
                       n_rows, missing)
 

@@ -154,9 +154,18 @@ def sphere_to_aperture(values: NDArray[np.float64], sphere: SphereGrid, aperture
                        F: float, D: float) -> tuple[NDArray[np.float64], Coverage]:
     """Resample sphere samples (n_theta, n_phi) onto the aperture grid (N, N), NaN outside.
 
-    ``values`` is any smooth quantity on the sphere (here FA); F and D in m.
+    ``values`` is any smooth quantity on the sphere (here FA); F and D in m. A scan that
+    starts at theta_min > 0 leaves the polar cap without data: its rows count as missing
+    samples, filled like any hole (:func:`fill_missing`), and ``Coverage.n_filled`` includes
+    them (``n_rows`` stays the scan's own rows).
     """
     check_full_circle(sphere)
+    cap = cap_rows(sphere)
+    if cap:  # the cap's rows on the scan's own step; a part-step offset may stay at the pole
+        values = np.concatenate([np.full((cap, sphere.n_phi), np.nan), values], axis=0)
+        sphere = SphereGrid(sphere.radius, sphere.n_theta + cap, sphere.n_phi,
+                            max(sphere.theta_min - cap * sphere.dtheta, 0.0), sphere.theta_max,
+                            sphere.phi_min, sphere.phi_max)
     n_rows = usable_rows(sphere, F, D)
     filled, n_filled = fill_missing(values, n_rows)
     table = extend_rows(filled, n_rows)
@@ -168,8 +177,14 @@ def sphere_to_aperture(values: NDArray[np.float64], sphere: SphereGrid, aperture
     ip = (phi - sphere.phi[0]) / sphere.dphi + PAD
     out = np.full((aperture.N, aperture.N), np.nan)
     out[mask] = map_coordinates(padded, [it, ip], order=3, mode="nearest", prefilter=True)
-    coverage = Coverage(n_rows, float(sphere.theta[n_rows - 1]), n_filled, theta_rim(D, F))
+    coverage = Coverage(n_rows - cap, float(sphere.theta[n_rows - 1]), n_filled, theta_rim(D, F))
     return out, coverage
+
+
+def cap_rows(sphere: SphereGrid) -> int:
+    """Whole rows of the sphere's theta step that fit between the pole and the scan's first
+    row (0 when it starts at the pole, or less than a step from it)."""
+    return int(np.floor(sphere.theta_min / sphere.dtheta + 1e-6))
 
 
 def _pad(table: NDArray[np.float64], sphere: SphereGrid) -> NDArray[np.float64]:
