@@ -14,6 +14,7 @@ no gap and no reordering.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import zlib
@@ -111,9 +112,11 @@ class Journal:
         self.records = records
 
     @classmethod
-    def create(cls, path: str | Path, fingerprint: str, steps: int) -> Journal:
+    def create(cls, path: str | Path, fingerprint: str, steps: int, plan: str = "") -> Journal:
         """Start a new journal; refuse to overwrite one that holds records (a journal holding
-        only its header, from a scan that failed before its first step, is replaced)."""
+        only its header, from a scan that failed before its first step, is replaced).
+        ``plan``: the plan's own fingerprint (without the instruments' settings), so that
+        ``--from-journal`` can tell the journal of another plan."""
         path = Path(path)
         if path.exists() and path.stat().st_size > 0:
             try:
@@ -127,7 +130,11 @@ class Journal:
         path.parent.mkdir(parents=True, exist_ok=True)
         header = {"format": FORMAT, "version": VERSION, "fingerprint": fingerprint,
                   "steps": steps, "created": datetime.now(UTC).isoformat(timespec="seconds")}
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+        if plan:
+            header["plan"] = plan
+        # truncated only once locked: a scan already writing this journal keeps it
+        fd = _locked(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND)
+        os.ftruncate(fd, 0)
         journal = cls(path, fd, [])
         journal._write(_with_crc(header))
         _sync_dir(path.parent)
@@ -144,7 +151,7 @@ class Journal:
         if header.get("fingerprint") != fingerprint or header.get("steps") != steps:
             raise JournalError(f"{path}: the journal belongs to another plan or other settings "
                                "(fingerprints differ); resume with the same plan and options")
-        fd = os.open(path, os.O_WRONLY | os.O_APPEND)
+        fd = _locked(path, os.O_WRONLY | os.O_APPEND)
         if os.fstat(fd).st_size != good:
             os.ftruncate(fd, good)
             os.fsync(fd)
@@ -175,6 +182,19 @@ class Journal:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _locked(path: Path, flags: int) -> int:
+    """``path`` opened with ``flags`` and locked for this process alone (``flock``, released
+    when the file is closed or the process dies); a journal another scan holds is refused."""
+    fd = os.open(path, flags, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise JournalError(f"{path}: another scan is writing this journal; wait for it to end, "
+                           "or give another output") from None
+    return fd
 
 
 def _sync_dir(folder: Path) -> None:

@@ -11,10 +11,11 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyvisa
@@ -26,7 +27,7 @@ from hardware.errors import JournalError, PlanError
 from hardware.instruments.motion import MotionController
 from hardware.instruments.power_meter import PowerMeter
 from hardware.interp import SphereField
-from hardware.journal import Journal, read_journal
+from hardware.journal import Journal, Record, read_journal
 from hardware.plan import ScanPlan, w_to_dbm
 from hardware.rig import Rig
 from hardware.sim.rig import Faults, SimulatedRig
@@ -104,7 +105,7 @@ def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
         if resume and held:
             jr = Journal.resume(jpath, fingerprint, len(steps))
         else:  # no journal, or one holding no step: nothing to resume, start afresh
-            jr = Journal.create(jpath, fingerprint, len(steps))
+            jr = Journal.create(jpath, fingerprint, len(steps), plan=plan.fingerprint())
         with jr:
             start = len(jr.records)
             attrs: dict[str, object] = {"journal_fingerprint": fingerprint, **extra}
@@ -173,6 +174,8 @@ def _check_outputs(plan: ScanPlan, output: str | os.PathLike[str],
     for target in (output, journal):
         if target is not None:
             check_output(target, plan.inputs(), PlanError)
+    check_output(output, [("journal", journal if journal is not None else journal_path(output))],
+                 PlanError)
 
 
 def journal_records(path: str | os.PathLike[str]) -> int:
@@ -191,8 +194,29 @@ def fieldmap_from_journal(plan: ScanPlan, path: str | os.PathLike[str],
     if header.get("steps") != len(plan.steps()):
         raise JournalError(f"{path}: the journal has {header.get('steps')} steps, "
                            f"the plan {len(plan.steps())}")
+    check_journal_plan(plan, header, records, path)
     return build_fieldmap(plan, records, {"journal_fingerprint": header.get("fingerprint", ""),
                                           **(attrs or {})})
+
+
+def check_journal_plan(plan: ScanPlan, header: Mapping[str, Any], records: Sequence[Record],
+                       path: str | os.PathLike[str]) -> None:
+    """Refuse a journal that is not ``plan``'s: its header's plan fingerprint (journals written
+    since it was recorded), and for every record the step's kind, cell and commanded axes (rad,
+    to 1e-9), which the plan decides; so the readings of another grid, dish or frequency are
+    never written into this plan's cells."""
+    recorded = header.get("plan")
+    if recorded and recorded != plan.fingerprint():
+        raise JournalError(f"{path}: the journal belongs to another plan (its plan fingerprint "
+                           f"{recorded}, this plan's {plan.fingerprint()})")
+    steps = plan.steps()
+    for record in records:
+        step = steps[record.n]
+        command = plan.rig.axes(step.theta, step.phi)
+        if (record.kind, record.i, record.j) != (step.kind, step.i, step.j) or not all(
+                abs(a - b) <= 1e-9 for a, b in zip(record.command, command, strict=True)):
+            raise JournalError(f"{path}: step {record.n} of the journal is not this plan's (cell or "
+                               "commanded axes differ): the journal belongs to another plan")
 
 
 def park(rig: Rig, *, resources: Mapping[str, str] | None = None, simulate: bool = False,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from pathlib import Path
 
@@ -10,10 +11,10 @@ import numpy as np
 import pytest
 
 from hardware.errors import JournalError, PlanError
-from hardware.journal import read_journal
+from hardware.journal import Record, read_journal
 from hardware.plan import REFERENCE, load_plan
 from hardware.rig import Calibration, Rig
-from hardware.session import fieldmap_from_journal, park, scan
+from hardware.session import fieldmap_file_from_journal, fieldmap_from_journal, park, scan
 from hardware.sim.rig import Faults
 from hardware.sim.settings import drift_db
 from raysim.errors import InstrumentError
@@ -207,3 +208,57 @@ def test_park_simulated() -> None:
     slider, rotation = park(rig, simulate=True)
     assert math.degrees(slider) == pytest.approx(93.0, abs=1e-6)
     assert math.degrees(rotation) == pytest.approx(10.0, abs=1e-6)
+
+
+def test_a_journal_is_rebuilt_only_by_its_own_plan(tmp_path: Path) -> None:
+    from hardware.journal import _with_crc
+
+    plan_path = write_plan(tmp_path, noise=0.01)
+    plan = load_plan(plan_path)
+    field = aligned_field(tmp_path)
+    scan(plan, tmp_path / "scan.nc", simulate=field)
+    journal = tmp_path / "scan.nc.journal"
+    same = fieldmap_from_journal(plan, journal)
+    assert np.isfinite(same["intensity"].values).all()
+    before = journal.read_bytes()
+    with pytest.raises(PlanError, match="is the journal"):  # the FieldMap written over its journal
+        fieldmap_file_from_journal(plan_path, journal, journal=journal)
+    assert journal.read_bytes() == before
+    # the same number of steps, another grid (shifted 5 deg), another frequency: refused
+    shifted = dataclasses.replace(plan, grid=dataclasses.replace(
+        plan.grid, theta_min=math.radians(5.0), theta_max=plan.grid.theta_max + math.radians(5.0)))
+    higher = dataclasses.replace(plan, frequency_hz=6e8)
+    assert len(shifted.steps()) == len(higher.steps()) == len(plan.steps())
+    for other in (shifted, higher):
+        with pytest.raises(JournalError, match="belongs to another plan"):
+            fieldmap_from_journal(other, journal)
+    # a journal written before headers carried the plan's fingerprint: the records' cells and
+    # commanded axes still tell the shifted grid
+    lines = journal.read_bytes().splitlines(keepends=True)
+    header = json.loads(lines[0])
+    del header["plan"], header["crc"]
+    old = tmp_path / "old.journal"
+    old.write_bytes(_with_crc(header) + b"".join(lines[1:]))
+    assert np.array_equal(fieldmap_from_journal(plan, old)["intensity"].values,
+                          same["intensity"].values)
+    with pytest.raises(JournalError, match="of the journal is not this plan's"):
+        fieldmap_from_journal(shifted, old)
+
+
+def test_a_journal_being_written_is_not_taken_by_a_second_scan(tmp_path: Path) -> None:
+    from hardware.journal import Journal
+
+    path = tmp_path / "scan.nc.journal"
+    with Journal.create(path, "abc", 4) as first:
+        # a journal holding only its header is replaced by a new scan, but not while its own
+        # scan still writes it
+        with pytest.raises(JournalError, match="another scan is writing this journal"):
+            Journal.create(path, "abc", 4)
+        first.append(Record(0, "cell", 0, 0, (0.0, 0.0), (0.0, 0.0), (1e-3,), 0.0))
+        with pytest.raises(JournalError, match="another scan is writing this journal"):
+            Journal.resume(path, "abc", 4)
+        before = path.read_bytes()
+    # its records were kept; closed, it can be resumed
+    assert path.read_bytes() == before and len(read_journal(path)[1]) == 1
+    with Journal.resume(path, "abc", 4) as again:
+        assert len(again.records) == 1
