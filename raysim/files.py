@@ -23,7 +23,9 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import socket
 import tempfile
+import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
@@ -198,14 +200,53 @@ def new_folder_mode() -> int:
     return 0o777 & ~_umask()
 
 
+#: how old (s) a leftover whose writer cannot be told (another host, an older raysim's name)
+#: must be before it is taken for a killed run's
+FOREIGN_STALE_S = 24 * 3600.0
+
+
+def writer_prefix(path: str | os.PathLike[str]) -> str:
+    """The name prefix of a temporary file or staging folder beside ``path`` (``.NAME.``),
+    with the writer's host and process id, so that a later run removes only what a dead
+    writer left (:func:`remove_stale`), never the work of one still running."""
+    return f".{Path(path).name}.{socket.gethostname()}-{os.getpid()}-"
+
+
+def _writer_alive(stale: Path, name: str) -> bool:
+    """Whether the writer that made ``stale`` (beside a file called ``name``) may still run:
+    a process of this host that exists, or, where the name does not tell (another host, an
+    older name), anything younger than :data:`FOREIGN_STALE_S`."""
+    rest = stale.name[len(name) + 2:]
+    if rest.startswith("old-"):
+        host, pid = socket.gethostname(), rest[4:]
+    else:
+        host = rest.rpartition("-")[0]  # host-pid-RANDOM.tmp: mkstemp's RANDOM has no "-"
+        host, _, pid = host.rpartition("-")
+    if host == socket.gethostname() and pid.isdigit():
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            return True  # another user's live process
+        return True
+    try:
+        return time.time() - stale.lstat().st_mtime < FOREIGN_STALE_S
+    except OSError:
+        return False
+
+
 def remove_stale(path: str | os.PathLike[str]) -> None:
     """Remove what killed writers of ``path`` left beside it: temporary files and staging
-    folders ``.NAME.*.tmp`` and replaced folders ``.NAME.old-PID``."""
+    folders ``.NAME.*.tmp`` and replaced folders ``.NAME.old-PID``, each only when the run
+    that made it is no longer alive (two runs on one output never delete each other's work)."""
     path = Path(path)
     if not path.parent.is_dir():
         return
     for pattern in (f".{path.name}.*.tmp", f".{path.name}.old-*"):
         for stale in path.parent.glob(pattern):
+            if _writer_alive(stale, path.name):
+                continue
             if stale.is_dir() and not stale.is_symlink():
                 shutil.rmtree(stale, ignore_errors=True)
             else:
@@ -228,7 +269,7 @@ def atomic_path(path: str | os.PathLike[str], clean: bool = True) -> Iterator[Pa
     if clean:
         remove_stale(path)
     try:
-        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        fd, name = tempfile.mkstemp(prefix=writer_prefix(path), suffix=".tmp", dir=path.parent)
     except OSError as exc:
         raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
     os.close(fd)

@@ -152,11 +152,11 @@ def staging(target: Path) -> Iterator[Path]:
     import shutil
     import tempfile
 
-    from raysim.files import new_folder_mode, remove_stale
+    from raysim.files import new_folder_mode, remove_stale, writer_prefix
 
     target.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale(target)  # what a killed run left
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
+    remove_stale(target)  # what a killed run left (never a live run's staging folder)
+    tmp = Path(tempfile.mkdtemp(prefix=writer_prefix(target), suffix=".tmp", dir=target.parent))
     try:
         yield tmp
         os.chmod(tmp, new_folder_mode())  # mkdtemp's folder is private (0700)

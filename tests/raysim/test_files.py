@@ -4,6 +4,8 @@ by failing the write) leaves the previous state and one line; stale staging is r
 from __future__ import annotations
 
 import errno
+import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -82,13 +84,31 @@ def test_scenes_copy_on_a_full_disk_writes_nothing(tmp_path, capfd, monkeypatch)
 
 
 def test_a_later_run_removes_the_staging_a_killed_one_left(tmp_path):
+    import socket
+    import subprocess
+    import sys
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)
+    dead_pid = int(dead.stdout)  # a process that has ended
+    host = socket.gethostname()
     target = tmp_path / "out"
-    (tmp_path / ".out.k1ll.tmp").mkdir()
-    (tmp_path / ".out.k1ll.tmp" / "report.html").write_text("half")
-    (tmp_path / ".out.old-123").mkdir()
+    killed = tmp_path / f".out.{host}-{dead_pid}-k1ll.tmp"
+    killed.mkdir()
+    (killed / "report.html").write_text("half")
+    (tmp_path / f".out.old-{dead_pid}").mkdir()
+    (tmp_path / f".out.{host}-{dead_pid}-k2ll.tmp").write_text("half a file")
+    live = tmp_path / f".out.{host}-{os.getpid()}-busy.tmp"  # a run still writing: kept
+    live.mkdir()
+    other_host = tmp_path / ".out.elsewhere-1-busy.tmp"  # another host's, young: kept
+    other_host.mkdir()
+    old_name = tmp_path / ".out.k3ll.tmp"  # an older raysim's name, a day old: removed
+    old_name.mkdir()
+    os.utime(old_name, (time.time() - 2 * 86400,) * 2)
     (tmp_path / ".other.k1ll.tmp").mkdir()  # another output's: kept
     with staging(target) as tmp:
         (tmp / "report.html").write_text("whole")
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".other.k1ll.tmp", "out"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [".other.k1ll.tmp", "out", live.name, other_host.name])
     assert (target / "report.html").read_text() == "whole"
     remove_stale(tmp_path / "missing" / "x")  # no folder: nothing to do
