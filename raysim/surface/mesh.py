@@ -324,7 +324,10 @@ def load_reflector(path: str | Path, unit: float = 1.0, F: float | None = None,
     are the mesh's connected pieces. ``unit`` scales file coordinates to metres.
     """
     mesh = _read_mesh(path, unit)
-    fit = fit_paraboloid(np.asarray(mesh.vertices, dtype=np.float64), F)
+    try:
+        fit = fit_paraboloid(np.asarray(mesh.vertices, dtype=np.float64), F)
+    except MeshError as exc:
+        raise MeshError(f"{path}: {exc}") from None
     F_used = fit.F
     shift = np.array([fit.x0, fit.y0, fit.z0])
     vertices = np.asarray(mesh.vertices, dtype=np.float64) - shift
@@ -366,6 +369,9 @@ def _read_mesh(path: str | Path, unit: float):
     if not np.all(np.isfinite(np.asarray(mesh.vertices))):  # processing would drop them silently
         raise MeshError(f"{path}: holds vertices that are not finite numbers (NaN or infinite)")
     mesh.process()  # what loading with process=True does: merge duplicate vertices
+    _drop_repeated_faces(mesh)
+    if len(mesh.faces) == 0:
+        raise MeshError(f"{path}: holds no triangles (every face repeats a vertex)")
     mesh.apply_scale(unit)
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     if not np.all(np.isfinite(vertices)):
@@ -378,6 +384,20 @@ def _read_mesh(path: str | Path, unit: float):
         raise MeshError(f"{path}: spans only {span:g} m across with dish.mesh_unit_m = {unit:g}: "
                         "is dish.mesh_unit_m right?")
     return mesh
+
+
+def _drop_repeated_faces(mesh) -> None:
+    """Drop faces that name one vertex twice (no triangle) and every repeat of a face (CAD
+    exports often hold both): a repeated face would radiate its currents twice and double the
+    intensity it lights. The test is on vertex indices alone, so an ideal mesh of the same
+    triangulation loses the same faces."""
+    faces = np.sort(np.asarray(mesh.faces, dtype=np.int64), axis=1)
+    keep = np.zeros(len(faces), dtype=bool)
+    keep[np.unique(faces, axis=0, return_index=True)[1]] = True
+    keep &= (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2])
+    if not keep.all():
+        mesh.update_faces(keep)
+        mesh.remove_unreferenced_vertices()
 
 
 def _faces_up(vertices: NDArray, faces: NDArray) -> NDArray:
@@ -404,6 +424,20 @@ def _components(faces: NDArray, n_vertices: int) -> NDArray[np.int64]:
     return rank[inverse].astype(np.int64)
 
 
+def _check_sphere(sphere, ideal: Reflector, path) -> None:
+    """The checks a scene's sphere gets against a parametric dish, for a mesh's fitted F and
+    D (known only once it is read): the sphere inside the focal length, its first row before
+    the rim image theta_rim = 2 atan(D / 4F) (DESIGN: the ideal mapping r = 2F tan(theta/2))."""
+    if sphere.radius >= ideal.F:
+        raise MeshError(f"{path}: the fitted focal length {ideal.F:.4g} m is not above "
+                        f"'sphere.radius_m' = {sphere.radius:g} m (the sphere would cut the dish)")
+    rim = 2.0 * np.arctan(ideal.D / (4.0 * ideal.F))
+    if sphere.theta_min >= rim:
+        raise MeshError(f"{path}: 'sphere.theta_min_deg' = {np.degrees(sphere.theta_min):g} is beyond "
+                        f"the fitted dish's rim image at {np.degrees(rim):.2f} deg: the sphere would "
+                        "see no reflection")
+
+
 def reflectors_for(scene) -> tuple[Reflector, Reflector]:
     """The (ideal, deformed) reflector pair a :class:`~raysim.scene.scene.Scene` describes, both
     with the scene's obstacles (built on the reflector's focal length)."""
@@ -411,6 +445,7 @@ def reflectors_for(scene) -> tuple[Reflector, Reflector]:
     specs = getattr(scene, "obstacles", ())
     if dish.mesh is not None:
         ideal, loaded, _ = load_reflector(dish.mesh, dish.mesh_unit, dish.focal_length, dish.ideal_mesh)
+        _check_sphere(scene.sphere, ideal, dish.mesh)
         obstacles = obstacle_mesh(specs, ideal.F)
         if obstacles is not None:
             ideal, loaded = ideal.with_obstacles(obstacles), loaded.with_obstacles(obstacles)

@@ -180,3 +180,46 @@ def test_unreadable_mesh_is_a_mesh_error(tmp_path: Path):
         load_reflector(bad)
     with pytest.raises(MeshError, match="no such mesh file"):
         load_reflector(tmp_path / "missing.ply")
+
+
+def test_repeated_and_vertex_repeating_faces_are_dropped_on_loading(tmp_path: Path):
+    import trimesh
+
+    source = paraboloid(20.0, 8.0, 0.5)
+    clean = tmp_path / "clean.ply"
+    source.mesh.export(clean)
+    faces = np.asarray(source.faces)
+    extra = np.vstack([faces[:50], faces[60:70][:, [1, 2, 0]],  # repeats, one rotated
+                       [[0, 0, 1], [1, 1, 1], [2, 3, 2]]])       # no triangles
+    trimesh.Trimesh(source.vertices, np.vstack([faces, extra]), process=False).export(tmp_path / "dirty.ply")
+    _, want, _ = load_reflector(clean, F=8.0)
+    _, got, _ = load_reflector(tmp_path / "dirty.ply", F=8.0)
+    assert len(got.faces) == len(faces)
+    # the same surface: every face area once (a repeat would count its area, and its currents, twice)
+    assert got.mesh.area == pytest.approx(want.mesh.area, rel=1e-12)
+    assert np.array_equal(np.sort(np.sort(got.vertices[got.faces], axis=1), axis=0),
+                          np.sort(np.sort(want.vertices[want.faces], axis=1), axis=0))
+
+
+def test_a_mesh_scene_gets_the_sphere_checks_once_its_dish_is_fitted(tmp_path: Path):
+    from raysim.maps.sphere import SphereGrid
+    from raysim.surface.mesh import reflectors_for
+
+    paraboloid(20.0, 8.0, 0.5).mesh.export(tmp_path / "dish.ply")
+
+    class Scene:  # what reflectors_for reads of a scene
+        def __init__(self, sphere):
+            self.dish = type("Dish", (), {"mesh": tmp_path / "dish.ply", "mesh_unit": 1.0,
+                                          "focal_length": None, "ideal_mesh": None})()
+            self.sphere, self.obstacles = sphere, ()
+            from raysim.surface.deformation import NoDeformation
+
+            self.deformation = NoDeformation()
+
+    ideal, _ = reflectors_for(Scene(SphereGrid(2.0, 10, 20)))
+    assert ideal.F == pytest.approx(8.0, rel=1e-9)
+    with pytest.raises(MeshError, match="not above 'sphere.radius_m' = 12 m"):
+        reflectors_for(Scene(SphereGrid(12.0, 10, 20)))
+    # the rim image of D = 20 m, F = 8 m: 2 atan(20 / 32) = 64.0 deg
+    with pytest.raises(MeshError, match="beyond the fitted dish's rim image at 64.01 deg"):
+        reflectors_for(Scene(SphereGrid(2.0, 10, 20, np.radians(65.0), np.radians(80.0))))
