@@ -36,6 +36,8 @@ REQUIRED: Any = _Required()  # default meaning "the key must be given"
 def read_text(path: str | Path, what: str, error: type[RaysimError]) -> str:
     """The text of the ``what`` file at ``path`` (UTF-8); one-line ``error`` when unreadable."""
     path = Path(path)
+    if path.is_dir():
+        raise error(f"{path}: is a folder, give a {what} file")
     if not path.is_file():
         raise error(f"{path}: no such {what} file")
     try:

@@ -273,6 +273,7 @@ NOWHERE = "TCPIP::nosuchhost.invalid::5025::SOCKET"
 CASES: dict[str, list[tuple[list[str], str]]] = {
     "simulate": [
         (["simulate", "missing.toml", "-o", "o.nc"], "missing.toml: no such scene file"),
+        (["simulate", "user_folder", "-o", "o.nc"], "user_folder: is a folder, give a scene file"),
         (["simulate", "scene.toml", "-o", "scene.toml"], "is the scene file"),
         (["simulate", "scene.toml", "-o", "link.nc"], "is the scene file"),
         (["simulate", "scene.toml", "-o", "sub/../scene.toml"], "is the scene file"),
@@ -476,6 +477,8 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
     ],
     "budget": [
         (["budget", "missing.toml"], "no such scan plan file"),
+        (["budget", "user_folder"], "is a folder, give a scan plan file"),
+        (["correct", "user_folder", "-o", "corr"], "is a folder, give a NetCDF file"),
         (["budget", "plan_setle.toml"], "unknown key 'acquisition.setle'"),
         (["budget", "plan.toml"], "fewer than four theta rows inside the rim image"),
         (["budget", "plan.toml", "--noise-db", "abc"], "must be numbers separated by commas"),

@@ -358,6 +358,8 @@ def _read_mesh(path: str | Path, unit: float):
     import trimesh
 
     path = Path(path)
+    if path.is_dir():
+        raise MeshError(f"{path}: is a folder, give a mesh file")
     if not path.is_file():
         raise MeshError(f"{path}: no such mesh file")
     try:
