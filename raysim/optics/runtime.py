@@ -94,20 +94,29 @@ def cpu_threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+#: slices of a CPU launch that accumulates (``private``), whatever the threads: the order of
+#: its float sums must not depend on the machine
+ACCUMULATING_SLICES = 8
+
+
 def launch(kernel: Any, dim: int, inputs: Sequence[Any], device: str, min_chunk: int = 4096,
            private: Sequence[int] = ()) -> None:
     """Launch a 1-D ``kernel`` over ``dim`` items; on the CPU, in slices across threads.
 
     ``inputs`` excludes the trailing ``offset`` argument, which this function appends.
     ``private`` lists the positions in ``inputs`` of arrays the kernel accumulates into with
-    ``wp.atomic_add``: Warp's CPU atomics are plain adds, so each thread gets its own zeroed
-    copy and the copies are summed into the original afterwards.
+    ``wp.atomic_add``: Warp's CPU atomics are plain adds, so each slice gets its own zeroed
+    copy and the copies are summed into the original afterwards, in slice order. Such a launch
+    is cut into :data:`ACCUMULATING_SLICES` slices whatever the number of threads, so its sums
+    are the same to the last bit on any machine (a dataset resumed with other ``--threads``
+    stays bit-identical).
     """
     wp = init()
     if dim <= 0:
         return
     threads = cpu_threads() if device == "cpu" else 1
-    n = max(1, min(threads, dim // min_chunk))
+    slices = ACCUMULATING_SLICES if private and device == "cpu" else threads
+    n = max(1, min(slices, dim // min_chunk))
     if n == 1:
         wp.launch(kernel, dim=dim, inputs=[*inputs, 0], device=device)
         wp.synchronize_device(device)
@@ -125,7 +134,7 @@ def launch(kernel: Any, dim: int, inputs: Sequence[Any], device: str, min_chunk:
         if hi > lo:
             wp.launch(kernel, dim=hi - lo, inputs=[*args, lo], device=device)
 
-    with ThreadPoolExecutor(max_workers=n) as pool:
+    with ThreadPoolExecutor(max_workers=max(1, min(n, threads))) as pool:
         list(pool.map(run, range(n)))
     for i in private:
         total = inputs[i].numpy()  # a view of the CPU array's memory

@@ -356,14 +356,17 @@ def test_shadowed_rays_carry_no_power():
     assert abs(result.power_balance) < 1e-9
 
 
-def test_threads_do_not_change_the_result(monkeypatch):
+def test_threads_do_not_change_the_result_by_a_bit(monkeypatch):
+    # the tubes' power is summed per slice and the slices in order, whatever the threads: a
+    # dataset resumed with other --threads must be bit-identical (it differed by 1e-14 when the
+    # slices followed the threads)
     grid = SphereGrid(R, 45, 90)
     mesh = paraboloid(D, F, 0.6)
-    monkeypatch.setenv("RAYSIM_THREADS", "1")
-    one = go.trace(mesh, grid).intensity
-    monkeypatch.setenv("RAYSIM_THREADS", "2")
-    two = go.trace(mesh, grid).intensity
-    assert np.allclose(one, two, rtol=1e-12, atol=0)
+    results = []
+    for threads in ("1", "2", "3"):
+        monkeypatch.setenv("RAYSIM_THREADS", threads)
+        results.append(go.trace(mesh, grid).intensity)
+    assert all(np.array_equal(results[0], other) for other in results[1:])
 
 
 def test_cuda_without_a_gpu_is_one_clear_error():
