@@ -10,6 +10,7 @@ Modules, in the order data flows through them:
 - ``spec``: spec TOML -> :class:`DatasetSpec`, and its fingerprint.
 - ``sampling``: per-sample seeds, the train/validation split, one sample's surface.
 - ``store_layout``, ``store``: the Zarr layout; creation, checks, per-sample writes.
+- ``integrity``: what a resume checks besides the samples, and the readers' verified reads.
 - ``worker``: what runs in a Dask worker (set-up plugin, the sample and ideal tasks).
 - ``run``: the client (:func:`generate`): cluster, tasks, progress, resume.
 - ``effects``: measurement effects (the spec's ``[measurement]`` table), drawn per sample.
@@ -19,6 +20,7 @@ Modules, in the order data flows through them:
   wrap it for PyTorch and JAX (optional extras).
 """
 
+from raysim.dataset.integrity import CorruptSampleError, CorruptStoreError
 from raysim.dataset.loader import Loader
 from raysim.dataset.reading import open_dataset, sample_fieldmap, sample_intensity, sample_measured
 from raysim.dataset.run import RunReport, generate
@@ -26,6 +28,8 @@ from raysim.dataset.sampling import SampleDraw, draw_sample, sample_seed, valida
 from raysim.dataset.spec import DatasetError, DatasetSpec, load_spec, parse_spec
 
 __all__ = [
+    "CorruptSampleError",
+    "CorruptStoreError",
     "DatasetError",
     "DatasetSpec",
     "Loader",

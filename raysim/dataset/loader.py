@@ -25,6 +25,13 @@ value of every done training sample), computed once per representation and sourc
 in the store's attributes (``normalisation``) when the store is writable, recomputed when the
 training samples done change. NaN (outside the aperture, beyond the rim image, a missing
 point) becomes ``fill`` after normalisation; :attr:`Loader.target_mask` marks the aperture.
+
+Nothing is returned unverified: opening checks the store's coordinates, split and attributes
+against the checksums it recorded (:func:`raysim.dataset.integrity.check_static`), and every
+sample read is checked against its ``checksum`` (its data arrays are read with it and hashed),
+the ideal intensities against ``ideal_checksum``. A sample that fails raises
+:class:`~raysim.dataset.integrity.CorruptSampleError` naming the store and the sample, which
+``raysim dataset SPEC -o STORE --resume`` recomputes.
 """
 
 from __future__ import annotations
@@ -39,6 +46,7 @@ import numpy as np
 import zarr
 from numpy.typing import NDArray
 
+from raysim.dataset import integrity
 from raysim.dataset.reading import SOURCES
 from raysim.dataset.spec import DatasetError
 from raysim.dataset.store import DONE, open_readonly
@@ -118,6 +126,7 @@ class Loader:
             raise DatasetError(f"batch_size must be >= 1, got {batch_size}")
         self.store = str(store)
         self.group = open_readonly(self.store)
+        integrity.check_static(self.group, self.store)
         if SOURCES[source] not in self.group:
             raise DatasetError(f"{self.store}: no {SOURCES[source]} (its spec has no [measurement] table)")
         self.representation, self.source, self.split = representation, source, split
@@ -136,9 +145,19 @@ class Loader:
                           float(a["phi_max"]))
 
     @cached_property
-    def _ideal(self) -> tuple[NDArray, NDArray]:
-        """(frequencies in Hz, ideal intensities (n_f, n_theta, n_phi))."""
-        return np.asarray(self.group["frequency"][...]), np.asarray(self.group["intensity_ideal"][...])
+    def _ideal(self) -> tuple[NDArray, NDArray, NDArray[np.bool_]]:
+        """(frequencies in Hz, ideal intensities (n_f, n_theta, n_phi), which match their checksum)."""
+        return integrity.read_ideals(self.group, self.store)
+
+    @cached_property
+    def _names(self) -> list[str]:
+        """The per-sample data arrays a sample's checksum covers."""
+        return integrity.data_names(self.group)
+
+    @cached_property
+    def _arrays(self) -> dict:
+        """Those arrays, with ``status`` and ``checksum``, opened once."""
+        return integrity.open_arrays(self.group, self.store, self._names)
 
     @cached_property
     def target_mask(self) -> NDArray[np.bool_]:
@@ -155,14 +174,14 @@ class Loader:
         order = np.argsort(idx, kind="stable")
         back = np.empty_like(order)
         back[order] = np.arange(len(idx))
-        sorted_idx = idx[order]
-        intensity = np.asarray(self.group[SOURCES[self.source]].oindex[sorted_idx], dtype=np.float64)[back]
-        target = np.asarray(self.group["deformation"].oindex[sorted_idx], dtype=np.float64)[back]
+        values = integrity.read_verified(self._arrays, self.store, idx[order], self._names)
+        intensity = np.asarray(values[SOURCES[self.source]], dtype=np.float64)[back]
+        target = np.asarray(values["deformation"], dtype=np.float64)[back]
         if self.representation == "intensity":
             return intensity, target
-        freqs, ideals = self._ideal
-        f = np.asarray(self.group["frequency_hz"].oindex[sorted_idx])[back]
-        fa = [self._fa(i, ideals[_frequency_index(freqs, fi)]) for i, fi in zip(intensity, f, strict=True)]
+        f = np.asarray(values["frequency_hz"])[back]
+        fa = [self._fa(i, integrity.ideal_of(self.store, *self._ideal, fi))
+              for i, fi in zip(intensity, f, strict=True)]
         return np.stack(fa), target
 
     def _fa(self, intensity: NDArray, ideal: NDArray) -> NDArray[np.float64]:
@@ -252,10 +271,3 @@ def samples(group: zarr.Group, split: str) -> NDArray[np.int64]:
     if which is not None:
         done &= np.asarray(group["split"][...]) == which
     return np.flatnonzero(done)
-
-
-def _frequency_index(frequencies: NDArray, frequency: float) -> int:
-    hit = np.flatnonzero(frequencies == frequency)
-    if not hit.size:
-        raise DatasetError(f"a sample's frequency {frequency:g} Hz is not one of the store's")
-    return int(hit[0])

@@ -1,5 +1,11 @@
 """Reading a dataset back: the whole store as a lazy xarray Dataset, one sample as a FieldMap,
-and any sample regenerated alone from its spec (no store, no cluster)."""
+and any sample regenerated alone from its spec (no store, no cluster).
+
+:func:`open_dataset` checks the store's coordinates, seeds, split and attributes against the
+checksums it recorded (:func:`raysim.dataset.integrity.check_static`); its sample arrays are
+lazy and unverified. :func:`sample_fieldmap` reads its sample from the store and verifies it
+against its checksum (:class:`~raysim.dataset.integrity.CorruptSampleError` if it fails).
+"""
 
 from __future__ import annotations
 
@@ -8,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from raysim.dataset import integrity
 from raysim.dataset.sampling import draw_sample
 from raysim.dataset.spec import DatasetError, DatasetSpec
 from raysim.dataset.store import open_readonly
@@ -18,33 +25,55 @@ SOURCES = {"clean": "intensity", "measured": "intensity_measured"}  # source -> 
 def open_dataset(store: str | Path) -> xr.Dataset:
     """The store as an ``xarray.Dataset`` backed by lazy Dask arrays (nothing is loaded).
 
-    Use only samples with ``status == 1``; ``split == 1`` marks the validation samples.
+    Use only samples with ``status == 1``; ``split == 1`` marks the validation samples. The
+    coordinates, ``seed``, ``split`` and the attributes are checked against the checksums the
+    store recorded (CorruptStoreError); the per-sample arrays are read unverified (use
+    :func:`sample_fieldmap` or :class:`~raysim.dataset.loader.Loader`, which verify them).
     """
-    open_readonly(str(store))  # one clear line if it is not a raysim dataset
+    integrity.check_static(open_readonly(str(store)), str(store))  # one clear line if not trusted
     ds = xr.open_zarr(str(store), consolidated=False)
     names = [v for v in ds.data_vars if v.endswith(("_term_n", "_term_m"))]
     return ds.set_coords(names)
 
 
 def sample_fieldmap(ds: xr.Dataset, index: int, source: str = "clean") -> xr.Dataset:
-    """Sample ``index`` of an opened dataset as a FieldMap (see :mod:`raysim.maps.fieldmap`);
-    ``source`` ``measured`` takes its ``intensity_measured`` (a store with measurement effects)."""
+    """Sample ``index`` of a dataset opened by :func:`open_dataset` as a FieldMap (see
+    :mod:`raysim.maps.fieldmap`); ``source`` ``measured`` takes its ``intensity_measured`` (a
+    store with measurement effects).
+
+    The sample's data and its frequency's ideal intensity are read from the store and verified
+    against their checksums: one that fails raises
+    :class:`~raysim.dataset.integrity.CorruptSampleError` naming the store and the sample.
+    """
     from raysim.maps.fieldmap import fieldmap, grid_of
 
     variable = _intensity_variable(ds, source)
+    path, group = _store_of(ds)
     sample = ds.isel(sample=index)
-    frequency = float(sample["frequency_hz"].values)
-    ideal = ds["intensity_ideal"].sel(frequency=frequency)
+    number = int(sample["sample"].values)  # the sample's index in the store
+    names = integrity.data_names(group)
+    values = integrity.read_verified(integrity.open_arrays(group, path, names), path, [number], names)
+    frequency = float(values["frequency_hz"][0])
+    ideal = integrity.ideal_of(path, *integrity.read_ideals(group, path), frequency)
     from raysim.scene import scene_of
 
     scene = scene_of(ds.attrs)  # its probe read the samples (raysim.maps.probe)
-    attrs = {"dataset": ds.attrs.get("name", ""), "sample": int(index),
-             "seed": str(int(sample["seed"].values)), "deformation_rms": float(sample["rms"].values),
+    attrs = {"dataset": ds.attrs.get("name", ""), "sample": number,
+             "seed": str(int(sample["seed"].values)), "deformation_rms": float(values["rms"][0]),
              "dataset_intensity": variable, **(scene.probe.attrs() if scene is not None else {})}
-    return fieldmap(grid_of(ds), sample[variable].values, ideal.values,
+    return fieldmap(grid_of(ds), values[variable][0], ideal,
                     focal_length=ds.attrs["focal_length"], diameter=ds.attrs["diameter"],
                     frequency_hz=frequency, method=ds.attrs["method"], sampling=ds.attrs["sampling"],
                     scene=ds.attrs.get("scene"), attrs=attrs)
+
+
+def _store_of(ds: xr.Dataset):
+    """(path, read-only group) of the store ``ds`` was opened from."""
+    path = ds.encoding.get("source")
+    if not path:
+        raise DatasetError("sample_fieldmap reads a dataset opened by raysim.dataset.open_dataset "
+                           "(this one names no store to verify its sample against)")
+    return str(path), open_readonly(str(path))
 
 
 def _intensity_variable(ds: xr.Dataset, source: str) -> str:

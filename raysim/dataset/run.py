@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from raysim.dataset import integrity
 from raysim.dataset import store as zstore
 from raysim.dataset.spec import DatasetError, DatasetSpec, load_spec
 from raysim.dataset.worker import DatasetWorkerPlugin, run_ideal, run_sample
@@ -44,6 +45,7 @@ class RunReport:
     failures: tuple[tuple[int, str], ...]  # (sample, reason) of this run's failures, first 20
     ideal_failures: tuple[tuple[int, str], ...]  # (frequency index, reason)
     repaired: int = 0  # done samples (and ideal intensities) that failed verification: recomputed
+    rewritten: tuple[str, ...] = ()  # creation-time arrays and attributes rewritten from the spec
 
     @property
     def samples_per_second(self) -> float:
@@ -52,7 +54,8 @@ class RunReport:
     def summary(self) -> str:
         """One line for the user."""
         if not self.computed:
-            return f"{self.store}: {self.done}/{self.samples} samples done, nothing left to compute"
+            return (f"{self.store}: {self.done}/{self.samples} samples done, nothing left to compute"
+                    f"{self._rewritten_note()}")
         line = (f"{self.store}: {self.done}/{self.samples} samples done ({self.skipped} already "
                 f"there, {self.computed} computed on {self.workers} workers in {self.seconds:.1f} s, "
                 f"{self.samples_per_second:.3g} samples/s)")
@@ -63,7 +66,12 @@ class RunReport:
             line += f"; the ideal intensity failed ({self.ideal_failures[0][1]})"
         if self.repaired:
             line += f"; {self.repaired} done items failed verification and were recomputed"
-        return line
+        return line + self._rewritten_note()
+
+    def _rewritten_note(self) -> str:
+        if not self.rewritten:
+            return ""
+        return f"; no longer matching the spec, rewritten from it: {', '.join(self.rewritten)}"
 
 
 def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int | None = None,
@@ -94,12 +102,11 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
     check_run_options(spec, store, workers=workers, scheduler=scheduler, device=device,
                       threads=threads, resume=resume)
     path = _store_path(store)
+    zstore.remove_leftovers(path)
     group, created = _existing_store(path, spec, resume), False
-    repaired = 0
-    if group is not None:  # resume: data that fail their checksums are computed again
-        bad, ideal_bad = zstore.verify(group, path)
-        zstore.reset(group, bad, ideal_bad)
-        repaired = len(bad) + len(ideal_bad)
+    repaired, rewritten = 0, ()
+    if group is not None:  # resume: check, then repair what the spec gives and recompute the rest
+        repaired, rewritten = _check_and_repair(group, path, spec)
     if group is None:  # a new store: every sample and every frequency's ideal is pending
         pending, ideal_pending = np.arange(spec.samples), np.arange(len(spec.frequencies))
     else:
@@ -135,7 +142,22 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
         store=path, samples=spec.samples, done=int(np.sum(final == zstore.DONE)),
         failed=int(np.sum(final == zstore.FAILED)), computed=len(pending), skipped=skipped,
         workers=n_workers, seconds=time.perf_counter() - start, failures=tuple(failures[:20]),
-        ideal_failures=tuple(ideal_failures), repaired=repaired)
+        ideal_failures=tuple(ideal_failures), repaired=repaired, rewritten=rewritten)
+
+
+def _check_and_repair(group, path: str, spec: DatasetSpec) -> tuple[int, tuple[str, ...]]:
+    """A resumed store checked before anything is written: every array of the spec's layout
+    present and readable (else refused, DatasetError), every done sample and ideal intensity
+    against its checksum. Then the creation-time arrays and attributes that no longer match
+    the spec are rewritten from it, and the samples that failed are made pending. Returns
+    (samples and ideals made pending, what was rewritten)."""
+    zstore.require_checksums(group, path)
+    repairs = integrity.check_store(group, path, spec)
+    names = integrity.spec_data_names(spec)
+    bad, ideal_bad = zstore.verify(group, path, names)
+    integrity.repair(group, repairs, spec)
+    zstore.reset(group, bad, ideal_bad, names)
+    return len(bad) + len(ideal_bad), repairs.names
 
 
 SampleReport = Callable[[int, int, int], None]  # (done in the store, failed this run, total)

@@ -21,7 +21,9 @@ A sample's ``status`` is written after all its data and its ``checksum`` (SHA-25
 per-sample data array, :func:`sample_checksum`): it is the completion marker, and ``resume``
 verifies every done sample against its checksum first (:func:`verify`; a chunk that does not
 decode, or was removed and reads as the fill value, fails), making the ones that fail
-pending again (:func:`reset`). ``intensity_ideal`` has ``ideal_checksum`` likewise.
+pending again (:func:`reset`). ``intensity_ideal`` has ``ideal_checksum`` likewise. The
+arrays written at creation and the attributes are checked against the spec on resume, and
+against the ``static_checksums`` attribute by readers (:mod:`raysim.dataset.integrity`).
 Attributes hold the spec and scene text, the spec's fingerprint, the FieldMap
 attributes (``focal_length``, ``diameter``, ``sphere_radius``, ``method``, ``sampling``, the
 sphere's edges) and the versions of the packages that made the store.
@@ -29,13 +31,13 @@ sphere's edges) and the versions of the packages that made the store.
 
 from __future__ import annotations
 
-import hashlib
 import math
 import os
 import platform
 import shutil
 import time
 import uuid
+from collections.abc import Iterable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib import metadata
@@ -45,13 +47,12 @@ from typing import Any
 import numpy as np
 import zarr
 
+from raysim.dataset.integrity import BOOKKEEPING, CHECKED_ATTRS, checksum, is_data, record_static
 from raysim.dataset.spec import DatasetError, DatasetSpec
 from raysim.dataset.store_layout import FORMAT, ArraySpec, layout
 from raysim.version import VERSION_ATTR, __version__
 
 PENDING, DONE, FAILED = 0, 1, 2
-#: per-sample arrays that record a run rather than a sample's data (not in its checksum)
-BOOKKEEPING = frozenset({"status", "error", "checksum", "seconds", "cpu_seconds", "finished"})
 _BATCH = 256  # samples read at once while verifying
 _PACKAGES = ("numpy", "warp-lang", "dask", "distributed", "zarr", "xarray")
 
@@ -71,20 +72,47 @@ def versions() -> dict[str, str]:
 def create(path: str, spec: DatasetSpec) -> zarr.Group:
     """A new store at ``path`` (which must not exist) with its coordinates, seeds and split.
 
-    A local store is built in a hidden sibling folder and renamed into place, so a run killed
-    while creating it leaves no half-made store that ``resume`` would have to trust.
+    A local store is built in a hidden sibling folder ``.NAME.HOST-PID-XXXX.tmp`` and renamed
+    into place, so a run killed while creating it leaves no half-made store that ``resume``
+    would have to trust; what such a run left is removed here once its process is gone
+    (:func:`remove_leftovers`).
     """
     if "://" in path:
         return _fill(zarr.open_group(path, mode="w-", attributes=_attributes(spec)), spec)
+    from raysim.files import writer_prefix
+
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    scratch = target.parent / f".{target.name}.{uuid.uuid4().hex[:8]}.creating"
+    remove_leftovers(path)
+    scratch = target.parent / f"{writer_prefix(target)}{uuid.uuid4().hex[:8]}.tmp"
     try:
         _fill(zarr.open_group(str(scratch), mode="w-", attributes=_attributes(spec)), spec)
         os.rename(scratch, target)  # fails if the target appeared meanwhile
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
     return zarr.open_group(path, mode="r+")
+
+
+def remove_leftovers(path: str) -> None:
+    """Remove what killed runs left beside the local store ``path``: their scratch folders
+    ``.NAME.HOST-PID-XXXX.tmp`` once process PID of this host is gone
+    (:func:`raysim.files.remove_stale`; a run still creating the store keeps its own), and
+    the ``.NAME.XXXX.creating`` folders of older raysims, which name no process, once a day old."""
+    if "://" in path:
+        return
+    from raysim.files import FOREIGN_STALE_S, remove_stale
+
+    target = Path(path)
+    remove_stale(target)
+    if not target.parent.is_dir():
+        return
+    for stale in target.parent.glob(f".{target.name}.*.creating"):
+        try:
+            old = time.time() - stale.lstat().st_mtime >= FOREIGN_STALE_S
+        except OSError:
+            continue
+        if old and stale.is_dir() and not stale.is_symlink():
+            shutil.rmtree(stale, ignore_errors=True)
 
 
 def _fill(group: zarr.Group, spec: DatasetSpec) -> zarr.Group:
@@ -99,6 +127,7 @@ def _fill(group: zarr.Group, spec: DatasetSpec) -> zarr.Group:
     group["seed"][...] = np.array([sample_seed(spec.seed, i) for i in range(spec.samples)],
                                   dtype=np.uint64)
     group["split"][...] = validation_mask(spec).astype(np.int8)
+    record_static(group, spec)
     return group
 
 
@@ -150,23 +179,9 @@ def ideal_status(group: zarr.Group) -> np.ndarray:
 
 
 def data_names(group: zarr.Group) -> list[str]:
-    """The per-sample data arrays of a store (one sample per chunk, not bookkeeping), sorted."""
-    names = []
-    for name, arr in group.arrays():
-        dims = arr.metadata.dimension_names or ()
-        if (dims[:1] == ("sample",) and arr.chunks[0] == 1 and name not in BOOKKEEPING
-                and np.dtype(arr.dtype).kind in "biuf"):
-            names.append(name)
-    return sorted(names)
-
-
-def checksum(values: dict[str, np.ndarray]) -> str:
-    """SHA-256 (hex) of named arrays: each name, then its values' bytes in C order."""
-    sha = hashlib.sha256()
-    for name in sorted(values):
-        sha.update(name.encode())
-        sha.update(np.ascontiguousarray(values[name]).tobytes())
-    return sha.hexdigest()
+    """The per-sample data arrays present in a store (one sample per chunk, not bookkeeping),
+    sorted. A resume takes them from the spec instead (:func:`raysim.dataset.integrity.spec_data_names`)."""
+    return sorted(name for name, arr in group.arrays() if is_data(arr, name))
 
 
 def sample_checksum(group: zarr.Group, index: int, names: list[str] | None = None) -> str:
@@ -175,15 +190,20 @@ def sample_checksum(group: zarr.Group, index: int, names: list[str] | None = Non
     return checksum({name: np.asarray(group[name][index]) for name in names})
 
 
-def verify(group: zarr.Group, path: str) -> tuple[list[int], list[int]]:
+def require_checksums(group: zarr.Group, path: str) -> None:
+    """Refuse (DatasetError) a store that records no checksums (made by an older raysim)."""
+    if "checksum" not in group or "ideal_checksum" not in group:
+        raise DatasetError(f"{path}: records no checksums (made by an older raysim), so its samples "
+                           "cannot be verified: make it again at a new store path")
+
+
+def verify(group: zarr.Group, path: str, names: list[str]) -> tuple[list[int], list[int]]:
     """The done samples, and the done ideal intensities, whose stored data do not match
-    their checksums (or do not decode). A store that records no checksums, or whose
-    bookkeeping cannot be read, is refused (DatasetError, one line naming it)."""
+    their checksums (or do not decode); ``names``: the per-sample data arrays, as the spec's
+    layout gives them. A store that records no checksums, or whose bookkeeping cannot be
+    read, is refused (DatasetError, one line naming it)."""
     try:
-        if "checksum" not in group or "ideal_checksum" not in group:
-            raise DatasetError(f"{path}: records no checksums (made by an older raysim), so its samples "
-                               "cannot be verified: make it again at a new store path")
-        names = data_names(group)
+        require_checksums(group, path)
         done = np.flatnonzero(status(group) == DONE)
         sums = _read_each(group["checksum"], done)
         arrays = {name: group[name] for name in names}
@@ -227,11 +247,11 @@ def _read_each(arr: Any, indices: np.ndarray) -> list[Any]:
         return out
 
 
-def reset(group: zarr.Group, samples: list[int], ideals: list[int]) -> None:
+def reset(group: zarr.Group, samples: Iterable[int], ideals: Iterable[int], names: list[str]) -> None:
     """Make samples and ideal intensities pending again: the marker first, then their data
-    chunks written as the fill value (which removes them), so that a recomputation gives the
-    store an uninterrupted run would have."""
-    names = [*data_names(group), "checksum"]
+    chunks (``names``, the spec's) written as the fill value (which removes them), so that a
+    recomputation gives the store an uninterrupted run would have."""
+    names = [*names, "checksum"]
     for index in samples:
         group["status"][index] = PENDING
         for name in names:
@@ -249,10 +269,10 @@ class Writer:
     """Writes one process's samples into an open store (array handles cached)."""
 
     group: zarr.Group
+    names: list[str] | None = None  # the per-sample data arrays (default: those in the store)
 
     def __post_init__(self) -> None:
         self._arrays: dict[str, Any] = {}
-        self._names: list[str] | None = None
 
     def __getitem__(self, name: str) -> Any:
         if name not in self._arrays:
@@ -293,9 +313,9 @@ class Writer:
         if measured is not None:
             items["intensity_measured"] = measured
         self._put(index, items)
-        if self._names is None:  # the same for every sample of the store
-            self._names = data_names(self.group)
-        self["checksum"][index] = checksum({name: np.asarray(self[name][index]) for name in self._names})
+        if self.names is None:  # the same for every sample of the store
+            self.names = data_names(self.group)
+        self["checksum"][index] = checksum({name: np.asarray(self[name][index]) for name in self.names})
         self["status"][index] = DONE
 
     def failed(self, index: int, reason: str, seconds: float = math.nan) -> None:
@@ -351,11 +371,18 @@ def _attributes(spec: DatasetSpec) -> dict[str, Any]:
     }
 
 
+def spec_attributes(spec: DatasetSpec) -> dict[str, Any]:
+    """The root attributes that are functions of the spec's content alone (what a resume
+    checks, :data:`raysim.dataset.integrity.CHECKED_ATTRS`)."""
+    attrs = _attributes(spec)
+    return {k: attrs[k] for k in CHECKED_ATTRS}
+
+
 def exists(path: str) -> bool:
     """Whether something is at a local store path (remote URLs: let Zarr decide)."""
     return "://" not in path and Path(path).exists()
 
 
-__all__ = ["DONE", "FAILED", "PENDING", "ArraySpec", "Writer", "checksum", "create", "data_names",
-           "exists", "ideal_status", "open_checked", "open_readonly", "reset", "sample_checksum",
-           "status", "verify", "versions"]
+__all__ = ["BOOKKEEPING", "DONE", "FAILED", "PENDING", "ArraySpec", "Writer", "checksum", "create",
+           "data_names", "exists", "ideal_status", "open_checked", "open_readonly", "remove_leftovers",
+           "require_checksums", "reset", "sample_checksum", "spec_attributes", "status", "verify", "versions"]

@@ -22,6 +22,7 @@ from typing import Any
 from distributed.diagnostics.plugin import WorkerPlugin
 
 from raysim.dataset.engine import ideal_intensity, simulate_sample
+from raysim.dataset.integrity import spec_data_names
 from raysim.dataset.sampling import draw_sample
 from raysim.dataset.spec import DatasetError, DatasetSpec, parse_spec
 from raysim.dataset.store import Writer, open_readonly
@@ -62,7 +63,7 @@ def context(store: str, fingerprint: str) -> Context:
         raise DatasetError(f"{store}: the store's spec changed under a running dataset")
     import zarr
 
-    return Context(spec, Writer(zarr.open_group(store, mode="r+")))
+    return Context(spec, Writer(zarr.open_group(store, mode="r+"), spec_data_names(spec)))
 
 
 def run_ideal(store: str, fingerprint: str, f_index: int, device: str = "cpu") -> dict[str, Any]:

@@ -291,7 +291,8 @@ def test_a_resume_recomputes_samples_whose_chunks_were_removed_or_truncated(refe
     truncated.write_bytes(truncated.read_bytes()[:10])
     _sample_chunks(store, "checksum", 2)[0].unlink()
     _sample_chunks(store, "intensity_ideal", 0)[0].unlink()
-    assert zstore.verify(zarr.open_group(str(store), mode="r+"), str(store)) == ([0, 1, 2], [0])
+    names = zstore.data_names(zarr.open_group(str(reference), mode="r"))
+    assert zstore.verify(zarr.open_group(str(store), mode="r+"), str(store), names) == ([0, 1, 2], [0])
     report = generate(spec, store, resume=True, scheduler=inproc)
     assert (report.repaired, report.skipped, report.computed) == (4, 1, spec.samples - 1)
     assert "4 done items failed verification and were recomputed" in report.summary()
@@ -334,7 +335,8 @@ def test_a_killed_and_corrupted_store_resumes_to_the_uninterrupted_one(reference
 
 
 @pytest.mark.parametrize(("garbled", "message"), [("zarr.json", "not a Zarr store"),
-                                                  ("status/zarr.json", "its bookkeeping cannot be read")])
+                                                  ("status/zarr.json", "its array 'status' is missing or "
+                                                                       "its metadata cannot be read")])
 def test_a_store_whose_metadata_cannot_be_read_is_refused_in_one_line(reference, spec, tmp_path, inproc,
                                                                       garbled, message):
     store = tmp_path / "garbled.zarr"

@@ -1,0 +1,333 @@
+"""What a dataset store holds besides its samples, checked: its arrays' presence and layout,
+the arrays written once at creation and the root attributes; and samples read back verified.
+
+The arrays written when a store is created (the coordinates, ``seed``, ``split``) and the root
+attributes that describe its data (``diameter``, the sphere's edges, ...) are deterministic
+functions of the spec. Two checks use that:
+
+- a resume (:func:`check_store`, then :func:`repair`) refuses a store one of whose arrays is
+  missing or whose metadata cannot be read (a good sample's data are never reset on the word
+  of a listing), and rewrites from the spec whatever of the creation-time arrays and
+  attributes no longer matches it (nothing computed is lost: they are the spec's);
+- readers (:func:`check_static`, :func:`read_verified`, :func:`read_ideals`), which have no
+  spec, compare the creation-time arrays and attributes with the SHA-256 recorded in the
+  store's ``static_checksums`` attribute when it was made (or last resumed), and every sample
+  they return with its own ``checksum``.
+
+Each failure is one line naming the store: :class:`CorruptStoreError` and
+:class:`CorruptSampleError` (both :class:`~raysim.dataset.spec.DatasetError`) say to resume.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import tomllib
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import zarr
+
+from raysim.dataset.spec import DatasetError, DatasetSpec
+from raysim.dataset.store_layout import ArraySpec, layout
+
+#: root attribute holding {"arrays": {name: sha256}, "attributes": sha256, "data": [names]}
+STATIC_ATTR = "static_checksums"
+#: root attributes that are functions of the spec's content and that readers interpret
+CHECKED_ATTRS = ("raysim_dataset_format", "description", "samples", "seed", "method", "radiator",
+                 "radiator_tol", "sampling", "focal_length", "diameter", "sphere_radius", "theta_min",
+                 "theta_max", "phi_min", "phi_max", "validation_fraction", "models", "measurement",
+                 "status_meanings")
+#: text attributes compared by their TOML content (comments and layout may differ)
+TEXT_ATTRS = ("spec", "scene")
+#: per-sample arrays that record a run rather than a sample's data (not in its checksum)
+BOOKKEEPING = frozenset({"status", "error", "checksum", "seconds", "cpu_seconds", "finished"})
+_DONE = 1
+
+
+class CorruptStoreError(DatasetError):
+    """A store's creation-time arrays or attributes do not match what it recorded."""
+
+
+class CorruptSampleError(DatasetError):
+    """A sample (or an ideal intensity) read back does not match its checksum."""
+
+
+def resume_hint(path: str) -> str:
+    """The command that recomputes (or rewrites) what failed a check in the store ``path``."""
+    return f"run `raysim dataset SPEC -o {path} --resume` with the store's spec to recompute it"
+
+
+def checksum(values: dict[str, np.ndarray]) -> str:
+    """SHA-256 (hex) of named arrays: each name, then its values' bytes in C order."""
+    sha = hashlib.sha256()
+    for name in sorted(values):
+        sha.update(name.encode())
+        sha.update(np.ascontiguousarray(values[name]).tobytes())
+    return sha.hexdigest()
+
+
+def is_data(array: ArraySpec | Any, name: str) -> bool:
+    """Whether an array (a layout entry or a stored array) is a per-sample data array: one
+    sample per chunk, numeric, not bookkeeping. The rule every checksum was made with."""
+    dims = tuple(array.dims if isinstance(array, ArraySpec) else array.metadata.dimension_names or ())
+    return (dims[:1] == ("sample",) and array.chunks[0] == 1 and name not in BOOKKEEPING
+            and np.dtype(array.dtype).kind in "biuf")
+
+
+def spec_data_names(spec: DatasetSpec) -> list[str]:
+    """The per-sample data arrays the spec's layout gives (what a checksum covers), sorted."""
+    return sorted(name for name, array in layout(spec).items() if is_data(array, name))
+
+
+def static_names(spec: DatasetSpec) -> list[str]:
+    """The arrays written once at creation: the coordinates, ``seed`` and ``split``."""
+    return sorted([*(name for name, a in layout(spec).items() if a.values is not None), "seed", "split"])
+
+
+def static_arrays(spec: DatasetSpec) -> dict[str, np.ndarray]:
+    """The arrays written once at creation, as the spec gives them, in their stored dtypes."""
+    from raysim.dataset.sampling import sample_seed, validation_mask
+
+    specs = layout(spec)
+    out = {name: np.asarray(a.values, dtype=a.dtype) for name, a in specs.items() if a.values is not None}
+    out["seed"] = np.array([sample_seed(spec.seed, i) for i in range(spec.samples)], dtype=np.uint64)
+    out["split"] = validation_mask(spec).astype(np.int8)
+    return out
+
+
+# --- a resume: refuse what cannot be trusted, rewrite what the spec gives --------------------------
+@dataclass
+class Repairs:
+    """What a resume rewrites from the spec: arrays (name -> values) and root attributes."""
+
+    arrays: dict[str, np.ndarray] = field(default_factory=dict)
+    attributes: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """What is rewritten, for the run's summary (attributes as ``attribute NAME``)."""
+        attrs = [k for k in self.attributes if k not in ("spec_source", "spec_base")]
+        return (*sorted(self.arrays), *(f"attribute {k}" for k in attrs))
+
+
+def check_store(group: zarr.Group, path: str, spec: DatasetSpec) -> Repairs:
+    """Refuse (DatasetError, one line naming the store and the array, nothing touched) a store
+    an array of the spec's layout is missing from, or whose metadata cannot be read or do not
+    match the layout; return the creation-time arrays and attributes to rewrite."""
+    for name, array in layout(spec).items():
+        _check_array(group, path, name, array)
+    arrays = {name: values for name, values in static_arrays(spec).items()
+              if not _holds(group[name], values)}
+    return Repairs(arrays, _attribute_repairs(dict(group.attrs), spec))
+
+
+def _check_array(group: zarr.Group, path: str, name: str, array: ArraySpec) -> None:
+    try:
+        arr = group[name]
+        meta = (tuple(arr.shape), tuple(arr.chunks), tuple(arr.metadata.dimension_names or ()), arr.dtype)
+    except Exception as exc:
+        raise DatasetError(f"{path}: its array {name!r} is missing or its metadata cannot be read "
+                           f"({type(exc).__name__}); the store was left as it is: restore the array, "
+                           "or make the dataset again at a new store path") from exc
+    want = np.dtype(array.dtype)
+    same_type = np.dtype(meta[3]).kind in "TUO" if want.kind == "U" else np.dtype(meta[3]) == want
+    if meta[:3] != (array.shape, array.chunks, array.dims) or not same_type:
+        raise DatasetError(f"{path}: its array {name!r} does not have the shape, chunks or type its "
+                           f"spec gives ({meta[0]} {meta[3]}, expected {array.shape} {want}); the "
+                           "store was left as it is: make the dataset again at a new store path")
+
+
+def _holds(arr: Any, values: np.ndarray) -> bool:
+    """Whether ``arr`` reads back as ``values`` (NaN where NaN); False if it cannot be read."""
+    try:
+        stored = np.asarray(arr[...])
+    except Exception:
+        return False
+    return stored.shape == values.shape and np.array_equal(stored, values,
+                                                           equal_nan=values.dtype.kind == "f")
+
+
+def _attribute_repairs(stored: dict[str, Any], spec: DatasetSpec) -> dict[str, Any]:
+    from raysim.dataset.store import spec_attributes
+
+    want = spec_attributes(spec)
+    out = {k: want[k] for k in CHECKED_ATTRS if _json(stored.get(k)) != _json(want[k])}
+    if not _same_toml(stored.get("spec"), spec.text):
+        out.update(spec=spec.text, spec_source=spec.source, spec_base=str(spec.base))
+    if not _same_toml(stored.get("scene"), spec.scene_text):
+        out["scene"] = spec.scene_text
+    return out
+
+
+def _json(value: Any) -> str:
+    return json.dumps(value, sort_keys=True)
+
+
+def _same_toml(stored: Any, text: str) -> bool:
+    """Whether ``stored`` is TOML text with the content of ``text`` (comments aside)."""
+    if not isinstance(stored, str):
+        return False
+    try:
+        return tomllib.loads(stored) == tomllib.loads(text)
+    except Exception:  # not TOML (or nested beyond the parser)
+        return False
+
+
+def repair(group: zarr.Group, repairs: Repairs, spec: DatasetSpec) -> None:
+    """Rewrite what :func:`check_store` found from the spec, then record the store's static
+    checksums (what readers compare with) as they now are."""
+    for name, values in repairs.arrays.items():
+        group[name][...] = values
+    if repairs.attributes:
+        group.attrs.update(repairs.attributes)
+    record_static(group, spec)
+
+
+def record_static(group: zarr.Group, spec: DatasetSpec) -> None:
+    """Write :data:`STATIC_ATTR`: the checksums of the creation-time arrays and of the checked
+    attributes as stored now, and the names of the per-sample data arrays."""
+    arrays = {name: checksum({name: np.asarray(group[name][...])}) for name in static_names(spec)}
+    current = {"arrays": arrays, "attributes": _attributes_checksum(dict(group.attrs)),
+               "data": spec_data_names(spec)}
+    if group.attrs.get(STATIC_ATTR) != current:
+        group.attrs[STATIC_ATTR] = current
+
+
+def _attributes_checksum(attrs: dict[str, Any]) -> str:
+    chosen = {k: attrs.get(k) for k in (*CHECKED_ATTRS, *TEXT_ATTRS)}
+    return hashlib.sha256(_json(chosen).encode()).hexdigest()
+
+
+# --- readers: no spec, the checksums recorded in the store ------------------------------------------
+def check_static(group: zarr.Group, path: str) -> None:
+    """Refuse (CorruptStoreError) a store whose creation-time arrays or checked attributes no
+    longer match the checksums it recorded; a store that recorded none is not checked."""
+    sums = group.attrs.get(STATIC_ATTR)
+    if not isinstance(sums, dict):
+        return
+    if _attributes_checksum(dict(group.attrs)) != sums.get("attributes"):
+        raise CorruptStoreError(f"{path}: its attributes (diameter, sphere, spec, ...) were changed "
+                                f"since it was made; run `raysim dataset SPEC -o {path} --resume` "
+                                "with the store's spec to rewrite them")
+    for name, expected in dict(sums.get("arrays", {})).items():
+        try:
+            actual = checksum({name: np.asarray(group[name][...])})
+        except Exception:
+            actual = None
+        if actual != expected:
+            raise CorruptStoreError(f"{path}: its array {name!r} was removed or damaged since it was "
+                                    f"made; run `raysim dataset SPEC -o {path} --resume` with the "
+                                    "store's spec to rewrite it")
+
+
+def data_names(group: zarr.Group) -> list[str]:
+    """The per-sample data arrays of a store: as recorded at creation, else as listed."""
+    sums = group.attrs.get(STATIC_ATTR)
+    if isinstance(sums, dict) and isinstance(sums.get("data"), list):
+        return [str(n) for n in sums["data"]]
+    return sorted(name for name, arr in group.arrays() if is_data(arr, name))
+
+
+def open_arrays(group: zarr.Group, path: str, names: Sequence[str]) -> dict[str, Any]:
+    """The arrays ``names`` of a store and its ``status`` and ``checksum``, opened once
+    (CorruptStoreError, naming the array, where one is missing or its metadata unreadable)."""
+    out = {}
+    for name in (*names, "status", "checksum"):
+        try:
+            out[name] = group[name]
+        except Exception as exc:
+            raise CorruptStoreError(f"{path}: its array {name!r} is missing or its metadata cannot be "
+                                    f"read ({type(exc).__name__}); run `raysim dataset SPEC -o {path} "
+                                    "--resume` to see what can be repaired") from exc
+    return out
+
+
+def read_verified(arrays: dict[str, Any], path: str, indices: Sequence[int] | np.ndarray,
+                  names: list[str]) -> dict[str, np.ndarray]:
+    """Every data array ``names`` of the samples ``indices`` (increasing; ``arrays`` from
+    :func:`open_arrays`), each sample checked done and against its checksum: name -> values
+    (len(indices), ...) in the stored dtype. All the arrays are read at once (Zarr's event
+    loop), and the values hashed are the values returned. A sample that fails raises
+    CorruptSampleError naming the store and the sample."""
+    idx = np.asarray(indices, dtype=np.int64)
+    if not len(idx):
+        return {name: np.empty((0, *arrays[name].shape[1:]), dtype=arrays[name].dtype) for name in names}
+    read = _read_all(arrays, idx)
+    for k, index in enumerate(idx.tolist()):
+        status = read["status"][k]
+        if status is None or int(status) != _DONE:
+            raise CorruptSampleError(f"{path}: sample {index} is not done; {resume_hint(path)}")
+        sample = {name: read[name][k] for name in names}
+        stored = read["checksum"][k]
+        if stored is None or any(v is None for v in sample.values()) or str(stored) != checksum(sample):
+            raise CorruptSampleError(f"{path}: sample {index}'s stored data do not match its checksum "
+                                     f"(a chunk was removed or damaged); {resume_hint(path)}")
+    return {name: np.stack(read[name]) for name in names}
+
+
+def _read_all(arrays: dict[str, Any], idx: np.ndarray) -> dict[str, list[Any]]:
+    """``arrays[name][i]`` for each name and index (None where a chunk does not decode)."""
+    blocks: list[Any]
+    if all(hasattr(a, "_async_array") for a in arrays.values()):
+        import asyncio
+
+        from zarr.core.sync import sync
+
+        async def read() -> list[Any]:
+            return await asyncio.gather(*(a._async_array.get_orthogonal_selection((idx,))
+                                          for a in arrays.values()), return_exceptions=True)
+
+        blocks = sync(read())
+    else:  # pragma: no cover - a Zarr without the async layer
+        blocks = [_try(lambda a=a: a.oindex[idx]) for a in arrays.values()]
+    out = {}
+    for (name, arr), block in zip(arrays.items(), blocks, strict=True):
+        if isinstance(block, BaseException):  # a chunk that does not decode: one by one
+            out[name] = [_try(lambda i=i, arr=arr: arr[i]) for i in idx.tolist()]
+        else:
+            block = np.asarray(block)
+            out[name] = [np.asarray(block[k]) for k in range(len(idx))]
+    return out
+
+
+def _try(read: Any) -> Any:
+    try:
+        return np.asarray(read())
+    except Exception:
+        return None
+
+
+def read_ideals(group: zarr.Group, path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(frequencies (Hz), ideal intensities, which of them are done and match their checksum)."""
+    try:
+        frequencies = np.asarray(group["frequency"][...])
+        arrays = {name: group[name] for name in ("ideal_status", "ideal_checksum", "intensity_ideal")}
+    except Exception as exc:
+        raise CorruptStoreError(f"{path}: its frequencies or ideal intensities cannot be read "
+                                f"({type(exc).__name__}); {resume_hint(path)}") from exc
+    read = _read_all(arrays, np.arange(arrays["intensity_ideal"].shape[0]))
+    ok = np.array([s is not None and int(s) == _DONE and v is not None and c is not None
+                   and str(c) == checksum({"intensity_ideal": v})
+                   for s, c, v in zip(read["ideal_status"], read["ideal_checksum"], read["intensity_ideal"],
+                                      strict=True)], dtype=bool)
+    shape = tuple(arrays["intensity_ideal"].shape[1:])
+    ideals = [v if v is not None else np.full(shape, np.nan) for v in read["intensity_ideal"]]
+    return frequencies, np.stack(ideals) if ideals else np.empty((0, *shape)), ok
+
+
+def ideal_of(path: str, frequencies: np.ndarray, ideals: np.ndarray, ok: np.ndarray,
+             frequency: float) -> np.ndarray:
+    """The verified ideal intensity of ``frequency``; a frequency the store does not list, or
+    whose ideal failed its check, raises (one line naming the store)."""
+    hit = np.flatnonzero(frequencies == frequency)
+    if not hit.size:
+        raise CorruptStoreError(f"{path}: a sample's frequency {frequency:g} Hz is not one of the "
+                                f"store's (its 'frequency' array was damaged?); {resume_hint(path)}")
+    f = int(hit[0])
+    if not ok[f]:
+        raise CorruptSampleError(f"{path}: the ideal intensity of {frequency:g} Hz is not done or does "
+                                 f"not match its checksum; {resume_hint(path)}")
+    return ideals[f]

@@ -1,0 +1,242 @@
+"""A store damaged outside its samples, or read back damaged: what a resume rewrites, what it
+refuses, what the readers refuse, and what killed runs leave beside a store.
+
+Every check compares with a clean store made once, uninterrupted (the independent reference):
+a repaired store must be that store again, a refused one byte-identical to what it was.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zarr
+
+from raysim.dataset import DatasetError, Loader, generate, open_dataset, parse_spec, sample_fieldmap
+from raysim.dataset import store as zstore
+from raysim.dataset.integrity import STATIC_ATTR, CorruptSampleError, CorruptStoreError
+from raysim.files import writer_prefix
+from tests.cli import run_cli
+from tests.raysim.dataset.conftest import ROOT, small_demo_text
+
+pytestmark = pytest.mark.slow  # a store made by an in-process Dask cluster
+PROVENANCE = {"seconds", "cpu_seconds", "finished"}  # when and how long: differ between runs
+
+
+@pytest.fixture(scope="module")
+def spec():
+    return parse_spec(small_demo_text(samples=4, measurement=False), source="small4.toml",
+                      base=ROOT / "scenes")
+
+
+@pytest.fixture(scope="module")
+def inproc():
+    """A Dask cluster inside this process (one worker thread), RAYSIM_THREADS restored after."""
+    from distributed import LocalCluster
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("RAYSIM_THREADS", "1")
+        with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                          dashboard_address=None) as cluster:
+            yield cluster.scheduler_address
+
+
+@pytest.fixture(scope="module")
+def clean(tmp_path_factory, spec, inproc):
+    """The reference: the small dataset made once, uninterrupted."""
+    path = tmp_path_factory.mktemp("clean") / "small.zarr"
+    report = generate(spec, path, scheduler=inproc)
+    assert report.done == spec.samples and not report.rewritten and not report.repaired
+    return path
+
+
+@pytest.fixture()
+def copy(clean, tmp_path):
+    path = tmp_path / "copy.zarr"
+    shutil.copytree(clean, path)
+    return path
+
+
+def _files(path: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(path)): p.read_bytes() for p in sorted(path.rglob("*")) if p.is_file()}
+
+
+def assert_same_store(a: Path, b: Path) -> None:
+    """Every array bit-identical (NaN where NaN) but the run's timings, the same attributes
+    but the creation date."""
+    left, right = (zarr.open_group(str(p), mode="r") for p in (a, b))
+    names = sorted(n for n, _ in left.arrays())
+    assert names == sorted(n for n, _ in right.arrays())
+    for name in set(names) - PROVENANCE:
+        x, y = np.asarray(left[name][...]), np.asarray(right[name][...])
+        same = np.array_equal(x, y, equal_nan=True) if x.dtype.kind == "f" else np.array_equal(x, y)
+        assert same, f"array {name!r} differs"
+    attrs = [dict(g.attrs) for g in (left, right)]
+    for d in attrs:
+        d.pop("created")
+    assert attrs[0] == attrs[1]
+
+
+# --- A: creation-time arrays and attributes -----------------------------------------------------------
+def _remove(name: str):
+    def damage(path: Path) -> None:
+        (path / name / "c" / "0").unlink()
+    return damage
+
+
+def _edit_diameter(path: Path) -> None:
+    root = path / "zarr.json"
+    text = root.read_text()
+    assert '"diameter": 110.0' in text
+    root.write_text(text.replace('"diameter": 110.0', '"diameter": 90.0'))
+
+
+@pytest.mark.parametrize(("damage", "rewritten"), [
+    (_remove("split"), "split"), (_remove("seed"), "seed"), (_remove("theta"), "theta"),
+    (_remove("frequency"), "frequency"), (_remove("x"), "x"), (_edit_diameter, "attribute diameter")])
+def test_a_resume_rewrites_what_the_spec_gives_and_readers_refuse_it_until_then(
+        clean, copy, spec, inproc, damage, rewritten):
+    damage(copy)
+    what = rewritten.removeprefix("attribute ")
+    for read in (lambda: Loader(str(copy), split="all"), lambda: open_dataset(copy)):
+        with pytest.raises(CorruptStoreError, match="--resume") as info:
+            read()
+        assert str(copy) in str(info.value) and what in str(info.value)
+    report = generate(spec, copy, resume=True, scheduler=inproc)
+    assert report.rewritten == (rewritten,) and report.computed == 0 and report.repaired == 0
+    assert f"rewritten from it: {rewritten}" in report.summary()
+    assert_same_store(clean, copy)  # the split, seeds, coordinates and attributes made again
+    validation = np.flatnonzero(zarr.open_group(str(clean), mode="r")["split"][...] == 1)
+    assert len(validation) == 2  # the spec's round(0.5 * 4)
+    assert np.array_equal(Loader(str(copy), split="validation").indices, validation)
+
+
+# --- B: missing or unreadable array metadata ----------------------------------------------------------
+def _garble(name: str):
+    def damage(path: Path) -> None:
+        (path / name).write_text("{not json")
+    return damage
+
+
+def _unlink(name: str):
+    def damage(path: Path) -> None:
+        target = path / name
+        shutil.rmtree(target) if target.is_dir() else target.unlink()
+    return damage
+
+
+@pytest.mark.parametrize(("damage", "array"), [
+    (_unlink("intensity/zarr.json"), "intensity"), (_unlink("gravity_rms"), "gravity_rms"),
+    (_garble("deformation/zarr.json"), "deformation"), (_unlink("split/zarr.json"), "split")])
+def test_a_resume_refuses_a_store_missing_an_array_of_its_layout_and_touches_nothing(
+        copy, spec, inproc, damage, array):
+    damage(copy)
+    before = _files(copy)
+    with pytest.raises(DatasetError, match=f"its array '{array}' is missing or its metadata") as info:
+        generate(spec, copy, resume=True, scheduler=inproc)
+    assert str(copy) in str(info.value) and "\n" not in str(info.value)
+    assert _files(copy) == before  # no sample reset, no checksum erased
+
+
+def test_the_cli_refuses_such_a_store_in_one_line(copy, spec, tmp_path):
+    source = tmp_path / "small4.toml"
+    source.write_text(spec.text)  # its scene is inline: the same spec from any folder
+    (copy / "intensity" / "zarr.json").unlink()
+    before = _files(copy)
+    result = run_cli("dataset", str(source), "-o", str(copy), "--resume", timeout=120)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1 and "'intensity'" in lines[0], result.stderr
+    assert _files(copy) == before
+
+
+# --- C: readers verify every sample -------------------------------------------------------------------
+def _overwrite_deformation(path: Path) -> int:
+    """Sample 1's deformation chunk replaced by sample 0's: it decodes, to other values."""
+    group = zarr.open_group(str(path), mode="r+")
+    group["deformation"][1] = group["deformation"][0]
+    return 1
+
+
+def _delete_intensity(path: Path) -> int:
+    """Sample 2's intensity chunk removed: it reads as the fill value, NaN."""
+    (path / "intensity" / "c" / "2" / "0" / "0").unlink()
+    return 2
+
+
+@pytest.mark.parametrize("damage", [_overwrite_deformation, _delete_intensity])
+def test_readers_refuse_a_sample_that_fails_its_checksum_and_a_resume_recomputes_it(
+        clean, copy, spec, inproc, damage):
+    bad = damage(copy)
+    reference = zarr.open_group(str(clean), mode="r")
+    for representation in ("intensity", "fa_sphere"):
+        loader = Loader(str(copy), representation=representation, split="all", normalise=False)
+        with pytest.raises(CorruptSampleError, match=f"sample {bad}'s stored data") as info:
+            list(loader)
+        assert str(copy) in str(info.value) and "--resume" in str(info.value)
+    ds = open_dataset(copy)
+    with pytest.raises(CorruptSampleError, match=f"sample {bad}'s"):
+        sample_fieldmap(ds, bad)
+    good = 3
+    assert np.array_equal(sample_fieldmap(ds, good)["intensity"].values, reference["intensity"][good])
+    _, y = Loader(str(copy), split="all", normalise=False).raw([good])
+    assert np.array_equal(y[0], reference["deformation"][good], equal_nan=True)
+    report = generate(spec, copy, resume=True, scheduler=inproc)
+    assert (report.repaired, report.computed) == (1, 1)
+    assert_same_store(clean, copy)
+    assert len(list(Loader(str(copy), split="all", batch_size=4))) == 1
+
+
+def test_a_failed_ideal_and_a_lost_frequency_are_one_line_errors(copy):
+    (copy / "intensity_ideal" / "c" / "0" / "0" / "0").unlink()
+    with pytest.raises(CorruptSampleError, match="ideal intensity of 3e\\+08 Hz"):
+        Loader(str(copy), representation="fa_sphere", split="all").raw([0])
+    # a store of an older raysim (no recorded checksums to refuse it at opening) that lost its
+    # frequencies: the sample's frequency is no longer one of the store's
+    group = zarr.open_group(str(copy), mode="r+")
+    del group.attrs[STATIC_ATTR]
+    (copy / "frequency" / "c" / "0").unlink()
+    with pytest.raises(CorruptStoreError, match="frequency"):
+        sample_fieldmap(open_dataset(copy), 0)
+
+
+# --- D: what a run killed while creating its store left -----------------------------------------------
+_KILLED_WHILE_CREATING = """
+import os, signal, sys
+from pathlib import Path
+from raysim.dataset import parse_spec
+from raysim.dataset import store
+spec = parse_spec(sys.stdin.read(), source="small4.toml", base=Path(sys.argv[2]))
+fill = store._fill
+def fill_and_die(group, spec):
+    fill(group, spec)
+    os.kill(os.getpid(), signal.SIGKILL)
+store._fill = fill_and_die
+store.create(sys.argv[1], spec)
+"""
+
+
+def test_a_run_killed_while_creating_leaves_what_the_next_run_removes(spec, tmp_path):
+    target = tmp_path / "new.zarr"
+    result = subprocess.run([sys.executable, "-c", textwrap.dedent(_KILLED_WHILE_CREATING), str(target),
+                             str(ROOT / "scenes")], input=spec.text, capture_output=True, text=True,
+                            timeout=120, cwd=ROOT)
+    assert result.returncode == -9, result.stderr
+    (dead,) = [p for p in tmp_path.iterdir() if p.name != "new.zarr"]
+    assert not target.exists() and (dead / "zarr.json").is_file()  # a whole scratch store, left
+    live = tmp_path / f"{writer_prefix(target)}0123abcd.tmp"  # a run still creating it: this one
+    live.mkdir()
+    legacy_old, legacy_new = tmp_path / ".new.zarr.00aa11bb.creating", tmp_path / ".new.zarr.22cc33dd.creating"
+    for folder in (legacy_old, legacy_new):
+        folder.mkdir()
+    two_days_ago = time.time() - 2 * 86400
+    os.utime(legacy_old, (two_days_ago, two_days_ago))
+    group = zstore.create(str(target), spec)
+    assert (zstore.status(group) == zstore.PENDING).all()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["new.zarr", live.name, legacy_new.name])
