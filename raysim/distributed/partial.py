@@ -69,8 +69,11 @@ class PartialStore:
         """A new store at ``path`` (which must not exist), built aside and renamed into place."""
         import zarr
 
+        from raysim.files import remove_stale, writer_prefix
+
         path = Path(path)
-        scratch = path.parent / f".{path.name}.{uuid.uuid4().hex[:8]}.creating"
+        remove_stale(path)  # what a run killed while creating it left, once that run is gone
+        scratch = path.parent / f"{writer_prefix(path)}{uuid.uuid4().hex[:8]}.tmp"
         attrs = {"raysim_partial_format": FORMAT, "fingerprint": fingerprint,
                  "fingerprint_parts": description, "n_points": int(n_points),
                  "block_size": int(block_size), "parts": {k: list(v) for k, v in parts.items()},
