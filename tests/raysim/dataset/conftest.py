@@ -39,3 +39,19 @@ def measured_store(tmp_path_factory):
     report = generate(spec, path, workers=1, threads=1)
     assert report.done == spec.samples and report.failed == 0
     return spec, path
+
+
+@pytest.fixture(scope="module")
+def inproc():
+    """A Dask cluster inside this process (one worker thread, no network), for the quick runs.
+
+    The dataset's worker plugin sets RAYSIM_THREADS=1 in the worker's process, here ours:
+    it is restored afterwards.
+    """
+    from distributed import LocalCluster
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("RAYSIM_THREADS", "1")
+        with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                          dashboard_address=None) as cluster:
+            yield cluster.scheduler_address

@@ -37,18 +37,6 @@ def spec():
 
 
 @pytest.fixture(scope="module")
-def inproc():
-    """A Dask cluster inside this process (one worker thread), RAYSIM_THREADS restored after."""
-    from distributed import LocalCluster
-
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("RAYSIM_THREADS", "1")
-        with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                          dashboard_address=None) as cluster:
-            yield cluster.scheduler_address
-
-
-@pytest.fixture(scope="module")
 def clean(tmp_path_factory, spec, inproc):
     """The reference: the small dataset made once, uninterrupted."""
     path = tmp_path_factory.mktemp("clean") / "small.zarr"
