@@ -244,6 +244,9 @@ def _park(rig: Rig, address: str, rm: pyvisa.ResourceManager | None) -> tuple[fl
     try:
         motion.setup((rig.slider_axis, rig.rotation_axis), rig.speed)
         return move_to(motion, rig, *rig.park)
+    except BaseException:
+        motion.stop((rig.slider_axis, rig.rotation_axis))  # as a scan does on any failure
+        raise
     finally:
         motion.close()
 

@@ -98,10 +98,13 @@ class MotionController(CheckedInstrument):
         """Actual position of ``axis`` (rad)."""
         answer = self.query(f"{axis}TP?")
         try:
-            return math.radians(float(answer))
-        except ValueError as exc:
+            value = float(answer)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):  # a NaN would pass any tolerance test
             raise InstrumentError(f"motion controller at {self.link.resource}: {axis}TP? "
-                                  f"answered '{answer}', not a position") from exc
+                                  f"answered '{answer}', not a position")
+        return math.radians(value)
 
     def done(self, axis: int) -> bool:
         """Whether ``axis`` has finished its motion (``nMD?``)."""
@@ -132,9 +135,14 @@ class MotionController(CheckedInstrument):
                     f"motion controller at {self.link.resource}: axis {min(pending)} did not "
                     f"reach its target within {timeout_s:g} s")
             time.sleep(self.poll_s)
-        readback = {axis: self.position(axis) for axis in targets}
+        try:
+            readback = {axis: self.position(axis) for axis in targets}
+        except InstrumentError:
+            self.stop(targets)
+            raise
         for axis, target in targets.items():
             if abs(readback[axis] - target) > tolerance:
+                self.stop(targets)
                 raise InstrumentError(
                     f"motion controller at {self.link.resource}: axis {axis} stopped at "
                     f"{math.degrees(readback[axis]):.4f} deg, target "
@@ -155,9 +163,23 @@ class MotionController(CheckedInstrument):
             time.sleep(self.poll_s)
 
     def stop(self, axes) -> None:
-        """Stop the axes, best effort (used while already handling a failure; never raises)."""
-        for axis in axes:
-            try:
+        """Stop the axes, best effort (used while already handling a failure; never raises).
+        When this link can no longer be used (a read timed out, the controller closed it),
+        the stop goes through a new connection: a move under way must not run on."""
+        try:
+            for axis in axes:
                 self.link.write(f"{axis}ST")
-            except InstrumentError:
-                return
+            return
+        except InstrumentError:
+            pass
+        try:
+            fresh = self.link.reopened()
+        except Exception:  # unreachable: nothing more can be done from here
+            return
+        try:
+            for axis in axes:
+                fresh.write(f"{axis}ST")
+        except Exception:
+            pass
+        finally:
+            fresh.close()

@@ -17,7 +17,10 @@ from raysim.errors import InstrumentError
 
 MODELS = ("N1913A", "N1914A")
 MAX_QUEUE = 32          # entries drained from the error queue at most
-OVERRANGE = 9.0e37      # SCPI's "not a number" is 9.91E37
+#: what any power sensor can read (dBm): thermal noise in 1 Hz is -174 dBm, and the N191xA
+#: sensors stop near +44 dBm; a reading outside is a fault, never a power (SCPI's 9.91E37
+#: "not a number" included), and would otherwise become 0 W or overflow
+DBM_RANGE = (-174.0, 60.0)
 
 
 class PowerMeter(CheckedInstrument):
@@ -87,9 +90,10 @@ class PowerMeter(CheckedInstrument):
         except ValueError as exc:
             raise InstrumentError(f"power meter at {self.link.resource}: FETC? answered "
                                   f"'{answer}', not a number") from exc
-        if not math.isfinite(value) or abs(value) >= OVERRANGE:
+        if not math.isfinite(value) or not DBM_RANGE[0] <= value <= DBM_RANGE[1]:
             raise InstrumentError(f"power meter at {self.link.resource}: reading out of range "
-                                  f"('{answer}')")
+                                  f"('{answer}'; a power sensor reads {DBM_RANGE[0]:g} to "
+                                  f"{DBM_RANGE[1]:+g} dBm)")
         return value
 
     def read_power(self) -> float:

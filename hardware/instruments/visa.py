@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import socket
 import threading
+import time
 from collections import deque
 
 import pyvisa
@@ -18,6 +19,9 @@ import pyvisa.errors
 
 from raysim.errors import InstrumentError
 
+#: the longest answer line any instrument of the rig gives is tens of bytes (an ``*IDN?``)
+MAX_ANSWER_BYTES = 4096
+ANSWER_CHUNK = 256  # bytes read at most per call while looking for the line's end
 _rm_lock = threading.Lock()
 _default_rm: pyvisa.ResourceManager | None = None
 
@@ -52,6 +56,8 @@ class VisaLink:
         self.timeout_s = timeout_s
         self.transcript: deque[tuple[str, str]] = deque(maxlen=transcript)
         self._broken: str | None = None
+        self._rm = rm
+        self._terminations = (read_termination, write_termination)
         host = tcpip_host(resource) if rm is None else None  # the socket backend resolves names
         if host is not None:
             try:
@@ -82,18 +88,46 @@ class VisaLink:
         """Send one query and return its answer, stripped; raise if none comes in time."""
         self.write(command)
         try:
-            answer = self._inst.read().strip()
+            answer = self._read_line(command).strip()
         except pyvisa.errors.VisaIOError as exc:
             self._broken = "a read timed out"
             if exc.error_code == pyvisa.constants.StatusCode.error_timeout:
                 raise InstrumentError(f"{self.name} at {self.resource} is silent: no answer to "
                                       f"'{command}' within {self.timeout_s:g} s") from exc
             raise self._error(f"gave no answer to '{command}'", exc) from exc
-        except (pyvisa.errors.Error, OSError, UnicodeDecodeError) as exc:
+        except UnicodeDecodeError:
+            self._broken = "a read failed"
+            raise InstrumentError(f"{self.name} at {self.resource} answered '{command}' with bytes "
+                                  "that are not ASCII text") from None
+        except (pyvisa.errors.Error, OSError) as exc:
             self._broken = "a read failed"
             raise self._error(f"gave no answer to '{command}'", exc) from exc
         self.transcript.append(("<", answer))
         return answer
+
+    def _read_line(self, command: str) -> str:
+        """One answer line, bounded in length (:data:`MAX_ANSWER_BYTES`) and in time (the
+        read timeout, for the whole line): a reader that waits for the terminator alone would
+        take an endless stream without one, chunk by chunk, until memory ran out."""
+        end = self._terminations[0].encode("ascii")
+        deadline = time.monotonic() + self.timeout_s
+        line = b""
+        while not line.endswith(end):
+            line += self._inst.read_bytes(ANSWER_CHUNK, break_on_termchar=True)
+            if len(line) > MAX_ANSWER_BYTES or (time.monotonic() > deadline and not line.endswith(end)):
+                self._broken = "an answer without end"
+                what = (f"more than {MAX_ANSWER_BYTES} bytes" if len(line) > MAX_ANSWER_BYTES
+                        else f"no line end within {self.timeout_s:g} s")
+                raise InstrumentError(f"{self.name} at {self.resource} answered '{command}' with "
+                                      f"{what}: not one of its answers")
+        return line[: len(line) - len(end)].decode("ascii")
+
+    def reopened(self) -> VisaLink:
+        """A new connection to the same instrument, with the same settings (to stop the axes
+        when this one can no longer be used)."""
+        read, write = self._terminations
+        return VisaLink(self.resource, name=self.name, timeout_s=self.timeout_s,
+                        read_termination=read, write_termination=write, rm=self._rm)
 
     def close(self) -> None:
         """Close the connection (idempotent, never raises)."""

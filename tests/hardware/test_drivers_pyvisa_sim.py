@@ -92,3 +92,19 @@ def test_motion_ending_off_target(rm: pyvisa.ResourceManager) -> None:
 def test_wrong_controller(rm: pyvisa.ResourceManager) -> None:
     with pytest.raises(InstrumentError, match="expected a Newport ESP301"):
         MotionController.open("TCPIP::esp300.example::5001::SOCKET", rm=rm, timeout_s=0.5)
+
+
+def test_a_position_read_back_as_nan_is_refused_and_the_axes_stopped(rm: pyvisa.ResourceManager) -> None:
+    # abs(nan - target) > tolerance is False: a NaN read-back would pass as on target
+    esp = MotionController.open("TCPIP::nan.example::5001::SOCKET", rm=rm, timeout_s=0.5)
+    with pytest.raises(InstrumentError, match=r"1TP\? answered 'nan', not a position"):
+        esp.move({1: math.radians(10.0)}, tolerance=math.radians(0.01), timeout_s=0.5)
+    sent = [text for way, text in esp.link.transcript if way == ">"]
+    assert sent[-1] == "1ST"
+
+
+def test_a_reading_no_sensor_can_give_is_refused(rm: pyvisa.ResourceManager) -> None:
+    # +250 dBm is finite and below SCPI's 9.91E37; as a power it would be 1e22 W
+    meter = PowerMeter.open("TCPIP::overrange.example::5025::SOCKET", rm=rm, timeout_s=0.5)
+    with pytest.raises(InstrumentError, match=r"reading out of range \('\+2\.500000000E\+02'"):
+        meter.read_power()
