@@ -64,6 +64,7 @@ class RefineHistory:
     misfit_rms: list[float] = field(default_factory=list)
     gain_factor: list[float] = field(default_factory=list)
     seconds: float = 0.0
+    stopped: str = ""  # why the loop ended before its iterations, "" when it ran them all
 
 
 @lru_cache(maxsize=4)
@@ -133,6 +134,7 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
     gamma = 1.0
     iterates: list[NDArray[np.float64]] = []
     updates: list[NDArray[np.float64]] = []
+    evaluated = (delta, gamma)  # the last map (and scale) whose misfit was measured
     for k in range(iterations):
         modelled = model_of(k + 1, f"iteration {k + 1}/{iterations}",
                             extend_outside(grid, delta))
@@ -140,6 +142,14 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
         misfit = ((1.0 + fa_measured) * gamma - 1.0 - intensity_ratio_fa(modelled, ideal)) * w
         misfit[n_rows:] = np.nan
         history.misfit_rms.append(float(np.sqrt(np.nanmean(misfit[:n_rows] ** 2))))
+        if k and (ended := _misfit_ended(history.misfit_rms)):
+            history.stopped = f"{ended} at iteration {k + 1} of {iterations}"
+            if ended == "misfit rose":  # the previous map fitted the data better: keep it
+                delta, gamma = evaluated
+                history.misfit_rms.pop()
+                history.gain_factor.pop()
+            break
+        evaluated = (delta, gamma)
         step = correct(misfit, delta)
         update, gain_step = step if fit_gain else (step, 0.0)
         update = update[mask]
@@ -159,6 +169,21 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
 
 
 GAIN_SCALE = 1e-6  # m per unit of the scale factor in the Anderson state
+#: the refinement stops when an iteration raises the misfit by more than this fraction (the map
+#: before it is returned: on grids too coarse for the data every update made it worse), or
+#: lowers it by less (the data no longer pull the map, while each update still moved it: 50
+#: iterations drifted 3.4 -> 20.7 um RMS on a 64-point grid)
+MISFIT_TOLERANCE = 1e-3
+
+
+def _misfit_ended(misfit_rms: list[float]) -> str:
+    """Why the refinement should stop after the last misfit of ``misfit_rms``, or ""."""
+    before, now = misfit_rms[-2], misfit_rms[-1]
+    if now > before * (1.0 + MISFIT_TOLERANCE):
+        return "misfit rose"
+    if now > before * (1.0 - MISFIT_TOLERANCE):
+        return "misfit stalled"
+    return ""
 
 
 def anderson_step(iterates: list[NDArray[np.float64]],

@@ -48,6 +48,21 @@ def test_go_refinement_removes_the_linearisation_error(paper_field):
     assert updates[0] > 1e-4 > 1e-5 > result.attrs["rms_m"]
 
 
+@pytest.mark.slow
+def test_refinement_never_returns_a_map_that_fits_the_data_worse(paper_field):
+    # on a 16-point grid the updates cannot represent the surface: every one raised the misfit,
+    # and four of them made the map worse than the linear answer (242 -> 422 um RMS); the loop
+    # now stops at the first rise and keeps the map before it
+    kept = invert(paper_field, N=16, refine_iterations=4, truth=paper_delta,
+                  forward=reference_forward(order=2))
+    assert kept.attrs["refine_stopped"].startswith("misfit rose at iteration 2")
+    plain = linear(paper_field, paper_delta, N=16)
+    np.testing.assert_array_equal(kept["deformation"].values, plain["deformation"].values)
+    # where the updates help, the loop runs as asked
+    fine = invert(paper_field, refine_iterations=2, truth=paper_delta, forward=reference_forward(order=2))
+    assert fine.attrs["refine_stopped"] == "no: every iteration ran"
+
+
 def test_any_constant_gain_gives_the_same_map_when_estimated(paper_field):
     scaled = paper_field.copy(deep=True)
     scaled["intensity"] = scaled["intensity"] * 1.7
