@@ -94,7 +94,8 @@ def read_rim_csv(path: str | os.PathLike[str]) -> RimTargets:
     if not path.is_file():
         raise RimTargetsError(f"{path}: no such rim-target file")
     try:
-        with open(path, newline="", encoding="utf-8") as fh:
+        # utf-8-sig: a spreadsheet's byte-order mark is not part of the header
+        with open(path, newline="", encoding="utf-8-sig") as fh:
             rows = [row for row in csv.reader(fh) if row and not row[0].lstrip().startswith("#")]
     except (OSError, UnicodeDecodeError) as exc:
         raise RimTargetsError(f"{path}: unreadable rim-target file ({exc})") from exc

@@ -12,7 +12,7 @@ from raysim.cli.common import app, progress_bar, say
 @app.command("campaign")
 def campaign_command(
     scene: Path = typer.Argument(..., help="Scene TOML: the telescope as it is (or a shipped name)."),
-    plan: Path = typer.Argument(..., help="Scan plan TOML with a [simulator] table (noise, gain)."),
+    plan: Path = typer.Argument(..., help="Scan plan TOML with a \\[simulator] table (noise, gain)."),
     output: Path = typer.Option(..., "-o", "--output", help="Folder for the campaign's files."),
     rim: int = typer.Option(64, help="Rim targets spread round the rim (0: none)."),
     rim_std_um: float = typer.Option(10.0, "--rim-std-um", help="Error of one rim target (um)."),

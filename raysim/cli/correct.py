@@ -27,10 +27,10 @@ def correct_command(
     surface_map: Path = typer.Argument(..., help="SurfaceMap NetCDF (raysim invert's output)."),
     output: Path = typer.Option(..., "-o", "--output", help="Folder to write the commands, the "
                                                              "predicted residual and the summary in."),
-    scene: Path | None = typer.Option(None, help="Scene TOML whose [panels] give the panel layout "
+    scene: Path | None = typer.Option(None, help="Scene TOML whose \\[panels] give the panel layout "
                                                  "(default: the scene the map's source FieldMap records)."),
     actuators: Path | None = typer.Option(None, help="Actuator file: CSV with columns id,x_m,y_m,panels"
-                                                     "[,min_m,max_m] or TOML [[actuator]] tables."),
+                                                     "\\[,min_m,max_m] or TOML \\[\\[actuator]] tables."),
     layout: str = typer.Option("corners", help="Without --actuators: corners (one actuator per panel "
                                                "corner, shared by the panels meeting there) or screws."),
     screws: str = typer.Option("0.2,0.2;0.2,0.8;0.8,0.5",

@@ -35,6 +35,11 @@ def test_a_good_csv_reads_in_metres(tmp_path):
     assert len(targets) == 10
     np.testing.assert_allclose(targets.dz, 1e-4 * np.arange(10))
     check_targets(targets, A)
+    # a spreadsheet's "CSV UTF-8" starts with a byte-order mark: the same targets
+    (tmp_path / "excel.csv").write_bytes(b"\xef\xbb\xbf" + (tmp_path / "rim.csv").read_bytes())
+    again = read_rim_csv(tmp_path / "excel.csv")
+    np.testing.assert_array_equal(again.dz, targets.dz)
+    np.testing.assert_array_equal(again.x, targets.x)
 
 
 @pytest.mark.parametrize(("text", "message"), [
