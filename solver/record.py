@@ -68,7 +68,7 @@ def surface_attrs(opts: InvertOptions, out: Outcome) -> dict[str, Any]:
                    if out.weighted else "none",
         "refine_update_rms_m": ",".join(f"{v:.3e}" for v in history.update_rms),
         "refine_misfit_rms": ",".join(f"{v:.3e}" for v in history.misfit_rms),
-        "refine_stopped": getattr(history, "stopped", "") or "no: every iteration ran",
+        "refine_stopped": history.stopped or "no: every iteration ran",
         "refine_seconds": history.seconds,
         "gain_mode": gain.mode, "gain_known": not gain.estimated, "gain_choice": gain.reason,
         "gain": out.data.scale * gain_factor,
