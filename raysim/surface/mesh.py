@@ -433,7 +433,7 @@ def _check_sphere(sphere, ideal: Reflector, path) -> None:
     if sphere.radius >= ideal.F:
         raise MeshError(f"{path}: the fitted focal length {ideal.F:.4g} m is not above "
                         f"'sphere.radius_m' = {sphere.radius:g} m (the sphere would cut the dish)")
-    rim = 2.0 * np.arctan(ideal.D / (4.0 * ideal.F))
+    rim = 2.0 * np.arctan(ideal.D / (4.0 * ideal.F))  # maps.sphere.theta_rim lies downstream
     if sphere.theta_min >= rim:
         raise MeshError(f"{path}: 'sphere.theta_min_deg' = {np.degrees(sphere.theta_min):g} is beyond "
                         f"the fitted dish's rim image at {np.degrees(rim):.2f} deg: the sphere would "
