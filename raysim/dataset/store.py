@@ -47,7 +47,14 @@ from typing import Any
 import numpy as np
 import zarr
 
-from raysim.dataset.integrity import BOOKKEEPING, CHECKED_ATTRS, checksum, is_data, record_static
+from raysim.dataset.integrity import (
+    BOOKKEEPING,
+    CHECKED_ATTRS,
+    checksum,
+    is_data,
+    record_static,
+    static_arrays,
+)
 from raysim.dataset.spec import DatasetError, DatasetSpec
 from raysim.dataset.store_layout import FORMAT, ArraySpec, layout
 from raysim.version import VERSION_ATTR, __version__
@@ -116,17 +123,11 @@ def remove_leftovers(path: str) -> None:
 
 
 def _fill(group: zarr.Group, spec: DatasetSpec) -> zarr.Group:
-    from raysim.dataset.sampling import sample_seed, validation_mask
-
     for name, array in layout(spec).items():
-        arr = group.create_array(name, shape=array.shape, chunks=array.chunks, dtype=array.dtype,
-                                 fill_value=array.fill, dimension_names=array.dims,
-                                 attributes=array.attrs)
-        if array.values is not None:
-            arr[...] = array.values
-    group["seed"][...] = np.array([sample_seed(spec.seed, i) for i in range(spec.samples)],
-                                  dtype=np.uint64)
-    group["split"][...] = validation_mask(spec).astype(np.int8)
+        group.create_array(name, shape=array.shape, chunks=array.chunks, dtype=array.dtype,
+                           fill_value=array.fill, dimension_names=array.dims, attributes=array.attrs)
+    for name, values in static_arrays(spec).items():  # what a resume checks them against
+        group[name][...] = values
     record_static(group, spec)
     return group
 
