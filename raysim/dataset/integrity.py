@@ -223,12 +223,17 @@ def check_static(group: zarr.Group, path: str) -> None:
                                     "store's spec to rewrite it")
 
 
+def listed_data_names(group: zarr.Group) -> list[str]:
+    """The per-sample data arrays present in a store (:func:`is_data`), sorted."""
+    return sorted(name for name, arr in group.arrays() if is_data(arr, name))
+
+
 def data_names(group: zarr.Group) -> list[str]:
     """The per-sample data arrays of a store: as recorded at creation, else as listed."""
     sums = group.attrs.get(STATIC_ATTR)
     if isinstance(sums, dict) and isinstance(sums.get("data"), list):
         return [str(n) for n in sums["data"]]
-    return sorted(name for name, arr in group.arrays() if is_data(arr, name))
+    return listed_data_names(group)
 
 
 def open_arrays(group: zarr.Group, path: str, names: Sequence[str]) -> dict[str, Any]:

@@ -51,7 +51,7 @@ from raysim.dataset.integrity import (
     BOOKKEEPING,
     CHECKED_ATTRS,
     checksum,
-    is_data,
+    listed_data_names,
     record_static,
     static_arrays,
 )
@@ -182,7 +182,7 @@ def ideal_status(group: zarr.Group) -> np.ndarray:
 def data_names(group: zarr.Group) -> list[str]:
     """The per-sample data arrays present in a store (one sample per chunk, not bookkeeping),
     sorted. A resume takes them from the spec instead (:func:`raysim.dataset.integrity.spec_data_names`)."""
-    return sorted(name for name, arr in group.arrays() if is_data(arr, name))
+    return listed_data_names(group)
 
 
 def sample_checksum(group: zarr.Group, index: int, names: list[str] | None = None) -> str:
