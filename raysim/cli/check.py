@@ -65,7 +65,8 @@ def check(
     from raysim.pipeline.check_inputs import parse_grid
 
     check_json_path(json_path, [("source", source)])
-    check_json_path(json_path, source_inputs(source))  # and the files a scene names
+    if json_path not in (None, "-"):  # and the files a scene names (read only for a --json file)
+        check_json_path(json_path, source_inputs(source))
     with progress_bar() as bar:
         task = bar.add_task("check", total=1.0)
 
