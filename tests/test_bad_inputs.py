@@ -301,6 +301,11 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         # issue 31: the fast radiator's options
         (["simulate", "scene.toml", "-o", "o.nc", "--method", "po", "--radiator", "fmm"],
          "unknown radiator 'fmm'"),
+        # accepted with GO and ignored before: the user believed the fast sum had run
+        (["simulate", "scene.toml", "-o", "o.nc", "--radiator", "direct"],
+         "--radiator and --radiator-tol apply to --method po and po+ptd only"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--method", "go+edge", "--radiator-tol", "1e-3"],
+         "--radiator and --radiator-tol apply to --method po and po+ptd only"),
         (["simulate", "scene.toml", "-o", "o.nc", "--method", "po", "--radiator-tol", "2"],
          "--radiator-tol must lie in [1e-12, 1)"),
         # finer than float64's sums can honour: it ran (for minutes) instead of saying so

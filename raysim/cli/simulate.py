@@ -42,13 +42,13 @@ def simulate(
         help="go+edge: add the Fresnel-zone correction of the deformed geometric wave (wave "
              "optics' smoothing of features finer than the Fresnel zone; on the paper's dish "
              "it helps below about 3 GHz)."),
-    radiator: str = typer.Option(
-        "fast", "--radiator",
-        help="po, po+ptd: fast (the multilevel sum, where its cost estimate beats the direct "
-             "sum; the FieldMap records which ran) or direct (the reference sum)."),
-    radiator_tol: float = typer.Option(
-        1e-6, "--radiator-tol",
-        help="po, po+ptd: relative RMS accuracy of the fast radiator, in [1e-12, 1)."),
+    radiator: str | None = typer.Option(
+        None, "--radiator",
+        help="po, po+ptd: fast (default: the multilevel sum, where its cost estimate beats the "
+             "direct sum; the FieldMap records which ran) or direct (the reference sum)."),
+    radiator_tol: float | None = typer.Option(
+        None, "--radiator-tol",
+        help="po, po+ptd: relative RMS accuracy of the fast radiator, in [1e-12, 1) (default 1e-6)."),
     scheduler: str | None = typer.Option(
         None, "--scheduler",
         help="po, po+ptd: compute the sphere's points in blocks on the Dask scheduler at "
@@ -79,11 +79,16 @@ def simulate(
 
     loaded = load_scene(scene).with_overrides(frequency, n_theta, n_phi)
     method = method or loaded.method
+    given_radiator = (radiator, radiator_tol) != (None, None)
+    radiator, radiator_tol = radiator or "fast", 1e-6 if radiator_tol is None else radiator_tol
     check_options(loaded, method=method, device=device, total=total, save_field=save_field,
                   samples_per_wavelength=samples_per_wavelength, edges=edges, fresnel=fresnel,
                   radiator=radiator, radiator_tol=radiator_tol)
     from raysim.dataset.run import MAX_THREADS, MAX_WORKERS
     from raysim.errors import RaysimError
+
+    if given_radiator and method not in ("po", "po+ptd"):
+        raise RaysimError("--radiator and --radiator-tol apply to --method po and po+ptd only")
 
     for name, value, hi in (("--workers", workers, MAX_WORKERS), ("--threads", threads, MAX_THREADS)):
         if value is not None and not 1 <= value <= hi:  # 0 is a count, not "off"
