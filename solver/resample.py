@@ -64,14 +64,16 @@ def check_full_circle(sphere: SphereGrid) -> None:
         raise FieldMapError("the scan must cover the full circle in phi (0..360 deg)")
 
 
-def fill_missing(values: NDArray[np.float64], n_rows: int) -> tuple[NDArray[np.float64], int]:
+def fill_missing(values: NDArray[np.float64], n_rows: int,
+                 pole: bool = True) -> tuple[NDArray[np.float64], int]:
     """Fill NaN samples of the first ``n_rows`` rows so the field's Laplacian is least there.
 
     The hole values minimise the sum of squares of the 5-point (theta, phi) Laplacian over
     every stencil that touches a hole (a discrete biharmonic fill, exact for discrete-harmonic
-    fields; the last row uses a one-sided theta difference). Periodic in phi; across the pole
-    the theta neighbour of row 0 at phi is row 0 at phi + pi. Returns the filled copy and the
-    number of samples filled.
+    fields; the last row uses a one-sided theta difference). Periodic in phi; with ``pole``
+    (row 0 half a step from the pole) the theta neighbour of row 0 at phi is row 0 at
+    phi + pi, else row 0 has no stencil of its own. Returns the filled copy and the number of
+    samples filled.
     """
     out = np.array(values, dtype=np.float64, copy=True)
     block = out[:n_rows]
@@ -83,7 +85,7 @@ def fill_missing(values: NDArray[np.float64], n_rows: int) -> tuple[NDArray[np.f
         raise FieldMapError("more than half of the samples inside the rim image are missing")
     n_t, n_p = block.shape
     cell = np.arange(n_t * n_p).reshape(n_t, n_p)
-    up = np.roll(cell[:1], n_p // 2, axis=1) if n_p % 2 == 0 else None
+    up = np.roll(cell[:1], n_p // 2, axis=1) if pole and n_p % 2 == 0 else None
     centre = cell[: n_t - 1] if up is not None else cell[1: n_t - 1]
     t0 = 0 if up is not None else 1
     rows_t = np.arange(t0, n_t - 1)
@@ -155,19 +157,20 @@ def sphere_to_aperture(values: NDArray[np.float64], sphere: SphereGrid, aperture
     """Resample sphere samples (n_theta, n_phi) onto the aperture grid (N, N), NaN outside.
 
     ``values`` is any smooth quantity on the sphere (here FA); F and D in m. A scan that
-    starts at theta_min > 0 leaves the polar cap without data: its rows count as missing
-    samples, filled like any hole (:func:`fill_missing`), and ``Coverage.n_filled`` includes
-    them (``n_rows`` stays the scan's own rows).
+    starts at theta_min > 0 leaves the polar cap without data: it is filled like any hole
+    (:func:`fill_missing`, on rows aligned to the pole by :func:`from_the_pole`), and
+    ``Coverage.n_filled`` counts the cap's whole rows of the scan's step (``n_rows`` stays
+    the scan's own rows).
     """
     check_full_circle(sphere)
-    cap = cap_rows(sphere)
-    if cap:  # the cap's rows on the scan's own step; a part-step offset may stay at the pole
-        values = np.concatenate([np.full((cap, sphere.n_phi), np.nan), values], axis=0)
-        sphere = SphereGrid(sphere.radius, sphere.n_theta + cap, sphere.n_phi,
-                            max(sphere.theta_min - cap * sphere.dtheta, 0.0), sphere.theta_max,
-                            sphere.phi_min, sphere.phi_max)
-    n_rows = usable_rows(sphere, F, D)
-    filled, n_filled = fill_missing(values, n_rows)
+    n_scan_rows = usable_rows(sphere, F, D)
+    theta_last = float(sphere.theta[n_scan_rows - 1])
+    n_filled = (int(np.count_nonzero(~np.isfinite(values[:n_scan_rows])))
+                + cap_rows(sphere) * sphere.n_phi)
+    n_rows = n_scan_rows
+    if sphere.theta_min > 1e-12:
+        values, sphere, n_rows = from_the_pole(values, sphere, n_rows)
+    filled, _ = fill_missing(values, n_rows)
     table = extend_rows(filled, n_rows)
     padded = _pad(table, sphere)
     mask = aperture.mask
@@ -177,8 +180,38 @@ def sphere_to_aperture(values: NDArray[np.float64], sphere: SphereGrid, aperture
     ip = (phi - sphere.phi[0]) / sphere.dphi + PAD
     out = np.full((aperture.N, aperture.N), np.nan)
     out[mask] = map_coordinates(padded, [it, ip], order=3, mode="nearest", prefilter=True)
-    coverage = Coverage(n_rows - cap, float(sphere.theta[n_rows - 1]), n_filled, theta_rim(D, F))
+    coverage = Coverage(n_scan_rows, theta_last, n_filled, theta_rim(D, F))
     return out, coverage
+
+
+def from_the_pole(values: NDArray[np.float64], sphere: SphereGrid,
+                  n_rows: int) -> tuple[NDArray[np.float64], SphereGrid, int]:
+    """The first ``n_rows`` rows of a scan that starts at theta_min > 0, on rows of its own
+    theta step that start half a step from the pole, with the polar cap's rows NaN (holes
+    for :func:`fill_missing`, whose pole stencil and the spline's continuation across the
+    pole both need row 0 half a step from it). Returns the values, their grid and row count.
+
+    A start a whole number of steps from the pole keeps the scan's samples as they are. Any
+    other start is moved onto the aligned rows by a cubic spline in theta, after its own
+    holes are filled without the pole (one more cap row then covers the part step).
+    """
+    step, n_phi = sphere.dtheta, sphere.n_phi
+    offset = sphere.theta_min / step          # the scan's first edge, in steps from the pole
+    cap = cap_rows(sphere)
+    if abs(offset - cap) < 1e-6:
+        rows = values[:n_rows]
+    else:
+        from scipy.interpolate import CubicSpline
+
+        own, _ = fill_missing(values, n_rows, pole=False)
+        # aligned row j sits at (j + 1/2) steps, the scan's row i at offset + i + 1/2
+        j = np.arange(cap + 1, int(np.floor(offset + n_rows - 1 + 1e-9)) + 1)
+        rows = CubicSpline(np.arange(n_rows), own[:n_rows], axis=0)(j - offset)
+        cap += 1
+    out = np.concatenate([np.full((cap, n_phi), np.nan), rows], axis=0)
+    aligned = SphereGrid(sphere.radius, out.shape[0], n_phi, 0.0, out.shape[0] * step,
+                         sphere.phi_min, sphere.phi_max)
+    return out, aligned, out.shape[0]
 
 
 def cap_rows(sphere: SphereGrid) -> int:

@@ -75,11 +75,13 @@ def test_partial_scans_are_refused():
         usable_rows(SphereGrid(R, 60, 360, theta_max=np.radians(60.0)), F, D)
 
 
-@pytest.mark.parametrize(("theta_min_deg", "cap_limit"), [(4.0, 1e-3), (10.0, 2e-2), (4.5, 6e-2)])
+@pytest.mark.parametrize(("theta_min_deg", "cap_limit"),
+                         [(4.0, 1e-3), (10.0, 2e-2), (4.5, 1e-3), (7.9, 1e-2), (2.7, 1e-3)])
 def test_a_scan_that_starts_short_of_the_pole_has_its_cap_filled_and_counted(theta_min_deg, cap_limit):
-    # rows of the scan's own 1 deg step fill the cap as missing samples (4.5 deg: a half-step
-    # offset stays at the pole, so the fill's pole stencil is only approximate there); a cap
-    # held at its first row's values, as before, erred by 0.2 to 0.6 in the cap
+    # rows of the scan's own step (about 1 deg) fill the cap as missing samples; 4.5, 7.9 and
+    # 2.7 deg start part of a step from the pole (their step is not 1 deg either), so the
+    # rows are first moved onto ones half a step from it. A cap held at its first row's
+    # values erred by 0.2 to 0.6 in the cap; one left part of a step off the pole, by 0.026
     sphere = SphereGrid(R, 90 - int(theta_min_deg), 360, np.radians(theta_min_deg), np.pi / 2)
     grid = ApertureGrid(D, 128)
     got, coverage = sphere_to_aperture(sampled(sphere), sphere, grid, F, D)
@@ -88,5 +90,5 @@ def test_a_scan_that_starts_short_of_the_pole_has_its_cap_filled_and_counted(the
     error = np.abs(got - smooth(*grid.XY))
     r_cap = 2 * F * np.tan(np.radians(theta_min_deg) / 2)
     cap = grid.mask & (grid.r < r_cap)
-    assert cap.sum() > 20 and np.max(error[cap]) < cap_limit
+    assert cap.sum() > 8 and np.max(error[cap]) < cap_limit
     assert np.max(error[grid.mask & (grid.r > r_cap + 1.0) & (grid.r < 45.0)]) < 1e-4
