@@ -13,6 +13,8 @@ at the FieldMap's threshold): blocked cells carry no data. ``raysim budget`` pri
 from __future__ import annotations
 
 import math
+import numbers
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,9 +49,16 @@ def parse_levels(text: str) -> list[float]:
         levels = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
         raise SolverError(f"--noise-db must be numbers separated by commas, got {text!r}") from None
-    if not levels or any(not 0.0 < v <= 10.0 or not math.isfinite(v) for v in levels):
-        raise SolverError(f"--noise-db values must lie in (0, 10] dB, got {text!r}")
+    check_levels(levels, repr(text))
     return levels
+
+
+def check_levels(levels: Sequence[float], shown: str) -> None:
+    """Refuse noise levels (dB per reading) that are not numbers in (0, 10]."""
+    if (isinstance(levels, str | bytes) or not levels
+            or any(isinstance(v, bool) or not isinstance(v, numbers.Real)
+                   or not (math.isfinite(v) and 0.0 < v <= 10.0) for v in levels)):
+        raise SolverError(f"--noise-db values must lie in (0, 10] dB, got {shown}")
 
 
 def budget_rows(plan: ScanPlan | str | Path, levels: list[float], readings: int | None = None,
@@ -61,12 +70,13 @@ def budget_rows(plan: ScanPlan | str | Path, levels: list[float], readings: int 
     targets (0: none) of std ``rim_std`` (m); ``refine``: the map is model-refined (its
     delta_c is the refocus), else linear; ``target`` (m): the RMS to reach.
     """
+    check_levels(levels, repr(levels))  # -0.01 dB gave the budget of +0.01, nan a nan total
     plan = plan if isinstance(plan, ScanPlan) else load_plan(plan)
     k = plan.samples_per_point if readings is None else readings
-    if not 1 <= k <= MAX_READINGS:
-        raise SolverError(f"--readings must be an integer in 1..{MAX_READINGS}, got {k}")
-    if rim and rim < 8:
-        raise SolverError(f"--rim needs at least 8 targets (or 0 for none), got {rim}")
+    if isinstance(k, bool) or not isinstance(k, numbers.Integral) or not 1 <= k <= MAX_READINGS:
+        raise SolverError(f"--readings must be an integer in 1..{MAX_READINGS}, got {k!r}")
+    if isinstance(rim, bool) or not isinstance(rim, numbers.Integral) or (rim and not 8 <= rim):
+        raise SolverError(f"--rim needs at least 8 targets (or 0 for none), got {rim!r}")
     if not 0.0 <= rim_std <= 1e-2:
         raise SolverError(f"--rim-std-um must lie in 0..10000 um, got {rim_std * 1e6:g}")
     if target is not None and not 0.0 < target <= 1e-2:
