@@ -15,14 +15,16 @@ import csv
 import io
 import json
 import math
+import numbers
 import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from raysim.errors import RaysimError
+from raysim.errors import RaysimError, SceneError
 from raysim.files import write_text
+from raysim.scene.scene import check_frequency
 from solver import surface
 from solver.actuators import DEFAULT_SCREWS, ActuatorLayout, corners_layout, read_actuators, screws_layout
 from solver.correction import Correction, correct, ruze, zernike_fit
@@ -107,11 +109,18 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
     module). ``stroke`` (m) bounds every generated actuator to [-stroke, stroke]."""
     if unit not in UNITS:
         raise SolverError(f"unknown --unit {unit!r}: choose {', '.join(UNITS)}")
-    if not 0 <= zernike_order <= 20:
-        raise SolverError(f"--zernike-order must be 0..20, got {zernike_order}")
-    freqs = tuple(float(f) for f in frequencies)
-    if any(not (f > 0 and math.isfinite(f)) for f in freqs):
-        raise SolverError("--frequency must be a finite number > 0 Hz")
+    if (isinstance(zernike_order, bool) or not isinstance(zernike_order, numbers.Integral)
+            or not 0 <= zernike_order <= 20):
+        raise SolverError(f"--zernike-order must be an integer in 0..20, got {zernike_order!r}")
+    try:
+        freqs = tuple(float(f) for f in np.atleast_1d(np.asarray(frequencies, dtype=np.float64)))
+    except (TypeError, ValueError):
+        raise SolverError(f"--frequency must be numbers in Hz, got {frequencies!r}") from None
+    for f in freqs:  # 43 (GHz meant) gave "Ruze 1.00000 -> 1.00000" without a word
+        try:
+            check_frequency(f, "--frequency")
+        except SceneError as exc:
+            raise SolverError(str(exc)) from None
     if stroke is not None and not (stroke > 0 and math.isfinite(stroke)):
         raise SolverError("--stroke must be a finite number > 0")
     if stroke is not None and actuators is not None:

@@ -434,6 +434,14 @@ def test_options_that_cannot_apply_are_refused(tmp_path):
         run_correct(path, tmp_path / "out", actuators=acts, stroke=1e-5)
     with pytest.raises(SolverError, match="finite"):
         run_correct(path, tmp_path / "out", frequencies=[float("inf")])
+    # GHz meant, or past any radio telescope: Ruze 1.00000 -> 1.00000 or 0.00000 was printed
+    with pytest.raises(SolverError, match="is in Hz"):
+        run_correct(path, tmp_path / "out", frequencies=[43.0])
+    with pytest.raises(SolverError, match="10 THz"):
+        run_correct(path, tmp_path / "out", frequencies=[43e12])
+    with pytest.raises(SolverError, match="integer in 0..20"):
+        run_correct(path, tmp_path / "out", zernike_order=4.5)
+    assert not (tmp_path / "out").exists()
     with pytest.raises(ActuatorError, match="give 1 to 6"):
         screws_layout(LAYOUT, ((0.1, 0.1),) * 7)
 
