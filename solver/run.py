@@ -15,6 +15,7 @@ from pathlib import Path
 import xarray as xr
 
 from raysim.errors import RaysimError
+from raysim.files import check_output
 from raysim.maps.fieldmap import load as load_fieldmap
 from raysim.progress import Progress
 from solver import boundary, surface
@@ -51,6 +52,10 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
     and ``radiator``, ``radiator_tol`` as :func:`solver.invert.invert`. Nothing is
     written when an input is bad.
     """
+    inputs = [("FieldMap", field_path), ("rim-target file", rim_csv)]
+    check_output(output, inputs)
+    if panels_csv is not None:
+        check_output(panels_csv, [*inputs, ("SurfaceMap output", output)])
     field = load_fieldmap(field_path)
     rim = boundary.read_rim_csv(rim_csv) if rim_csv is not None else None
     layout = None

@@ -118,3 +118,25 @@ def test_paper_po_sweep_reproduces_table3_at_0p1_ghz_and_keeps_its_fieldmap(monk
 def test_paper_po_rejects_bad_frequencies(monkeypatch, capsys):
     code, _, err = run(monkeypatch, capsys, "paper", "--po", "--frequencies", "0.1e9,abc")
     assert code == 2 and err.count("\n") == 1 and "--frequencies" in err
+
+
+def test_run_invert_from_python_refuses_to_write_over_its_inputs(tmp_path, field_file):
+    """The API writes nothing over its inputs either (it replaced the FieldMap with a
+    SurfaceMap, and the rim CSV with NetCDF, where the CLI refused)."""
+    import shutil
+
+    from raysim.errors import RaysimError
+    from solver.run import run_invert
+
+    field = shutil.copy(field_file, tmp_path / "in.nc")
+    rim = tmp_path / "rim.csv"
+    rim.write_text("x,y,dz\n" + "\n".join(f"{55 * np.cos(p):.4f},{55 * np.sin(p):.4f},0.0"
+                                           for p in np.linspace(0, 6, 8)) + "\n")
+    before = {p: p.read_bytes() for p in (tmp_path / "in.nc", rim)}
+    for output, extra in ((field, {}), (rim, {"rim_csv": rim}),
+                          (tmp_path / "s.nc", {"panels_csv": field}),
+                          (tmp_path / "s.nc", {"panels_csv": tmp_path / "s.nc"})):
+        with pytest.raises(RaysimError, match="would destroy the input"):
+            run_invert(field, output, N=32, refine=0, **extra)
+    assert {p: p.read_bytes() for p in before} == before
+    assert not (tmp_path / "s.nc").exists()
