@@ -22,10 +22,12 @@ GAIN_MODES = ("auto", "known", "power", "none")  # solver.gainmode says what eac
 
 
 def intensity_ratio_fa(intensity: ArrayLike, intensity_ideal: ArrayLike) -> NDArray[np.float64]:
-    """FA = I_ideal / I_def - 1 (dimensionless); NaN where a sample is missing or I_def <= 0."""
+    """FA = I_ideal / I_def - 1 (dimensionless); NaN (a missing sample) where either intensity
+    is missing or not positive: a cell the ideal reflector leaves dark has no ratio to invert
+    (FA = -1 there read as a deep bump)."""
     i_def = np.asarray(intensity, dtype=np.float64)
     i_ideal = np.asarray(intensity_ideal, dtype=np.float64)
-    good = np.isfinite(i_def) & np.isfinite(i_ideal) & (i_def > 0)
+    good = np.isfinite(i_def) & np.isfinite(i_ideal) & (i_def > 0) & (i_ideal > 0)
     out = np.full(np.broadcast(i_def, i_ideal).shape, np.nan)
     np.divide(i_ideal, i_def, out=out, where=good)
     return np.where(good, out - 1.0, np.nan)

@@ -24,6 +24,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
+from raysim.errors import FieldMapError
 from raysim.maps.surfacemap import surfacemap
 from raysim.progress import Progress
 from solver import boundary
@@ -134,6 +135,9 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         uncertainty_samples=uncertainty_samples, seed=seed, max_harmonics=max_harmonics,
         model=model, weights=weights, refine_method=refine_method, gauss_newton=gauss_newton,
         radiator=radiator, radiator_tol=radiator_tol)
+    if not isinstance(field, xr.Dataset):  # a path or a DataArray failed deep in xarray
+        raise FieldMapError(f"invert takes a FieldMap, an xarray.Dataset (raysim.load_fieldmap("
+                            f"path) reads one), not {type(field).__name__}")
     scan = Scan.from_fieldmap(field)
     grid = solver_grid(scan.D, opts.N)
     if opts.rim is not None:

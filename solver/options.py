@@ -24,6 +24,7 @@ from solver.poisson import SOLVERS
 MAX_N = 4096  # aperture grid points across D: 16.8 million unknowns, about 2 GB per solve
 MAX_REFINE = 50
 MAX_ITERATIONS = 1_000_000
+MAX_UNCERTAINTY_SAMPLES = 10_000  # each draw is one more linear solve
 DEFAULT_SOLVER = "multigrid"
 DEFAULT_N = 256
 DEFAULT_REFINE = 3
@@ -33,6 +34,12 @@ WEIGHTS = ("auto", "amplitude", "none")
 def _integer(name: str, value: object, lo: int, hi: int) -> None:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not lo <= value <= hi:
         raise SolverError(f"{name} must be an integer in {lo}..{hi}, got {value!r}")
+
+
+def _real_in(name: str, value: object, lo: float, hi: float) -> None:
+    """Refuse anything but a real number strictly between ``lo`` and ``hi``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not lo < value < hi:
+        raise SolverError(f"{name} must be a number strictly between {lo:g} and {hi:g}, got {value!r}")
 
 
 def check_options(*, solver: str | None = None, N: int | None = None, refine: int | None = None,
@@ -104,6 +111,14 @@ class InvertOptions:
                       radiator_tol=self.radiator_tol)
         if self.weights not in WEIGHTS:
             raise SolverError(f"unknown weights {self.weights!r}: choose one of {', '.join(WEIGHTS)}")
+        # a tolerance <= 0 left multigrid all NaN, NaN or >= 1 stopped at the zero start, and
+        # an SOR factor outside (0, 2) diverges or never moves
+        _real_in("the solver's relative tolerance (tol)", self.tol, 0.0, 1.0)
+        if self.omega is not None:
+            _real_in("the SOR relaxation factor (omega)", self.omega, 0.0, 2.0)
+        _integer("the uncertainty's Monte Carlo draws (uncertainty_samples)",
+                 self.uncertainty_samples, 0, MAX_UNCERTAINTY_SAMPLES)
+        _integer("the random seed (seed)", self.seed, 0, 2**63 - 1)
         if self.rim is not None and self.solver == "fft":
             raise SolverError("the fft solver works on the enclosing square and cannot use rim "
                               "targets; choose direct, multigrid, sor or gauss-seidel")

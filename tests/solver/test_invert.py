@@ -88,6 +88,13 @@ def test_missing_samples_are_filled_and_reported(paper_field):
     got = linear(holed, paper_delta)
     assert got.attrs["samples_missing"] == int(holes[:79].sum())
     assert abs(got.attrs["rrms"] - clean.attrs["rrms"]) < 0.003
+    # a cell the ideal reflector leaves dark is a missing sample too (its FA of -1, a deep
+    # bump, took the map's peak-to-peak from 1.8 to 10 mm for one such cell)
+    dark = paper_field.copy(deep=True)
+    dark["intensity_ideal"].values[holes] = 0.0
+    got = linear(dark, paper_delta)
+    assert got.attrs["samples_missing"] == int(holes[:79].sum())
+    assert abs(got.attrs["rrms"] - clean.attrs["rrms"]) < 0.003
 
 
 def test_rim_targets_fix_the_unobservable_harmonic_part(harmonic_field):
@@ -145,6 +152,22 @@ def test_bad_requests_raise_specific_errors(paper_field):
         invert(paper_field.drop_vars("intensity_ideal"))
     with pytest.raises(SolverError, match="off axis"):
         invert(paper_field.assign_attrs(incidence_theta=np.radians(2.0)))
+    for not_a_fieldmap in ("f.nc", paper_field.intensity, {}):
+        with pytest.raises(FieldMapError, match="invert takes a FieldMap"):
+            invert(not_a_fieldmap)
+    # no ideal power in any cell: a 4 m map came back (the truth peaks at 1.2 mm)
+    with pytest.raises(FieldMapError, match="missing"):
+        invert(paper_field.assign(intensity_ideal=paper_field.intensity_ideal * 0), refine_iterations=0)
+    # each of these returned a map (all NaN, all zero, or 1e60 m) without a word
+    for bad, says in (({"tol": -1.0}, "tolerance"), ({"tol": float("nan")}, "tolerance"),
+                      ({"tol": 10.0}, "tolerance"), ({"tol": "1e-10"}, "tolerance"),
+                      ({"solver": "sor", "omega": -1.0}, "relaxation"),
+                      ({"solver": "sor", "omega": 0.0}, "relaxation"),
+                      ({"solver": "sor", "omega": 2.0}, "relaxation"),
+                      ({"seed": -1}, "seed"), ({"seed": 1.5}, "seed"),
+                      ({"uncertainty_samples": "3"}, "Monte Carlo")):
+        with pytest.raises(SolverError, match=says):
+            invert(paper_field, refine_iterations=0, **bad)
 
 
 def test_options_object_gives_the_keywords_answer_and_checks_itself(paper_field):
