@@ -33,7 +33,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from raysim.errors import RaysimError
+from raysim.errors import RaysimError, SceneError
 from raysim.maps.fieldmap import fieldmap
 from raysim.methods import METHODS, WAVE_METHODS
 from raysim.optics import go
@@ -223,6 +223,9 @@ def check_method(scene: Scene, method: str | None, options: Options,
                  device: str | None = None) -> str:
     """The method to run (``method``, else the scene's), its options and ``device`` (when
     given) checked before any work; raises RaysimError with one line."""
+    if not isinstance(scene, Scene):  # a path failed deep in the mesh code
+        raise SceneError(f"simulate takes a Scene (raysim.load_scene(path) reads one), not "
+                          f"{type(scene).__name__}")
     method = scene.method if method is None else method
     if method not in ENGINES:
         raise RaysimError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")

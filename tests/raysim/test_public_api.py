@@ -30,3 +30,15 @@ def test_simulate_is_callable_twice_in_a_fresh_interpreter():
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "ok (6, 12)"
+
+
+def test_simulate_given_a_path_instead_of_a_scene_says_what_it_takes():
+    """raysim.simulate("scene.toml") failed with an AttributeError deep in the mesh code."""
+    import pytest
+
+    import raysim
+    from raysim.errors import SceneError
+
+    for not_a_scene in ("paper_go", None):
+        with pytest.raises(SceneError, match=r"simulate takes a Scene \(raysim.load_scene"):
+            raysim.simulate(not_a_scene)
