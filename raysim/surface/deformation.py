@@ -145,14 +145,90 @@ def paper_peak_to_peak(D: float, F: float) -> float:
     return float(profile.max() - profile.min())
 
 
+#: highest radial order n a Zernike term may have. The radial polynomials are evaluated stably
+#: to far beyond it (see :func:`zernike_radial`), but a term of order n has about n / 2 radial
+#: zero crossings, mostly near the rim: at n = 100 they lie centimetres apart on a 100 m dish,
+#: finer than the aperture grids (256 points over the diameter) or the probe grid of one scan
+#: can resolve, so a higher order is a typing mistake rather than a surface.
+MAX_ZERNIKE_ORDER = 100
+
+
 @lru_cache(maxsize=512)
 def radial_coefficients(n: int, m: int) -> tuple[tuple[int, float], ...]:
-    """(power, coefficient) pairs of the Zernike radial polynomial R_n^|m|(rho)."""
+    """(power, coefficient) pairs of the Zernike radial polynomial R_n^|m|(rho), the explicit
+    factorial sum. For reference only: summed in floating point it loses every digit to
+    cancellation from n ~ 40 on (its coefficients reach 1e17 at n = 60); :func:`zernike_radial`
+    is what the deformations evaluate."""
     m = abs(m)
     return tuple(
         (n - 2 * s, (-1) ** s * math.factorial(n - s)
          / (math.factorial(s) * math.factorial((n + m) // 2 - s) * math.factorial((n - m) // 2 - s)))
         for s in range((n - m) // 2 + 1))
+
+
+def _radial_family(m: int, k_max: int, rho: Array, gradient: bool) -> Iterator[tuple[Array, Array | None]]:
+    """For k = 0 .. ``k_max``: Q = R_{m+2k}^m(rho) / rho^m and, with ``gradient``, dQ/dx at
+    x = 1 - 2 rho^2 (else None), by the three-term recurrence of the Jacobi polynomials
+    (Q_k = (-1)^k P_k^(m,0)(x)), which is stable for rho <= 1 at any order, unlike the explicit
+    sum."""
+    a = float(m)
+    x = 1.0 - 2.0 * rho * rho
+    q_prev, dq_prev = np.ones_like(rho), np.zeros_like(rho)  # k = 0
+    yield q_prev, (dq_prev if gradient else None)
+    if k_max < 1:
+        return
+    q, dq = -0.5 * ((a + 2.0) * x + a), np.full_like(rho, -0.5 * (a + 2.0))  # k = 1
+    yield q, (dq if gradient else None)
+    for k in range(2, k_max + 1):
+        # 2k(k+a)(2k+a-2) P_k = (2k+a-1)[(2k+a)(2k+a-2) x + a^2] P_{k-1}
+        #                       - 2(k+a-1)(k-1)(2k+a) P_{k-2}, with P_k = (-1)^k Q_k
+        c0 = 2.0 * k * (k + a) * (2 * k + a - 2)
+        b = (2 * k + a - 1) * (2 * k + a) * (2 * k + a - 2) / c0
+        c = (2 * k + a - 1) * a * a / c0
+        d = 2.0 * (k + a - 1) * (k - 1) * (2 * k + a) / c0
+        q_next = -(b * x + c) * q - d * q_prev
+        if gradient:
+            dq, dq_prev = -(b * x + c) * dq - b * q - d * dq_prev, dq
+        q, q_prev = q_next, q
+        yield q, (dq if gradient else None)
+
+
+def _radial_terms(orders: Iterable[tuple[int, int]], rho: Array, gradient: bool
+                  ) -> dict[tuple[int, int], tuple[Array, Array | None, Array | None]]:
+    """(R, dR/drho, R/rho) of R_n^m at ``rho`` for each (n, m >= 0) of ``orders``, one
+    recurrence per m (the derivatives None unless ``gradient``; R/rho is 0 for m = 0, where
+    nothing uses it)."""
+    wanted: dict[int, set[int]] = {}
+    for n, m in orders:
+        wanted.setdefault(m, set()).add((n - m) // 2)
+    out: dict[tuple[int, int], tuple[Array, Array | None, Array | None]] = {}
+    for m, ks in wanted.items():
+        rho_m1 = rho ** (m - 1) if m >= 1 else None
+        rho_m = rho_m1 * rho if rho_m1 is not None else np.ones_like(rho)
+        for k, (q, dq_dx) in enumerate(_radial_family(m, max(ks), rho, gradient)):
+            if k not in ks:
+                continue
+            if not gradient:
+                out[(m + 2 * k, m)] = (rho_m * q, None, None)
+                continue
+            dq = -4.0 * rho * dq_dx  # dQ/drho
+            if rho_m1 is None:
+                out[(2 * k, 0)] = (q, dq, np.zeros_like(rho))
+            else:
+                out[(m + 2 * k, m)] = (rho_m * q, m * rho_m1 * q + rho_m * dq, rho_m1 * q)
+    return out
+
+
+def zernike_radial(n: int, m: int, rho: ArrayLike, gradient: bool = False
+                   ) -> tuple[Array, Array | None, Array | None]:
+    """The Zernike radial polynomial R_n^|m|(rho) (un-normalised, R(1) = 1) at ``rho``
+    (dimensionless, the radius over the disk's), evaluated stably at any order; with
+    ``gradient`` also dR/drho and R/rho (0 for m = 0), else None, None."""
+    m = abs(m)
+    if n < 0 or m > n or (n - m) % 2:
+        raise SceneError(f"Zernike (n={n}, m={m}) does not exist: need |m| <= n, n - |m| even")
+    rho = np.asarray(rho, dtype=np.float64)
+    return _radial_terms([(n, m)], rho, gradient)[(n, m)]
 
 
 def noll_norm(n: int, m: int) -> float:
@@ -166,10 +242,11 @@ class Zernike(Deformation):
     """Zernike terms over the disk of radius ``radius`` (m), Noll-normalised.
 
     ``terms`` holds (n, m, coefficient in metres); m >= 0 takes cos(m phi), m < 0 sin(|m| phi);
-    each term's RMS over the disk equals its coefficient. The powers of rho and the harmonics
-    cos(m phi), sin(m phi) are formed once per call (by recurrence from x / r, y / r) and reused
-    across terms: a spectrum of 25 terms on the 424 000 vertices of the paper's mesh costs tens
-    of milliseconds.
+    each term's RMS over the disk equals its coefficient; n is at most
+    :data:`MAX_ZERNIKE_ORDER`. The radial polynomials (one stable Jacobi recurrence per |m|, see
+    :func:`zernike_radial`) and the harmonics cos(m phi), sin(m phi) are formed once per call (by
+    recurrence from x / r, y / r) and reused across terms: a spectrum of 25 terms on the 424 000
+    vertices of the paper's mesh costs tens of milliseconds.
     """
 
     terms: tuple[tuple[int, int, float], ...]
@@ -179,6 +256,9 @@ class Zernike(Deformation):
         for n, m, _ in self.terms:
             if n < 0 or abs(m) > n or (n - abs(m)) % 2:
                 raise SceneError(f"Zernike (n={n}, m={m}) does not exist: need |m| <= n, n - |m| even")
+            if n > MAX_ZERNIKE_ORDER:
+                raise SceneError(f"Zernike (n={n}, m={m}): radial order n is over "
+                                 f"{MAX_ZERNIKE_ORDER}, finer than a scan resolves")
 
     def factors(self, x, y, gradient: bool) -> Iterator[ZernikeFactors]:
         """Per term, in order, what it contributes at (x, y) before its coefficient: (R(rho),
@@ -189,9 +269,7 @@ class Zernike(Deformation):
         x, y = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64))
         r = np.hypot(x, y)
         rho = r / self.radius
-        powers = [np.ones_like(rho)]
-        for _ in range(max((n for n, _, _ in self.terms), default=0)):
-            powers.append(powers[-1] * rho)
+        radials = _radial_terms({(n, abs(m)) for n, m, _ in self.terms}, rho, gradient)
         safe = np.where(r > 0, r, 1.0)
         c1 = np.where(r > 0, x / safe, 1.0)  # cos(phi); phi = 0 at r = 0
         s1 = np.where(r > 0, y / safe, 0.0)
@@ -199,20 +277,16 @@ class Zernike(Deformation):
         for _ in range(max((abs(m) for _, m, _ in self.terms), default=0)):
             c, s = harmonics[-1]
             harmonics.append((c * c1 - s * s1, s * c1 + c * s1))
-        zero = np.zeros_like(rho)
         for n, m, _ in self.terms:
             am = abs(m)
             c, s = harmonics[am]
             ang, dang = (c, -am * s) if m >= 0 else (s, am * c)
-            radial = radial_coefficients(n, m)
-            R = sum((k * powers[p] for p, k in radial), zero)
+            R, dR, R_over = radials[(n, am)]
             if not gradient:
                 yield R, ang, None, None
                 continue
             # d/dx = cos(phi) d/dr - sin(phi)/r d/dphi, d/dr = (1/radius) d/drho; R/rho is
-            # finite for m >= 1 and unused for m = 0 (dang = 0)
-            dR = sum((k * p * powers[p - 1] for p, k in radial if p >= 1), zero)
-            R_over = sum((k * powers[p - 1] for p, k in radial if p >= 1), zero)
+            # finite for m >= 1 and 0 for m = 0 (where dang = 0)
             yield R, ang, dR * ang * c1 - R_over * dang * s1, dR * ang * s1 + R_over * dang * c1
 
     def evaluate(self, x, y, gradient: bool, factors: Iterable[ZernikeFactors] | None = None):

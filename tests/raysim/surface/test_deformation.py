@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -10,11 +12,13 @@ import xarray as xr
 
 from raysim.errors import SceneError
 from raysim.surface.deformation import (
+    MAX_ZERNIKE_ORDER,
     GaussianBumps,
     PanelRigid,
     PaperDeformation,
     Zernike,
     paper_peak_to_peak,
+    zernike_radial,
 )
 from raysim.surface.gridded import GriddedMap
 from raysim.surface.mapfile import read_map
@@ -94,6 +98,91 @@ def test_zernike_terms_are_noll_normalised_and_orthogonal(n, m):
     assert np.sum(w * a * a) == pytest.approx(1.0, rel=1e-10)
     if (n, m) != (2, 2):
         assert abs(np.sum(w * a * b)) < 1e-10
+
+
+def exact_radial(n: int, m: int, rho: Fraction) -> tuple[Fraction, Fraction, Fraction]:
+    """R_n^m(rho), dR/drho and R/rho (m >= 1; else 0) by the explicit factorial sum, in exact
+    rational arithmetic (no cancellation, whatever the order)."""
+    value, slope, over = Fraction(0), Fraction(0), Fraction(0)
+    for s in range((n - m) // 2 + 1):
+        c = Fraction((-1) ** s * math.factorial(n - s),
+                     math.factorial(s) * math.factorial((n + m) // 2 - s)
+                     * math.factorial((n - m) // 2 - s))
+        p = n - 2 * s
+        value += c * rho**p
+        if p:
+            slope += c * p * rho ** (p - 1)
+            over += c * rho ** (p - 1) if m else 0
+    return value, slope, over
+
+
+def test_zernike_radial_matches_exact_rational_sums_at_low_order():
+    rhos = [Fraction(k, 16) for k in range(17)] + [Fraction(9, 7)]  # the disk and beyond its rim
+    x = np.array([float(r) for r in rhos])
+    for n in range(13):
+        for m in range(n % 2, n + 1, 2):
+            R, dR, R_over = zernike_radial(n, m, x, gradient=True)
+            exact = [exact_radial(n, m, r) for r in rhos]
+            want, want_slope, want_over = (np.array([float(e[i]) for e in exact]) for i in range(3))
+            assert np.allclose(R, want, rtol=1e-12, atol=1e-12), (n, m)
+            assert np.allclose(dR, want_slope, rtol=1e-12, atol=1e-12), (n, m)
+            # R / rho, finite at the centre for m >= 1 (and 0 for m = 0, where nothing uses it)
+            assert np.allclose(R_over, want_over, rtol=1e-12, atol=1e-12), (n, m)
+
+
+@pytest.mark.parametrize(("n", "m"), [(44, 0), (60, 0), (61, 3), (80, 20), (100, 0), (100, 98)])
+def test_zernike_radial_stays_accurate_at_high_order(n, m):
+    # the explicit sum in floating point loses every digit here; exact fractions do not
+    rhos = [Fraction(k, 40) for k in range(41)]
+    R, dR, _ = zernike_radial(n, m, np.array([float(r) for r in rhos]), gradient=True)
+    exact = [exact_radial(n, m, r) for r in rhos]
+    assert np.allclose(R, [float(e[0]) for e in exact], rtol=0, atol=1e-11)
+    assert np.allclose(dR, [float(e[1]) for e in exact], rtol=0, atol=1e-11 * n * n)
+
+
+def test_zernike_radial_is_one_on_the_rim_and_bounded_inside():
+    rho = np.linspace(0.0, 1.0, 2001)
+    for n in range(MAX_ZERNIKE_ORDER + 1):
+        for m in range(n % 2, n + 1, 2):
+            R = zernike_radial(n, m, rho)[0]
+            assert R[-1] == pytest.approx(1.0, abs=1e-12), (n, m)
+            assert np.abs(R).max() <= 1.0 + 1e-12, (n, m)  # |R_n^m| <= 1 on the unit disk
+
+
+@pytest.mark.parametrize("m", [0, 1, 7, 20])
+def test_zernike_radial_polynomials_are_orthogonal_at_high_order(m):
+    # int_0^1 R_n^m R_k^m rho drho = delta_nk / (2 (n + 1)), Gauss-Legendre exact to degree 319
+    t, w = np.polynomial.legendre.leggauss(160)
+    rho, w = 0.5 * (t + 1.0), 0.5 * w
+    orders = [n for n in range(m, MAX_ZERNIKE_ORDER + 1, 2) if n >= 60]
+    table = np.array([zernike_radial(n, m, rho)[0] for n in orders])
+    gram = (table * (w * rho)) @ table.T
+    want = np.diag([1.0 / (2 * (n + 1)) for n in orders])
+    assert np.abs(gram - want).max() < 1e-13
+
+
+def test_high_order_zernike_term_keeps_its_size_and_slopes():
+    # the QA case: 1 um of Z(60, 0) peaks at sqrt(61) um (Noll norm, |R| <= 1), not metres
+    z = Zernike(((60, 0, 1e-6),), 55.0)
+    x, y = aperture_grid()
+    assert np.abs(z(x, y)).max() <= math.sqrt(61) * 1e-6 * (1 + 1e-12)
+    assert z(np.array([55.0]), np.array([0.0]))[0] == pytest.approx(math.sqrt(61) * 1e-6, rel=1e-12)
+    # slopes of high-order terms against central differences, inside the disk
+    z = Zernike(((60, 4, 1e-6), (61, -3, 2e-6), (100, 0, 1e-7)), 55.0)
+    rng = np.random.default_rng(4)
+    r, phi = 55.0 * np.sqrt(rng.uniform(0, 0.99, 500)), rng.uniform(0, 2 * np.pi, 500)
+    x, y = r * np.cos(phi), r * np.sin(phi)
+    gx, gy = z.gradient(x, y)
+    fx, fy = central_difference(z, x, y, h=1e-4)
+    scale = max(np.abs(fx).max(), np.abs(fy).max())
+    assert np.abs(gx - fx).max() < 1e-6 * scale and np.abs(gy - fy).max() < 1e-6 * scale
+
+
+def test_zernike_order_beyond_the_bound_is_refused():
+    Zernike(((MAX_ZERNIKE_ORDER, 0, 1e-6),), 55.0)
+    with pytest.raises(SceneError, match=rf"radial order n is over {MAX_ZERNIKE_ORDER}") as info:
+        Zernike(((MAX_ZERNIKE_ORDER + 2, 0, 1e-6),), 55.0)
+    assert "\n" not in str(info.value)
 
 
 def test_panel_rigid_is_a_plane_per_panel_and_zero_in_gaps():
