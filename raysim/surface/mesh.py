@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from raysim.errors import MeshError
+from raysim.errors import MeshError, SceneError
 from raysim.surface.deformation import Deformation, NoDeformation
 from raysim.surface.obstacles import ObstacleMesh, obstacle_mesh
 from raysim.surface.panels import PanelLayout
@@ -440,13 +440,50 @@ def _check_sphere(sphere, ideal: Reflector, path) -> None:
                         "see no reflection")
 
 
+#: a scene's ``focal_length_m`` may override a mesh's fitted F on purpose (docs/howto/own-mesh.md),
+#: but not so far that the mesh departs from the paraboloid it then names by more than this
+#: fraction of the dish's depth D^2 / (16 F) RMS: the bound ``raysim check`` puts on a mesh
+MAX_DEPARTURE_OF_DEPTH = 0.02
+#: a scene's ``diameter_m`` must match the mesh's D (twice its outermost vertex's radius from
+#: the fitted axis) to this fraction: D is measured from the mesh, never set
+DIAMETER_TOLERANCE = 0.01
+
+
+def check_stated_dish(path: str | Path, loaded: Reflector, fit: ParaboloidFit,
+                      stated_D: float | None, stated_F: float | None) -> None:
+    """Refuse (:class:`~raysim.errors.SceneError`, one line naming both values) a scene's
+    ``diameter_m`` (m) that differs from the mesh's D by more than :data:`DIAMETER_TOLERANCE`,
+    or a ``focal_length_m`` (m) from which the mesh ``loaded`` (vertex-fitted to it, ``fit``)
+    departs by more than :data:`MAX_DEPARTURE_OF_DEPTH` of the dish's depth RMS."""
+    D = float(loaded.D)
+    if stated_D is not None and abs(stated_D - D) > DIAMETER_TOLERANCE * D:
+        raise SceneError(f"{path}: 'dish.diameter_m' = {stated_D:g} m contradicts the mesh, which "
+                         f"is D = {D:.4g} m across (twice its outermost vertex's radius; they must "
+                         f"agree to {100 * DIAMETER_TOLERANCE:g} %)")
+    if stated_F is not None:
+        depth = D * D / (16.0 * stated_F)
+        if fit.rms > MAX_DEPARTURE_OF_DEPTH * depth:
+            try:
+                own = f"{fit_paraboloid(loaded.vertices).F:.4g} m"
+            except MeshError:
+                own = "none (no paraboloid fits)"
+            raise SceneError(f"{path}: 'dish.focal_length_m' = {stated_F:g} m contradicts the mesh, "
+                             f"whose best-fit paraboloid has F = {own}: the mesh departs "
+                             f"{fit.rms:.3g} m RMS from the paraboloid of F = {stated_F:g} m "
+                             f"({100 * fit.rms / depth:.0f} % of the dish's depth, at most "
+                             f"{100 * MAX_DEPARTURE_OF_DEPTH:g} %)")
+
+
 def reflectors_for(scene) -> tuple[Reflector, Reflector]:
     """The (ideal, deformed) reflector pair a :class:`~raysim.scene.scene.Scene` describes, both
-    with the scene's obstacles (built on the reflector's focal length)."""
+    with the scene's obstacles (built on the reflector's focal length). A mesh's D and F are
+    checked against the scene's ``diameter_m`` and ``focal_length_m`` where it states them
+    (:func:`check_stated_dish`)."""
     dish = scene.dish
     specs = getattr(scene, "obstacles", ())
     if dish.mesh is not None:
-        ideal, loaded, _ = load_reflector(dish.mesh, dish.mesh_unit, dish.focal_length, dish.ideal_mesh)
+        ideal, loaded, fit = load_reflector(dish.mesh, dish.mesh_unit, dish.focal_length, dish.ideal_mesh)
+        check_stated_dish(dish.mesh, loaded, fit, getattr(dish, "diameter", None), dish.focal_length)
         _check_sphere(scene.sphere, ideal, dish.mesh)
         obstacles = obstacle_mesh(specs, ideal.F)
         if obstacles is not None:

@@ -223,3 +223,54 @@ def test_a_mesh_scene_gets_the_sphere_checks_once_its_dish_is_fitted(tmp_path: P
     # the rim image of D = 20 m, F = 8 m: 2 atan(20 / 32) = 64.0 deg
     with pytest.raises(MeshError, match="beyond the fitted dish's rim image at 64.01 deg"):
         reflectors_for(Scene(SphereGrid(2.0, 10, 20, np.radians(65.0), np.radians(80.0))))
+
+
+@pytest.fixture(scope="module")
+def mesh_scene_text(tmp_path_factory):
+    """A scene naming a D = 10 m, F = 3 m paraboloid mesh, with ``{dish}`` for the extra keys."""
+    folder = tmp_path_factory.mktemp("mesh_scene")
+    paraboloid(10.0, 3.0, 0.4).mesh.export(folder / "dish.ply")
+    text = ('[dish]\nmesh = "dish.ply"\n{dish}\n[source]\nfrequency_hz = 1e10\n'
+            "[sphere]\nradius_m = 1.0\nn_theta = 6\nn_phi = 12\n")
+    return folder, text
+
+
+def mesh_reflectors(mesh_scene_text, dish: str):
+    from raysim.scene.scene import parse_scene
+    from raysim.surface.mesh import reflectors_for
+
+    folder, text = mesh_scene_text
+    return reflectors_for(parse_scene(text.format(dish=dish), source="t.toml", base=folder))
+
+
+@pytest.mark.parametrize(("dish", "F", "D"), [
+    ("", 3.0, 10.0),                                    # both fitted / measured
+    ("focal_length_m = 3.0\ndiameter_m = 10.0", 3.0, 10.0),
+    ("focal_length_m = 3.05", 3.05, 10.0),              # a deliberate override of the fit
+    ("diameter_m = 10.05", 3.0, 10.0),                  # D within 1 %: the mesh's D is used
+])
+def test_a_mesh_scene_that_states_its_dish_consistently_works(mesh_scene_text, dish, F, D):
+    ideal, deformed = mesh_reflectors(mesh_scene_text, dish)
+    assert ideal.F == pytest.approx(F, rel=1e-6) and deformed.F == ideal.F
+    assert ideal.D == pytest.approx(D, rel=1e-6)  # float32 in the file
+    # the ideal reflector is the paraboloid of that F through the mesh's own vertices
+    x, y, z = ideal.vertices.T
+    assert np.allclose(z, (x * x + y * y) / (4 * ideal.F), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize(("dish", "names"), [
+    # 0.26 m RMS from the F = 5 m paraboloid: 21 % of that dish's depth D^2 / 16F = 1.25 m
+    ("focal_length_m = 5.0", ("'dish.focal_length_m' = 5 m", "best-fit paraboloid has F = 3 m",
+                              "% of the dish's depth, at most 2 %")),
+    ("diameter_m = 50.0", ("'dish.diameter_m' = 50 m", "D = 10 m across")),
+    ("diameter_m = 10.2", ("'dish.diameter_m' = 10.2 m", "D = 10 m across", "agree to 1 %")),
+])
+def test_a_mesh_scene_that_contradicts_its_mesh_is_refused(mesh_scene_text, dish, names):
+    from raysim.errors import SceneError
+
+    with pytest.raises(SceneError) as info:
+        mesh_reflectors(mesh_scene_text, dish)
+    text = str(info.value)
+    assert "\n" not in text and "dish.ply" in text
+    for name in names:
+        assert name in text
