@@ -5,8 +5,9 @@ solver, the renderer) shares:
 
 - coordinates ``theta``, ``phi``: cell centres in radians (theta from -z, phi = atan2(y, x),
   both seen from the focus);
-- ``intensity``: |E|^2 of the deformed (or measured) reflector relative to the incident wave;
-  ``intensity_ideal`` on the same grid; optional ``intensity_std``; NaN where no sample exists;
+- ``intensity``: |E|^2 of the deformed (or measured) reflector relative to the incident wave,
+  real and >= 0; ``intensity_ideal`` on the same grid, > 0 in one cell at least; optional
+  ``intensity_std``; NaN where no sample exists;
   optional ``blocked`` (0/1): cells obstacles hide (:mod:`raysim.optics.blockage`), which
   readers treat as missing, with the obstacles' triangles ``obstacle_vertices`` (m) and
   ``obstacle_faces``;
@@ -166,6 +167,10 @@ def validate(ds: xr.Dataset, source: str = "FieldMap") -> xr.Dataset:
                 raise FieldMapError(f"{source}: variable 'blocked' must hold 0 or 1 per cell")
             continue
         _check_intensity(ds[name].values, name, source)
+    ideal = np.asarray(ds["intensity_ideal"].values, dtype=np.float64)
+    if not np.any(ideal > 0.0):  # single zero cells are missing samples to the solver; all is none
+        raise FieldMapError(f"{source}: no ideal intensity: variable 'intensity_ideal' holds no "
+                            "value > 0 (every cell zero or missing), nothing to compare with")
     for name in ("focal_length", "diameter", "sphere_radius"):
         if name not in ds.attrs:
             raise FieldMapError(f"{source}: missing attribute '{name}' (m)")
@@ -217,11 +222,21 @@ def _check_edges(ds: xr.Dataset, source: str) -> None:
                                 f"or moved after it was written: set {lo} and {hi} to its new edges)")
 
 
+def _check_real(arr: np.ndarray, name: str, source: str) -> None:
+    """An intensity variable must hold real numbers: not complex (numpy counts complex as a
+    number, and a float conversion would drop the imaginary part), not strings or booleans."""
+    if np.iscomplexobj(arr):
+        raise FieldMapError(f"{source}: variable '{name}' holds complex values: an intensity must "
+                            "be real (|E|^2, not the field E)")
+    if arr.dtype == np.bool_ or not np.issubdtype(arr.dtype, np.number):
+        raise FieldMapError(f"{source}: variable '{name}' must hold numbers, got dtype {arr.dtype}")
+
+
 def _check_intensity(values: np.ndarray, name: str, source: str) -> None:
-    """Intensities are |E|^2: finite and >= 0 where present (NaN marks a missing sample)."""
+    """Intensities are |E|^2: real, finite and >= 0 where present (NaN marks a missing
+    sample)."""
     arr = np.asarray(values)
-    if not np.issubdtype(arr.dtype, np.number):
-        raise FieldMapError(f"{source}: variable '{name}' must hold numbers")
+    _check_real(arr, name, source)
     arr = arr.astype(np.float64)
     if np.any(np.isinf(arr)):
         raise FieldMapError(f"{source}: variable '{name}' holds infinite values "
@@ -243,7 +258,10 @@ def load(path: str | os.PathLike[str]) -> xr.Dataset:
 
 
 def _checked(values: np.ndarray, shape: tuple[int, int], name: str) -> np.ndarray:
-    arr = np.asarray(values, dtype=np.float64)
+    """``values`` as float64 of ``shape``; complex or non-numeric values refused, not cast."""
+    arr = np.asarray(values)
+    _check_real(arr, name, "FieldMap")
+    arr = arr.astype(np.float64)
     if arr.shape != shape:
         raise FieldMapError(f"{name} has shape {arr.shape}, the grid is {shape}")
     return arr

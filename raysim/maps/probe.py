@@ -158,8 +158,8 @@ def check_probe(polarization: float | None, q: float, table: Any, error: type[Ra
                 where: str = "probe") -> None:
     """Refuse what is not a probe (raising ``error`` naming ``where``): a polarisation angle
     that is not finite, q outside 0..MAX_Q, both q and a table, a table of fewer than two
-    (angle rad, power) rows, not increasing in angle, angles outside 0..pi, powers negative or
-    not finite."""
+    (angle rad, power) rows, not increasing in angle, angles outside 0..pi, powers negative,
+    not finite or all zero."""
     if polarization is not None and not math.isfinite(polarization):
         raise error(f"{where}: the polarisation angle must be finite, got {polarization}")
     if isinstance(q, bool) or not isinstance(q, int | float) or not math.isfinite(q) \
@@ -182,6 +182,9 @@ def check_probe(polarization: float | None, q: float, table: Any, error: type[Ra
         raise error(f"{where}: the pattern table's angles must increase from row to row")
     if np.any(power < 0.0):
         raise error(f"{where}: the pattern table's relative powers must be >= 0")
+    if not np.any(power > 0.0):
+        raise error(f"{where}: the pattern table's relative powers are all 0: a pattern needs "
+                    "some positive power (the probe would read nothing)")
 
 
 IDEAL = Probe()  # the ideal |E|^2 power meter, the default

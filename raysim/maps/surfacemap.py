@@ -4,7 +4,7 @@ The contract the solver writes and the renderer, the hardware crew and the tests
 (``docs/data.md``); :mod:`solver.surface` re-exports it under its old name:
 
 - coordinates ``x``, ``y``: aperture-plane cell centres (m), N each, over [-D/2, D/2];
-- ``deformation`` (y, x): delta along z (m), NaN outside the aperture r < D/2;
+- ``deformation`` (y, x): delta along z (m), real, NaN outside the aperture r < D/2;
 - optional ``truth`` (y, x) and ``error`` = deformation - truth (m) when the truth is known,
   ``deformation_std`` (y, x) (m) when the scan carried ``intensity_std``;
 - attributes: ``solver``, ``boundary`` (what the rim values were), ``harmonic_part``
@@ -51,12 +51,16 @@ def surfacemap(grid: ApertureGrid, deformation: np.ndarray, attrs: Mapping[str, 
     dims = ("y", "x")
     fields = {"deformation": deformation, "truth": truth, "deformation_std": deformation_std}
     if truth is not None:
+        for name, values in (("deformation", deformation), ("truth", truth)):
+            _check_real(np.asarray(values), name, "SurfaceMap")
         fields["error"] = np.asarray(deformation) - np.asarray(truth)
     data_vars = {}
     for name, values in fields.items():
         if values is None:
             continue
-        arr = np.asarray(values, dtype=np.float64)
+        arr = np.asarray(values)
+        _check_real(arr, name, "SurfaceMap")
+        arr = arr.astype(np.float64)
         if arr.shape != (grid.N, grid.N):
             raise SurfaceMapError(f"{name} has shape {arr.shape}, the grid is {(grid.N, grid.N)}")
         data_vars[name] = (dims, grid.masked(arr), {"units": "m", "long_name": LONG_NAMES[name]})
@@ -105,6 +109,7 @@ def validate(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
         if ds[name].attrs.get("units") != "m":
             raise SurfaceMapError(f"{source}: variable '{name}' must be in m, "
                                   f"got {ds[name].attrs.get('units')!r}")
+        _check_real(np.asarray(ds[name].values), name, source)
     for name in REQUIRED_ATTRS:
         if name not in ds.attrs:
             raise SurfaceMapError(f"{source}: missing attribute '{name}'")
@@ -116,6 +121,17 @@ def validate(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
     if "deformation_std" in ds.data_vars and (ds["deformation_std"].values < 0).any():
         raise SurfaceMapError(f"{source}: variable 'deformation_std' holds negative values")
     return ds
+
+
+def _check_real(arr: np.ndarray, name: str, source: str) -> None:
+    """A surface variable must hold real numbers (m): not complex (numpy counts complex as a
+    number, and a float conversion would drop the imaginary part), not strings or booleans."""
+    if np.iscomplexobj(arr):
+        raise SurfaceMapError(f"{source}: variable '{name}' holds complex values: a deformation "
+                              "must be real (m)")
+    if arr.dtype == np.bool_ or not np.issubdtype(arr.dtype, np.number):
+        raise SurfaceMapError(f"{source}: variable '{name}' must hold numbers (m), got dtype "
+                              f"{arr.dtype}")
 
 
 def _check_grid(ds: xr.Dataset, source: str) -> None:

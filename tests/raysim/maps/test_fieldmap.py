@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -9,7 +10,7 @@ import pytest
 import xarray as xr
 
 from raysim.errors import FieldMapError
-from raysim.maps.fieldmap import fieldmap, grid_of, load, save
+from raysim.maps.fieldmap import fieldmap, grid_of, load, save, validate
 from raysim.maps.sphere import SphereGrid, ideal_go_intensity
 
 
@@ -103,3 +104,43 @@ def test_shape_and_vocabulary_are_checked():
                  method="go", sampling="cell_mean")
     with pytest.raises(FieldMapError, match="method must be one of"):
         small_map(method="magic")
+
+
+@pytest.mark.parametrize("name", ["intensity", "intensity_ideal", "intensity_std"])
+def test_complex_intensities_are_refused_not_cast(tmp_path: Path, name: str):
+    # numpy counts complex as a number; a float cast would drop the imaginary part silently
+    grid, ds = small_map(intensity_std=np.full((9, 36), 1e-3))
+    values = ds[name].values * (1 + 0.5j)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no ComplexWarning on the way to the refusal
+        with pytest.raises(FieldMapError, match=f"'{name}' holds complex values: an intensity must be real"):
+            validate(ds.assign({name: (("theta", "phi"), values)}))
+        with pytest.raises(FieldMapError, match="intensity must be real"):
+            save(ds.assign({name: (("theta", "phi"), values)}), tmp_path / "c.nc")
+        args = {"intensity": ds["intensity"].values, "intensity_ideal": ds["intensity_ideal"].values,
+                "intensity_std": ds["intensity_std"].values, name: values}
+        with pytest.raises(FieldMapError, match="intensity must be real"):
+            fieldmap(grid, args["intensity"], args["intensity_ideal"], intensity_std=args["intensity_std"],
+                     focal_length=33.0, diameter=110.0, frequency_hz=3e8, method="go", sampling="cell_mean")
+    assert not (tmp_path / "c.nc").exists()
+    # a complex dtype with zero imaginary parts is still not an intensity variable
+    with pytest.raises(FieldMapError, match="intensity must be real"):
+        validate(ds.assign({name: ds[name].astype(complex)}))
+
+
+def test_an_ideal_intensity_must_exist_somewhere():
+    _, ds = small_map()
+    ideal = ds["intensity_ideal"].values
+    for none in (np.zeros_like(ideal), np.full_like(ideal, np.nan), np.where(ideal > 0, np.nan, 0.0)):
+        with pytest.raises(FieldMapError, match="no ideal intensity") as info:
+            validate(ds.assign(intensity_ideal=(("theta", "phi"), none)))
+        assert "\n" not in str(info.value)
+    # single zero cells are missing samples to the solver, not a broken map
+    holes = ideal.copy()
+    holes[0, :5] = 0.0
+    holes[3, 7] = np.nan
+    assert np.array_equal(validate(ds.assign(intensity_ideal=(("theta", "phi"), holes)))["intensity_ideal"].values,
+                          holes, equal_nan=True)
+    # negative ideal cells were refused before and still are
+    with pytest.raises(FieldMapError, match="negative values"):
+        validate(ds.assign(intensity_ideal=(("theta", "phi"), -ideal)))

@@ -78,6 +78,9 @@ def test_probe_attributes_survive_a_netcdf_file(tmp_path: Path, probe: Probe):
     ({"table": ((0.0, 1.0), (0.0, 0.5))}, "must increase from row to row"),
     ({"table": ((0.0, 1.0), (4.0, 0.5))}, "must lie in 0..180 deg"),
     ({"table": ((0.0, 1.0), (0.5, -0.5))}, "relative powers must be >= 0"),
+    ({"table": ((0.0, -1.0), (0.5, 1.0))}, "relative powers must be >= 0"),
+    ({"table": ((0.0, 0.0), (math.pi / 2, 0.0))}, "a pattern needs some positive power"),
+    ({"table": ((0.1, 0.0), (0.2, 0.0), (0.3, 0.0))}, "a pattern needs some positive power"),
     ({"table": ((0.0, 1.0),)}, "at least two"),
     ({"q": 2.0, "table": ((0.0, 1.0), (0.5, 0.5))}, "not both"),
 ])
@@ -91,3 +94,17 @@ def test_unusable_probe_attributes():
         probe_of({"probe_pattern": "table", "probe_pattern_angle": [0.0, 1.0]})
     with pytest.raises(FieldMapError, match="unusable probe attributes"):
         probe_of({"probe_pattern": "cos^q", "probe_pattern_q": -2.0})
+
+
+def test_an_all_zero_pattern_in_a_scene_is_refused_in_one_line():
+    from raysim.errors import SceneError
+    from raysim.scene.scene import parse_scene
+
+    base = ("[dish]\ndiameter_m = 20.0\nfocal_length_m = 8.0\n[source]\nfrequency_hz = 1e9\n"
+            "[sphere]\nradius_m = 2.0\n[probe]\npattern = {rows}\n")
+    with pytest.raises(SceneError, match="a pattern needs some positive power") as info:
+        parse_scene(base.format(rows="[[0.0, 0.0], [90.0, 0.0]]"), source="p.toml")
+    assert "\n" not in str(info.value) and str(info.value).startswith("p.toml: ")
+    # one positive row is a pattern: it reads g(alpha) interpolated towards it
+    probe = parse_scene(base.format(rows="[[0.0, 0.0], [90.0, 1.0]]"), source="p.toml").probe
+    assert probe.pattern(math.radians(45.0)) == pytest.approx(0.5, rel=1e-12)
