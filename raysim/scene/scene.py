@@ -13,6 +13,7 @@ radians. Every defect raises
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -126,11 +127,11 @@ class Scene:
             check_frequency(frequency_hz, "--frequency")
             scene = replace(scene, source=replace(scene.source, frequency_hz=float(frequency_hz)))
         if n_theta is not None or n_phi is not None:
-            sphere = replace(scene.sphere,
-                             n_theta=scene.sphere.n_theta if n_theta is None else n_theta,
-                             n_phi=scene.sphere.n_phi if n_phi is None else n_phi)
-            check_sphere_cells(sphere.n_theta, sphere.n_phi, ("--n-theta", "--n-phi"))
-            scene = replace(scene, sphere=sphere)
+            n_theta = scene.sphere.n_theta if n_theta is None else n_theta
+            n_phi = scene.sphere.n_phi if n_phi is None else n_phi
+            check_sphere_cells(n_theta, n_phi, ("--n-theta", "--n-phi"))
+            # numpy integers pass the check; the grid keeps plain ints
+            scene = replace(scene, sphere=replace(scene.sphere, n_theta=int(n_theta), n_phi=int(n_phi)))
         return scene
 
 
@@ -161,13 +162,16 @@ MAX_FACES = 10_000_000
 def check_sphere_cells(n_theta: int, n_phi: int, names: tuple[str, str] = ("n_theta", "n_phi"),
                        source: str = "") -> None:
     """Refuse a probe-sphere grid outside 1..MAX_N_THETA x 1..MAX_N_PHI or over MAX_CELLS cells
-    (the one check of the scene file's ``[sphere]`` and the ``--n-theta``/``--n-phi`` options)."""
+    (the one check of the scene file's ``[sphere]`` and the ``--n-theta``/``--n-phi`` options).
+    Any integer type counts (Python's or numpy's); bools and floats, even whole ones, do not."""
     prefix = f"{source}: " if source else ""
     for name, value, hi in ((names[0], n_theta, MAX_N_THETA), (names[1], n_phi, MAX_N_PHI)):
-        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= hi:
+        if (isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Integral)
+                or not 1 <= value <= hi):
             raise SceneError(f"{prefix}{name} must be an integer in 1..{hi}, got {value!r}")
-    if n_theta * n_phi > MAX_CELLS:
-        raise SceneError(f"{prefix}{names[0]} x {names[1]} = {n_theta * n_phi:,} cells is over "
+    cells = int(n_theta) * int(n_phi)  # Python ints: a small numpy type would wrap round
+    if cells > MAX_CELLS:
+        raise SceneError(f"{prefix}{names[0]} x {names[1]} = {cells:,} cells is over "
                          f"the limit of {MAX_CELLS:,}")
 
 

@@ -193,6 +193,32 @@ def test_overrides_check_their_values(paper_scene):
         paper_scene.with_overrides(n_phi=0)
 
 
+def test_high_order_zernike_scene_keeps_its_size_and_the_order_is_bounded():
+    # QA: 1 um of Z(60, 0) made a 3 m surface; Noll-normalised it peaks at sqrt(61) um on the rim
+    s = scene_with('\n[[deformation]]\ntype = "zernike"\nterms = [[60, 0, 1.0]]\n')
+    r = np.linspace(0.0, 55.0, 20001)
+    values = s.deformation(r, np.zeros_like(r))
+    assert np.abs(values).max() == pytest.approx(math.sqrt(61) * 1e-6, rel=1e-12)
+    with pytest.raises(SceneError, match=r"Zernike \(n=200, m=0\): radial order n is over 100") as info:
+        scene_with('\n[[deformation]]\ntype = "zernike"\nterms = [[200, 0, 1.0]]\n')
+    assert "\n" not in str(info.value) and str(info.value).startswith("test.toml: ")
+
+
+def test_overrides_take_numpy_integers_but_not_bools_or_floats(paper_scene):
+    s = paper_scene.with_overrides(n_theta=np.int64(18), n_phi=np.int32(72))
+    assert (s.sphere.n_theta, s.sphere.n_phi) == (18, 72)
+    assert type(s.sphere.n_theta) is int and type(s.sphere.n_phi) is int
+    assert s.sphere.dtheta == pytest.approx(math.radians(5.0))
+    for bad in (True, np.bool_(True), 18.0, np.float64(18.0), "18"):
+        with pytest.raises(SceneError, match="--n-theta must be an integer in 1..9000"):
+            paper_scene.with_overrides(n_theta=bad)
+    with pytest.raises(SceneError, match="--n-theta must be an integer in 1..9000"):
+        paper_scene.with_overrides(n_theta=np.int64(9001))
+    # cells counted in Python integers: 9000 x 30000 in int16 would wrap round below the limit
+    with pytest.raises(SceneError, match="270,000,000 cells is over the limit"):
+        paper_scene.with_overrides(n_theta=np.int16(9000), n_phi=np.int16(30000))
+
+
 def test_scene_files_in_repo_load(repo_root: Path):
     for path in sorted((repo_root / "scenes").glob("*.toml")):
         text = path.read_text()
