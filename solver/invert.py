@@ -277,11 +277,42 @@ def measured_fa(scan: Scan, gain: GainChoice) -> MeasuredFA:
 
 def _truth_from_scene(attrs: dict) -> Callable | None:
     """The deformation of the scene a FieldMap carries (None without one, or if it no longer
-    parses: :func:`raysim.scene.scene.scene_of`)."""
+    parses: :func:`raysim.scene.scene.scene_of`); for a mesh scene, the mesh's own departure
+    from its ideal (:func:`_mesh_truth`)."""
     from raysim.scene.scene import scene_of
 
     scene = scene_of(attrs)
-    return None if scene is None else scene.deformation
+    if scene is None:
+        return None
+    return scene.deformation if scene.dish.mesh is None else _mesh_truth(scene)
+
+
+def _mesh_truth(scene) -> Callable | None:
+    """delta(x, y) (m, along z) of a mesh scene: the deformed mesh's z minus its ideal's (the
+    ``ideal_mesh``, else the fitted paraboloid), vertex by vertex, linear over the ideal's
+    (x, y) and the nearest vertex's beyond its hull. The scene's own deformation, if any, is
+    in it. None when the mesh no longer loads (the truth is then unknown: its zero deformation
+    made every mesh's map read as its own error)."""
+    from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
+
+    from raysim.errors import RaysimError
+    from raysim.surface.mesh import reflectors_for
+
+    try:
+        ideal, deformed = reflectors_for(scene)
+    except (RaysimError, OSError):
+        return None
+    xy = ideal.vertices[:, :2]
+    dz = deformed.vertices[:, 2] - ideal.vertices[:, 2]
+    linear, nearest = LinearNDInterpolator(xy, dz), NearestNDInterpolator(xy, dz)
+
+    def delta(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
+        values = linear(x, y)
+        outside = ~np.isfinite(values)
+        values[outside] = nearest(x[outside], y[outside])
+        return values
+
+    return delta
 
 
 def truth_on_grid(truth, scan: Scan, grid: ApertureGrid) -> NDArray[np.float64] | None:

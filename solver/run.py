@@ -82,7 +82,9 @@ def summary(result: xr.Dataset) -> list[str]:
     a = result.attrs
     lines = []
     if "rms_m" in a:
-        lines.append(f"RMS error {a['rms_m'] * 1e6:.2f} um, RRMS {a['rrms'] * 100:.3f} % "
+        relative = (f"RRMS {a['rrms'] * 100:.3f} %" if math.isfinite(a["rrms"]) and
+                    a["truth_peak_to_peak_m"] > 0 else "RRMS n/a (a flat truth has no peak-to-peak)")
+        lines.append(f"RMS error {a['rms_m'] * 1e6:.2f} um, {relative} "
                      f"(truth peak-to-peak {a['truth_peak_to_peak_m'] * 1e3:.4f} mm)")
     else:
         lines.append("truth unknown: no RMS / RRMS")
