@@ -314,6 +314,62 @@ def fit_paraboloid(points: NDArray, F: float | None = None) -> ParaboloidFit:
     return ParaboloidFit(1.0 / (4.0 * k), float(x0), float(y0), float(z0), rms)
 
 
+#: a connected piece of a mesh is not reflector surface (a feed, a strut, a loose plate) when its
+#: vertices depart from the dish's paraboloid by more than this fraction of the dish's depth
+#: D^2 / (16 F) RMS, and by more than STRAY_OVER_MEDIAN times the other pieces' median
+#: (the panels of a dish that is not a paraboloid all depart alike, and stay)
+STRAY_PIECE_OF_DEPTH = 0.05
+STRAY_OVER_MEDIAN = 10.0
+
+
+def _fit_dish(vertices: NDArray, faces: NDArray, F: float | None) -> ParaboloidFit:
+    """:func:`fit_paraboloid` of a mesh's vertices (m) after refusing (MeshError, one line)
+    any connected piece that is not dish surface: each such piece, worst first, is left out
+    of the fit it would skew (a feed horn at the focus took a 25 m dish's F from 7.5 to 8.1 m)
+    until none is left, then all are named."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(vertices)
+    rows = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
+    cols = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
+    _, piece = connected_components(coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)),
+                                    directed=False)
+    on_faces = np.zeros(n, bool)
+    on_faces[faces.ravel()] = True
+    pieces = np.unique(piece[on_faces])
+    kept = on_faces.copy()
+    stray: list[tuple[int, float, float]] = []
+    while True:
+        fit = fit_paraboloid(vertices[kept], F)
+        if len(pieces) - len(stray) < 2:
+            break
+        dx, dy = vertices[:, 0] - fit.x0, vertices[:, 1] - fit.y0
+        departure = vertices[:, 2] - fit.z0 - (dx * dx + dy * dy) / (4.0 * fit.F)
+        D = 2.0 * float(np.max(np.hypot(dx[kept], dy[kept])))
+        depth = D * D / (16.0 * fit.F)
+        left = [i for i in pieces if i not in {s for s, _, _ in stray}]
+        rms = np.array([np.sqrt(np.mean(departure[on_faces & (piece == i)] ** 2)) for i in left])
+        worst = int(np.argmax(rms))
+        others = np.delete(rms, worst)
+        if not (rms[worst] > STRAY_PIECE_OF_DEPTH * depth
+                and rms[worst] > STRAY_OVER_MEDIAN * float(np.median(others))):
+            break
+        stray.append((int(left[worst]), float(rms[worst]), depth))
+        kept &= piece != left[worst]
+    if stray:
+        described = "; ".join(
+            f"{int(np.count_nonzero(piece == i))} vertices about "
+            f"({', '.join(f'{c:.3g}' for c in vertices[piece == i].mean(axis=0))}) m depart "
+            f"{rms:.3g} m RMS ({100 * rms / depth:.0f} % of the dish's depth)"
+            for i, rms, depth in stray)
+        what = "a piece of the mesh is" if len(stray) == 1 else f"{len(stray)} pieces of the mesh are"
+        raise MeshError(f"{what} not dish surface: {described}; a reflector mesh holds the dish's "
+                        "panels only: remove them, or give feed, legs or cabin as [[obstacle]] "
+                        "entries")
+    return fit
+
+
 def load_reflector(path: str | Path, unit: float = 1.0, F: float | None = None,
                    ideal_path: str | Path | None = None) -> tuple[Reflector, Reflector, ParaboloidFit]:
     """Load any mesh trimesh reads (STL, PLY, OBJ, GLB) as the deformed reflector.
@@ -325,7 +381,8 @@ def load_reflector(path: str | Path, unit: float = 1.0, F: float | None = None,
     """
     mesh = _read_mesh(path, unit)
     try:
-        fit = fit_paraboloid(np.asarray(mesh.vertices, dtype=np.float64), F)
+        fit = _fit_dish(np.asarray(mesh.vertices, dtype=np.float64),
+                        np.asarray(mesh.faces, dtype=np.int64), F)
     except MeshError as exc:
         raise MeshError(f"{path}: {exc}") from None
     F_used = fit.F

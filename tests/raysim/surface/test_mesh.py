@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -274,3 +275,42 @@ def test_a_mesh_scene_that_contradicts_its_mesh_is_refused(mesh_scene_text, dish
     assert "\n" not in text and "dish.ply" in text
     for name in names:
         assert name in text
+
+
+def _dish_with(tmp_path: Path, extra, name: str) -> Path:
+    """A panelled 20 m dish (F = 8 m, nine pieces) written with ``extra`` (a trimesh) added."""
+    import trimesh
+
+    dish = paraboloid(20.0, 8.0, 0.5, PanelLayout((0.0, 4.0, 10.0), (1, 8), 0.05)).mesh
+    path = tmp_path / name
+    trimesh.util.concatenate([dish, extra] if extra is not None else [dish]).export(path)
+    return path
+
+
+def test_pieces_that_are_not_dish_surface_are_refused_by_name(tmp_path: Path):
+    """A feed horn at the focus or a loose plate loaded as panels skewed the fit (a 25 m
+    dish's F from 7.5 to 8.1 m) and became metres of 'deformation'."""
+    import trimesh
+
+    horn = trimesh.creation.cylinder(radius=0.3, height=1.0)
+    horn.apply_translation([0.0, 0.0, 8.0])  # at the focus
+    plate = trimesh.creation.box((1.0, 1.0, 0.01))
+    plate.apply_translation([4.0, 4.0, 3.0])  # 2 m above the surface there
+    for extra, where in ((horn, "about (0, 0, 8) m"), (plate, "about (4, 4, 3) m")):
+        with pytest.raises(MeshError, match=rf"piece of the mesh is not dish surface: \d+ vertices {re.escape(where)}"):
+            load_reflector(_dish_with(tmp_path, extra, "dish.ply"))
+    with pytest.raises(MeshError, match="2 pieces of the mesh are not dish surface"):
+        load_reflector(_dish_with(tmp_path, trimesh.util.concatenate([horn, plate]), "two.ply"))
+
+
+def test_panels_that_all_depart_alike_are_not_stray(tmp_path: Path):
+    """A dish whose pieces depart alike from the paraboloid (here a spherical one, 2F in radius,
+    panelled) is a dish, if not a paraboloid: it loads, all nine pieces kept."""
+    source = paraboloid(20.0, 8.0, 0.5, PanelLayout((0.0, 4.0, 10.0), (1, 8), 0.05))
+    mesh = source.mesh.copy()
+    r2 = mesh.vertices[:, 0] ** 2 + mesh.vertices[:, 1] ** 2
+    mesh.vertices[:, 2] = 16.0 - np.sqrt(16.0**2 - r2)
+    path = tmp_path / "sphere.ply"
+    mesh.export(path)
+    _, loaded, _ = load_reflector(path)
+    assert loaded.n_panels == 9
