@@ -108,13 +108,15 @@ def load_dish(source: str | Path, *, sphere_radius: float | None = None,
 
 
 def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None = None) -> Dish:
-    from raysim.surface.mesh import load_reflector
+    from raysim.surface.mesh import check_stated_dish, load_reflector
 
     if not path.is_file():
         raise CheckError(f"{path}: no such mesh file")
     if F is not None and not (math.isfinite(F) and F > 0):
         raise CheckError(f"--focal-length must be a length > 0 m, got {F:g}")
-    ideal, _, fit = load_reflector(path, scene.dish.mesh_unit if scene else 1.0, F)
+    ideal, loaded, fit = load_reflector(path, scene.dish.mesh_unit if scene else 1.0, F)
+    if scene is not None:  # its diameter_m was replaced by the mesh's without a word
+        check_stated_dish(path, loaded, fit, scene.dish.diameter, F)
     D = float(ideal.D)
     depth = D**2 / (16.0 * fit.F)
     if not 0.1 <= fit.F / D <= 5.0:

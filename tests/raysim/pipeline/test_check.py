@@ -189,3 +189,14 @@ def test_papers_dish_at_0_3_ghz(wave, ideal, rrms):
         assert ideal[0] < float(ds["ideal_difference"][0]) < ideal[1]
     if rrms:
         assert rrms[0] < float(ds["rrms_go_model"][0]) < rrms[1]
+
+
+def test_a_mesh_scene_whose_diameter_contradicts_its_mesh_is_refused(raysim_cli, tmp_path):
+    """check replaced the scene's diameter_m with the mesh's own without a word."""
+    stl, _ = _panelled_stl(tmp_path)
+    scene = tmp_path / "mesh_scene.toml"
+    scene.write_text(f'name = "m"\n[dish]\nmesh = "{stl.name}"\ndiameter_m = 50.0\n'
+                     "[source]\nfrequency_hz = 1e9\n[sphere]\nradius_m = 1.0\n")
+    result = raysim_cli("check", str(scene), "--frequency", "1e9", "-o", str(tmp_path / "out"))
+    assert result.code == 2 and "'dish.diameter_m' = 50 m contradicts the mesh" in result.error()
+    assert not (tmp_path / "out").exists()
