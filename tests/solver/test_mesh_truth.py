@@ -4,6 +4,7 @@ A FieldMap of a scene whose dish is a mesh file used to get the scene's (absent)
 as its truth, so every map of it read as its own error ("RMS error 22 um, RRMS nan %")."""
 
 import numpy as np
+import pytest
 import trimesh
 
 from raysim.surface.mesh import paraboloid
@@ -48,3 +49,16 @@ def test_a_mesh_that_no_longer_loads_leaves_the_truth_unknown(tmp_path):
     text = _scene(tmp_path, True)
     (tmp_path / "dish.ply").unlink()
     assert _truth_from_scene({"scene": text}) is None
+
+
+def test_simulate_states_how_far_a_mesh_departs_from_its_ideal(tmp_path):
+    """The FieldMap and the summary line carry the mesh's RMS departure along z, the figure
+    that shows a file not in the reflector frame (a tilted axis reads as coma)."""
+    from raysim.scene.scene import parse_scene
+    from raysim.simulate import simulate, summary
+
+    ds = simulate(parse_scene(_scene(tmp_path, True)), method="go")
+    v = paraboloid(D, F, 0.25).vertices
+    expected = float(np.sqrt(np.mean(bump(v[:, 0], v[:, 1]) ** 2)))
+    assert ds.attrs["mesh_departure_rms_m"] == pytest.approx(expected, rel=1e-3)  # float32 file
+    assert "um RMS along z from its ideal" in summary(ds)
