@@ -249,7 +249,7 @@ def _check_intensity(values: np.ndarray, name: str, source: str) -> None:
 
 def save(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
     """Write a FieldMap atomically (temporary file + rename) as NetCDF-4."""
-    return write_atomic(validate(ds), path)
+    return write_atomic(validate(ds), path, FieldMapError)
 
 
 def load(path: str | os.PathLike[str]) -> xr.Dataset:

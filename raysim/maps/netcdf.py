@@ -56,9 +56,30 @@ def read(path: str | os.PathLike[str], error: type[Exception]) -> xr.Dataset:
         raise error(f"{path}: not a readable NetCDF file ({exc.__class__.__name__})") from None
 
 
-def write_atomic(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
+def write_atomic(ds: xr.Dataset, path: str | os.PathLike[str],
+                 error: type[Exception] = ValueError) -> Path:
     """Write ``ds`` to ``path`` as NetCDF-4 so that ``path`` is either old or complete
-    (:func:`raysim.files.atomic_path`)."""
+    (:func:`raysim.files.atomic_path`); an attribute NetCDF cannot store raises ``error``
+    first (:func:`check_attrs`)."""
+    check_attrs(ds, error)
     with atomic_path(path) as tmp:
         ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
     return Path(path)
+
+
+def check_attrs(ds: xr.Dataset, error: type[Exception]) -> None:
+    """Refuse (``error``, one line) an attribute of ``ds`` or of its variables that NetCDF
+    cannot store: anything but text, a real number or a 1-D array of real numbers (None,
+    a bool, a dict or a complex number failed inside netCDF4 with a TypeError)."""
+    for owner, attrs in [("", ds.attrs), *((f"{name}: ", ds[name].attrs) for name in ds.variables)]:
+        for key, value in attrs.items():
+            if isinstance(value, str | bytes):
+                continue
+            values = np.asarray(value) if isinstance(value, list | tuple | np.ndarray | np.generic
+                                                     | int | float) else None
+            if (values is None or values.ndim > 1 or values.dtype == np.bool_
+                    or not np.issubdtype(values.dtype, np.number)
+                    or np.issubdtype(values.dtype, np.complexfloating)):
+                raise error(f"attribute {owner}{key!r} = {value!r} cannot be stored in NetCDF: "
+                            "give text, a real number or a list of real numbers (0 or 1 for "
+                            "yes or no)")

@@ -160,7 +160,7 @@ def grid_of(ds: xr.Dataset) -> ApertureGrid:
 
 def save(ds: xr.Dataset, path: str | os.PathLike[str]) -> Path:
     """Write a SurfaceMap atomically (temporary file + rename) as NetCDF-4."""
-    return write_atomic(validate(ds), path)
+    return write_atomic(validate(ds), path, SurfaceMapError)
 
 
 def load(path: str | os.PathLike[str]) -> xr.Dataset:

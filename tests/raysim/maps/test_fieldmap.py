@@ -144,3 +144,27 @@ def test_an_ideal_intensity_must_exist_somewhere():
     # negative ideal cells were refused before and still are
     with pytest.raises(FieldMapError, match="negative values"):
         validate(ds.assign(intensity_ideal=(("theta", "phi"), -ideal)))
+
+
+@pytest.mark.parametrize("value", [None, {"a": 1}, True, 1 + 2j, [[1, 2], [3, 4]]])
+def test_attributes_netcdf_cannot_store_are_refused_before_writing(tmp_path: Path, value):
+    """They failed inside netCDF4 with a TypeError; an existing file stays as it was."""
+    _, ds = small_map()
+    path = save(ds, tmp_path / "f.nc")
+    before = path.read_bytes()
+    ds.attrs["note"] = value
+    with pytest.raises(FieldMapError, match="attribute 'note' = .* cannot be stored in NetCDF"):
+        save(ds, path)
+    assert path.read_bytes() == before
+    _, ds = small_map()
+    ds["intensity"].attrs["note"] = value
+    with pytest.raises(FieldMapError, match="attribute intensity: 'note'"):
+        save(ds, path)
+
+
+@pytest.mark.parametrize("value", ["text", 3, 2.5, np.float32(1.5), [1, 2], np.arange(3), np.int64(4)])
+def test_attributes_netcdf_stores_are_written_and_read_back(tmp_path: Path, value):
+    _, ds = small_map()
+    ds.attrs["note"] = value
+    back = load(save(ds, tmp_path / "f.nc"))
+    assert np.array_equal(np.atleast_1d(back.attrs["note"]), np.atleast_1d(value))
