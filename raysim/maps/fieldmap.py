@@ -196,7 +196,14 @@ def validate(ds: xr.Dataset, source: str = "FieldMap") -> xr.Dataset:
                             f"got {ds.attrs['sampling']!r}")
     if _float_attr(ds, "sphere_radius", source) >= _float_attr(ds, "focal_length", source):
         raise FieldMapError(f"{source}: sphere_radius must be smaller than focal_length")
+    for name in ANGLE_ATTRS:  # optional; the refinement's models read them as numbers
+        if name in ds.attrs and not np.isfinite(_float_attr(ds, name, source)):
+            raise FieldMapError(f"{source}: attribute '{name}' must be a finite angle (rad)")
     return ds
+
+
+#: optional attributes, angles in rad: the source's direction and polarisation
+ANGLE_ATTRS = ("polarization", "incidence_theta", "incidence_phi")
 
 
 def _check_edges(ds: xr.Dataset, source: str) -> None:

@@ -168,3 +168,13 @@ def test_attributes_netcdf_stores_are_written_and_read_back(tmp_path: Path, valu
     ds.attrs["note"] = value
     back = load(save(ds, tmp_path / "f.nc"))
     assert np.array_equal(np.atleast_1d(back.attrs["note"]), np.atleast_1d(value))
+
+
+@pytest.mark.parametrize("name", ["polarization", "incidence_theta", "incidence_phi"])
+def test_angle_attributes_must_be_finite_numbers(name):
+    """'x' reached the refinement's forward model as a float() ValueError."""
+    for value in ("x", float("nan")):
+        _, ds = small_map()
+        ds.attrs[name] = value
+        with pytest.raises(FieldMapError, match=f"attribute '{name}' must be a"):
+            validate(ds)
