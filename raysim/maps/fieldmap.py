@@ -30,7 +30,7 @@ import xarray as xr
 
 from raysim.constants import MAX_FREQUENCY_HZ, MIN_FREQUENCY_HZ
 from raysim.errors import FieldMapError
-from raysim.maps.netcdf import canonical_order, read, write_atomic
+from raysim.maps.netcdf import canonical_order, check_real, read, write_atomic
 from raysim.maps.sphere import SphereGrid
 from raysim.methods import FIELDMAP_METHODS
 from raysim.version import VERSION_ATTR, __version__
@@ -229,21 +229,11 @@ def _check_edges(ds: xr.Dataset, source: str) -> None:
                                 f"or moved after it was written: set {lo} and {hi} to its new edges)")
 
 
-def _check_real(arr: np.ndarray, name: str, source: str) -> None:
-    """An intensity variable must hold real numbers: not complex (numpy counts complex as a
-    number, and a float conversion would drop the imaginary part), not strings or booleans."""
-    if np.iscomplexobj(arr):
-        raise FieldMapError(f"{source}: variable '{name}' holds complex values: an intensity must "
-                            "be real (|E|^2, not the field E)")
-    if arr.dtype == np.bool_ or not np.issubdtype(arr.dtype, np.number):
-        raise FieldMapError(f"{source}: variable '{name}' must hold numbers, got dtype {arr.dtype}")
-
-
 def _check_intensity(values: np.ndarray, name: str, source: str) -> None:
     """Intensities are |E|^2: real, finite and >= 0 where present (NaN marks a missing
     sample)."""
     arr = np.asarray(values)
-    _check_real(arr, name, source)
+    check_real(arr, name, source, FieldMapError, "an intensity")
     arr = arr.astype(np.float64)
     if np.any(np.isinf(arr)):
         raise FieldMapError(f"{source}: variable '{name}' holds infinite values "
@@ -267,7 +257,7 @@ def load(path: str | os.PathLike[str]) -> xr.Dataset:
 def _checked(values: np.ndarray, shape: tuple[int, int], name: str) -> np.ndarray:
     """``values`` as float64 of ``shape``; complex or non-numeric values refused, not cast."""
     arr = np.asarray(values)
-    _check_real(arr, name, "FieldMap")
+    check_real(arr, name, "FieldMap", FieldMapError, "an intensity")
     arr = arr.astype(np.float64)
     if arr.shape != shape:
         raise FieldMapError(f"{name} has shape {arr.shape}, the grid is {shape}")

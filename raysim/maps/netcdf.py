@@ -83,3 +83,14 @@ def check_attrs(ds: xr.Dataset, error: type[Exception]) -> None:
                 raise error(f"attribute {owner}{key!r} = {value!r} cannot be stored in NetCDF: "
                             "give text, a real number or a list of real numbers (0 or 1 for "
                             "yes or no)")
+
+
+def check_real(arr: np.ndarray, name: str, source: str, error: type[Exception],
+               quantity: str) -> None:
+    """Refuse (``error``, one line) a variable ``name`` whose values are not real numbers:
+    complex (numpy counts complex as a number, and a float conversion would drop the imaginary
+    part), text or booleans. ``quantity`` says what it holds (``an intensity``)."""
+    if np.iscomplexobj(arr):
+        raise error(f"{source}: variable '{name}' holds complex values: {quantity} must be real")
+    if arr.dtype == np.bool_ or not np.issubdtype(arr.dtype, np.number):
+        raise error(f"{source}: variable '{name}' must hold numbers, got dtype {arr.dtype}")

@@ -26,7 +26,7 @@ import xarray as xr
 
 from raysim.errors import SurfaceMapError
 from raysim.maps.aperture import ApertureGrid, cell_centres
-from raysim.maps.netcdf import canonical_order, read, write_atomic
+from raysim.maps.netcdf import canonical_order, check_real, read, write_atomic
 from raysim.version import VERSION_ATTR, __version__
 
 REQUIRED_ATTRS = ("solver", "boundary", "harmonic_part", "removed_terms", "focal_length",
@@ -52,14 +52,14 @@ def surfacemap(grid: ApertureGrid, deformation: np.ndarray, attrs: Mapping[str, 
     fields = {"deformation": deformation, "truth": truth, "deformation_std": deformation_std}
     if truth is not None:
         for name, values in (("deformation", deformation), ("truth", truth)):
-            _check_real(np.asarray(values), name, "SurfaceMap")
+            check_real(np.asarray(values), name, "SurfaceMap", SurfaceMapError, "a deformation")
         fields["error"] = np.asarray(deformation) - np.asarray(truth)
     data_vars = {}
     for name, values in fields.items():
         if values is None:
             continue
         arr = np.asarray(values)
-        _check_real(arr, name, "SurfaceMap")
+        check_real(arr, name, "SurfaceMap", SurfaceMapError, "a deformation")
         arr = arr.astype(np.float64)
         if arr.shape != (grid.N, grid.N):
             raise SurfaceMapError(f"{name} has shape {arr.shape}, the grid is {(grid.N, grid.N)}")
@@ -109,7 +109,7 @@ def validate(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
         if ds[name].attrs.get("units") != "m":
             raise SurfaceMapError(f"{source}: variable '{name}' must be in m, "
                                   f"got {ds[name].attrs.get('units')!r}")
-        _check_real(np.asarray(ds[name].values), name, source)
+        check_real(np.asarray(ds[name].values), name, source, SurfaceMapError, "a deformation")
     for name in REQUIRED_ATTRS:
         if name not in ds.attrs:
             raise SurfaceMapError(f"{source}: missing attribute '{name}'")
@@ -121,17 +121,6 @@ def validate(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
     if "deformation_std" in ds.data_vars and (ds["deformation_std"].values < 0).any():
         raise SurfaceMapError(f"{source}: variable 'deformation_std' holds negative values")
     return ds
-
-
-def _check_real(arr: np.ndarray, name: str, source: str) -> None:
-    """A surface variable must hold real numbers (m): not complex (numpy counts complex as a
-    number, and a float conversion would drop the imaginary part), not strings or booleans."""
-    if np.iscomplexobj(arr):
-        raise SurfaceMapError(f"{source}: variable '{name}' holds complex values: a deformation "
-                              "must be real (m)")
-    if arr.dtype == np.bool_ or not np.issubdtype(arr.dtype, np.number):
-        raise SurfaceMapError(f"{source}: variable '{name}' must hold numbers (m), got dtype "
-                              f"{arr.dtype}")
 
 
 def _check_grid(ds: xr.Dataset, source: str) -> None:
