@@ -239,13 +239,19 @@ def _writer_alive(stale: Path, name: str) -> bool:
 def remove_stale(path: str | os.PathLike[str]) -> None:
     """Remove what killed writers of ``path`` left beside it: temporary files and staging
     folders ``.NAME.*.tmp`` and replaced folders ``.NAME.old-PID``, each only when the run
-    that made it is no longer alive (two runs on one output never delete each other's work)."""
+    that made it is no longer alive (two runs on one output never delete each other's work).
+    A replaced folder whose writer was killed before its new one took its place is put back
+    as ``path`` when ``path`` is missing: it is the user's previous output."""
     path = Path(path)
     if not path.parent.is_dir():
         return
-    for pattern in (f".{path.name}.*.tmp", f".{path.name}.old-*"):
-        for stale in path.parent.glob(pattern):
+    for pattern in (f".{path.name}.old-*", f".{path.name}.*.tmp"):
+        for stale in sorted(path.parent.glob(pattern)):
             if _writer_alive(stale, path.name):
+                continue
+            if pattern.endswith("old-*") and not os.path.lexists(path):
+                with contextlib.suppress(OSError):  # if it cannot go back, it stays as it is
+                    os.replace(stale, path)
                 continue
             if stale.is_dir() and not stale.is_symlink():
                 shutil.rmtree(stale, ignore_errors=True)

@@ -157,17 +157,18 @@ def staging(target: Path) -> Iterator[Path]:
     target.parent.mkdir(parents=True, exist_ok=True)
     remove_stale(target)  # what a killed run left (never a live run's staging folder)
     tmp = Path(tempfile.mkdtemp(prefix=writer_prefix(target), suffix=".tmp", dir=target.parent))
+    old = target.with_name(f".{target.name}.old-{os.getpid()}")
     try:
         yield tmp
         os.chmod(tmp, new_folder_mode())  # mkdtemp's folder is private (0700)
-        old = None
         if target.exists():
-            old = target.with_name(f".{target.name}.old-{os.getpid()}")
             os.replace(target, old)
         os.replace(tmp, target)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        shutil.rmtree(old, ignore_errors=True)
     except BaseException:
+        # an interrupt between the two renames left the old folder hidden: put it back
+        if old.exists() and not target.exists():
+            os.replace(old, target)
         shutil.rmtree(tmp, ignore_errors=True)
         raise
 

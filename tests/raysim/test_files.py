@@ -112,3 +112,48 @@ def test_a_later_run_removes_the_staging_a_killed_one_left(tmp_path):
         [".other.k1ll.tmp", "out", live.name, other_host.name])
     assert (target / "report.html").read_text() == "whole"
     remove_stale(tmp_path / "missing" / "x")  # no folder: nothing to do
+
+
+def _dead_pid() -> int:
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)
+    return int(done.stdout)  # a process that has ended
+
+
+def test_an_interrupt_between_the_two_renames_puts_the_old_folder_back(tmp_path, monkeypatch):
+    """Ctrl-C after the old report was moved aside and before the new one took its place
+    left no report at all (found by killing runs at random)."""
+    target = tmp_path / "out"
+    target.mkdir()
+    (target / "report.html").write_text("old")
+    real = os.replace
+
+    def interrupted(src, dst):
+        real(src, dst)
+        if Path(dst).name.startswith(".out.old-"):
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(os, "replace", interrupted)
+    with pytest.raises(KeyboardInterrupt), staging(target) as tmp:
+        (tmp / "report.html").write_text("new")
+    assert (target / "report.html").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_a_later_run_puts_back_the_folder_a_killed_one_had_moved_aside(tmp_path):
+    """A kill between the two renames leaves only ``.out.old-PID``; the next run deleted it as
+    garbage before writing anything. Now it is the output again, and replaced as usual."""
+    pid = _dead_pid()
+    aside = tmp_path / f".out.old-{pid}"
+    aside.mkdir()
+    (aside / "report.html").write_text("old")
+    remove_stale(tmp_path / "out")
+    assert (tmp_path / "out" / "report.html").read_text() == "old"
+    assert not aside.exists()
+    # with the output there, an orphaned copy is garbage as before
+    aside.mkdir()
+    remove_stale(tmp_path / "out")
+    assert not aside.exists() and (tmp_path / "out" / "report.html").read_text() == "old"
