@@ -11,7 +11,7 @@ Subpackages, from the ground up (a layer imports only from layers below it; the 
 - ``dataset``: bulk training data on Dask into Zarr (beside ``solver``, a top-level package).
 - ``render``: pictures only, headless.
 - ``pipeline``: end-to-end runs (``report``, ``paper``).
-- ``cli``: the ``raysim`` command.
+- ``cli``: the ``raysim`` command; ``console`` its entry point (signal handlers first).
 
 Leaves any layer may use: ``errors`` (user errors), ``version``, ``methods`` (the simulation
 methods, named once), ``files`` (the shipped examples, output guards), ``tomlschema`` (the one

@@ -181,3 +181,27 @@ def test_report_killed_or_terminated_leaves_no_staging_folder(tmp_path):
     done = run_cli(*args, timeout=300)
     assert done.code == 0, done.stderr
     assert (tmp_path / "out" / "report.html").is_file() and staged() == set()
+
+
+@pytest.mark.parametrize(("sig", "status", "line"), [
+    (signal.SIGINT, 130, "interrupted: raysim simulate stopped"),
+    (signal.SIGTERM, 143, "interrupted: raysim simulate stopped by SIGTERM")])
+def test_a_signal_while_the_command_loads_is_the_one_line(sig, status, line):
+    """In the second the console script spends importing its modules, Ctrl-C printed a
+    KeyboardInterrupt traceback and SIGTERM ended it without a word. The signal is sent at a
+    fixed point here: after the early handlers, before the command's modules load."""
+    import sys
+
+    from tests.cli import ROOT, cli_env
+
+    script = ("import os, signal, sys, time\n"
+              "sys.argv = ['raysim', 'simulate', 'paper_go', '-o', 'x.nc']\n"
+              "from raysim.console import install_early_handlers\n"
+              "install_early_handlers()\n"
+              f"os.kill(os.getpid(), {int(sig)})\n"
+              "import raysim.cli\n"
+              "time.sleep(30)\n")
+    done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, env=cli_env(),
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == status
+    assert done.stderr == line + "\n"
