@@ -53,12 +53,15 @@ class RunReport:
 
     def summary(self) -> str:
         """One line for the user."""
-        if not self.computed:
-            return (f"{self.store}: {self.done}/{self.samples} samples done, nothing left to compute"
-                    f"{self._rewritten_note()}")
-        line = (f"{self.store}: {self.done}/{self.samples} samples done ({self.skipped} already "
-                f"there, {self.computed} computed on {self.workers} workers in {self.seconds:.1f} s, "
-                f"{self.samples_per_second:.3g} samples/s)")
+        if not self.computed:  # an ideal intensity may still have been recomputed (repaired)
+            line = (f"{self.store}: {self.done}/{self.samples} samples done, "
+                    + ("no sample left to compute" if self.repaired or self.ideal_failures
+                       else "nothing left to compute"))
+        else:
+            line = (f"{self.store}: {self.done}/{self.samples} samples done ({self.skipped} already "
+                    f"there, {self.computed} computed on {self.workers} "
+                    f"worker{'s' if self.workers != 1 else ''} in {self.seconds:.1f} s, "
+                    f"{self.samples_per_second:.3g} samples/s)")
         if self.failed:
             index, reason = self.failures[0] if self.failures else (-1, "see the store's 'error'")
             line += f"; {self.failed} failed (sample {index}: {reason})"

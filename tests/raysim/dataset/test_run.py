@@ -330,3 +330,17 @@ def test_a_store_whose_metadata_cannot_be_read_is_refused_in_one_line(reference,
         generate(spec, store, resume=True, scheduler=inproc)
     assert str(store) in str(info.value) and "\n" not in str(info.value)
     assert (store / garbled).read_text() == "{not json"  # left as it was, for the user to decide
+
+
+def test_a_resume_that_only_repairs_an_ideal_intensity_says_so(reference, spec, tmp_path, inproc):
+    """Every sample done, one frequency's ideal intensity chunk lost: the resume recomputed it
+    and printed "nothing left to compute" (found by damaging stores between runs)."""
+    store = tmp_path / "ideal.zarr"
+    shutil.copytree(reference, store)
+    _sample_chunks(store, "intensity_ideal", 0)[0].unlink()
+    report = generate(spec, store, resume=True, scheduler=inproc)
+    assert (report.repaired, report.computed) == (1, 0)
+    line = report.summary()
+    assert "nothing left to compute" not in line
+    assert "1 done items failed verification and were recomputed" in line
+    assert_same_store(reference, store)
