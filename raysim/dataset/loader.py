@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 from raysim.dataset import integrity
 from raysim.dataset.reading import SOURCES
 from raysim.dataset.spec import DatasetError
-from raysim.dataset.store import DONE, open_readonly
+from raysim.dataset.store import DONE, open_readonly, status
 from raysim.maps.sphere import SphereGrid
 
 REPRESENTATIONS = ("intensity", "fa_sphere", "fa_aperture")
@@ -265,8 +265,10 @@ class Loader:
 
 
 def samples(group: zarr.Group, split: str) -> NDArray[np.int64]:
-    """Indices of the done samples of ``split`` (``train``, ``validation`` or ``all``)."""
-    done = np.asarray(group["status"][...]) == DONE
+    """Indices of the done samples of ``split`` (``train``, ``validation`` or ``all``); a torn
+    status marker counts as not done (:func:`raysim.dataset.store.status`; the decoder's
+    RuntimeError reached the user)."""
+    done = status(group) == DONE
     which = SPLITS[split]
     if which is not None:
         done &= np.asarray(group["split"][...]) == which
