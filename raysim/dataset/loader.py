@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import numbers
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from functools import cached_property
@@ -122,8 +123,18 @@ class Loader:
             raise DatasetError(f"unknown split {split!r}: use one of {', '.join(SPLITS)}")
         if source not in SOURCES:
             raise DatasetError(f"unknown source {source!r}: use one of {', '.join(SOURCES)}")
-        if batch_size < 1:
-            raise DatasetError(f"batch_size must be >= 1, got {batch_size}")
+        for name, value, lo in (("batch_size", batch_size, 1), ("seed", seed, 0),
+                                ("grid_n", 8 if grid_n is None else grid_n, 8)):
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lo:
+                raise DatasetError(f"{name} must be an integer >= {lo}, got {value!r}")
+        if not (isinstance(fill, numbers.Real) and not isinstance(fill, bool)):
+            raise DatasetError(f"fill must be a number, got {fill!r}")
+        try:
+            if not np.issubdtype(np.dtype(dtype), np.floating):
+                raise TypeError
+        except TypeError:
+            raise DatasetError(f"dtype must name a floating-point type (float32, float64), got "
+                               f"{dtype!r}") from None
         self.store = str(store)
         self.group = open_readonly(self.store)
         integrity.check_static(self.group, self.store)
@@ -132,7 +143,7 @@ class Loader:
         self.representation, self.source, self.split = representation, source, split
         self.batch_size, self.shuffle, self.seed, self.drop_last = int(batch_size), shuffle, seed, drop_last
         self.normalise, self.fill, self.dtype = normalise, float(fill), np.dtype(dtype)
-        self.grid_n = int(grid_n or self.group["x"].shape[0])
+        self.grid_n = int(self.group["x"].shape[0] if grid_n is None else grid_n)
         self.epoch = 0
         self.indices = samples(self.group, split)
 

@@ -147,6 +147,16 @@ def test_bad_loader_options_are_one_clear_error(store):
         Loader(str(path), representation="phase")
     with pytest.raises(DatasetError, match="unknown split"):
         Loader(str(path), split="test")
+    # each of these became a TypeError, or was quietly truncated or replaced (grid_n 0)
+    for bad, says in (({"grid_n": 0}, "grid_n must be an integer >= 8"),
+                      ({"grid_n": 48.7}, "grid_n must be an integer"),
+                      ({"batch_size": "2"}, "batch_size must be an integer"),
+                      ({"seed": -1}, "seed must be an integer >= 0"),
+                      ({"fill": "x"}, "fill must be a number"),
+                      ({"dtype": "foo"}, "dtype must name a floating-point type"),
+                      ({"dtype": "int32"}, "dtype must name a floating-point type")):
+        with pytest.raises(DatasetError, match=says):
+            Loader(str(path), **bad)
 
 
 def test_pytorch_dataset_round_trip(store):
