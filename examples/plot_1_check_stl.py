@@ -9,7 +9,8 @@ GO to show what the GO assumption costs in surface error.
 
 Here the dish is small (D = 10 m, F = 3 m, 36 panels in three rings with 20 mm gaps), written
 to an STL file first, so that the whole check takes seconds. On the command line the same is
-``raysim check panelled.stl --frequency 1e9 --frequency 4e9 --sphere-radius 1 -o out/check``.
+``raysim check panelled.stl --frequency 1e9 --frequency 4e9 --sphere-radius 1 --sphere 24x36
+--grid 64 --wave po+ptd --refine-model none -o out/check``.
 """
 
 # %%

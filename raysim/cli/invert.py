@@ -33,7 +33,7 @@ def invert_command(
         help="auto (the default: Gauss-Newton with the model's exact Jacobian where at least 20 "
              "LSQR iterations fit about 10 min on two cores (4.4e10 pair evaluations of a po or "
              "po+ptd model with its radiator), as many as fit in as few steps as they fill: the "
-             "paper's dish on 90 x 360 at 0.1 GHz 3 x 60, 0.3 GHz 2 x 46, 0.6 GHz 1 x 27; else the "
+             "paper's dish on 90 x 360 at 0.1 GHz 3 x 60, 0.3 GHz 2 x 51, 0.6 GHz 1 x 31; else the "
              "defect correction, and the SurfaceMap's gn_choice says why), defect "
              "(the defect correction alone) or gauss-newton (then Gauss-Newton whatever the cost; "
              "po or po+ptd models, in this process)."),

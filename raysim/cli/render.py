@@ -53,8 +53,9 @@ def report(
 ) -> None:
     """Simulate, invert and draw a scene: an HTML report mirroring the paper's Figs. 8-10.
 
-    The page embeds its figures; the PNGs, field.nc and surface.nc are written beside it.
-    Given a FieldMap instead of a scene, the simulation is skipped.
+    The page embeds its figures; beside it are figures/ (the PNGs), field.nc (the simulated
+    FieldMap) when the source is a scene, and surface.nc (the SurfaceMap) unless --no-invert.
+    Given a FieldMap instead of a scene, the simulation is skipped and no field.nc is written.
     """
     from raysim.pipeline.report import report as run
 
