@@ -327,14 +327,8 @@ def _fit_dish(vertices: NDArray, faces: NDArray, F: float | None) -> ParaboloidF
     any connected piece that is not dish surface: each such piece, worst first, is left out
     of the fit it would skew (a feed horn at the focus took a 25 m dish's F from 7.5 to 8.1 m)
     until none is left, then all are named."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     n = len(vertices)
-    rows = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
-    cols = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
-    _, piece = connected_components(coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)),
-                                    directed=False)
+    piece = _vertex_pieces(faces, n)
     on_faces = np.zeros(n, bool)
     on_faces[faces.ravel()] = True
     pieces = np.unique(piece[on_faces])
@@ -469,15 +463,20 @@ def _faces_up(vertices: NDArray, faces: NDArray) -> NDArray:
     return faces
 
 
-def _components(faces: NDArray, n_vertices: int) -> NDArray[np.int64]:
-    """Panel id per face: the connected pieces of the mesh, numbered by first appearance."""
+def _vertex_pieces(faces: NDArray, n_vertices: int) -> NDArray[np.int64]:
+    """The connected piece of the mesh each vertex belongs to (a label per vertex)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     rows = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
     cols = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
     graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_vertices, n_vertices))
-    _, label = connected_components(graph, directed=False)
+    return connected_components(graph, directed=False)[1]
+
+
+def _components(faces: NDArray, n_vertices: int) -> NDArray[np.int64]:
+    """Panel id per face: the connected pieces of the mesh, numbered by first appearance."""
+    label = _vertex_pieces(faces, n_vertices)
     _, first, inverse = np.unique(label[faces[:, 0]], return_index=True, return_inverse=True)
     rank = np.argsort(np.argsort(first))
     return rank[inverse].astype(np.int64)
