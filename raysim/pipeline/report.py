@@ -3,8 +3,10 @@
 The page (``report.html``) is self-contained: every figure is embedded as a base64 PNG, and the
 same PNGs, the FieldMap and the SurfaceMap are written beside it. It states the run's numbers
 (RMS and RRMS of the recovered surface, simulation, inversion and drawing times, the solver
-and its boundary assumption) and the scene text; for the paper's own case it quotes the paper's
-figures beside ours.
+and its boundary assumption), what the data cannot determine (in the words ``raysim invert``
+prints) and the scene text; for the paper's own case it quotes the paper's figure for the same
+kind of data beside ours: its GO case for GO data, its Table 3 row for PO (+ PTD) data at a
+frequency Table 3 lists, none otherwise.
 """
 
 from __future__ import annotations
@@ -37,8 +39,9 @@ from raysim.render.data import (
 from raysim.version import VERSION_ATTR
 
 PAPER_CASE = {"diameter": 110.0, "focal_length": 33.0, "sphere_radius": 10.0}
-PAPER_GO = ("paper, GO data: FDM (Gauss-Seidel, N = 256, 1000 iterations) RRMS 4.06 % in 92 ± 10 s; "
-            "FFT RRMS 7.47 %")
+PAPER_GO = ("GO data (the Table 2 case): FDM (Gauss-Seidel, N = 256, 1000 iterations) RRMS 4.06 % "
+            "in 92 ± 10 s; FFT RRMS 7.47 %")
+PAPER_PO_METHODS = ("po", "po+ptd")  # the data of the paper's Table 3 (PO & PTD)
 
 
 REPORT_FILES = ("report.html", "field.nc", "surface.nc", "figures")
@@ -50,6 +53,7 @@ figure { margin: 2em 0; }
 img { max-width: 100%; height: auto; box-sizing: border-box; border: 1px solid #ccc; }
 figcaption { font-size: 0.95em; margin-top: 0.4em; }
 pre { background: #f5f5f5; padding: 1em; overflow-x: auto; }
+.limits { border-left: 4px solid #c0392b; padding: 0.3em 0 0.3em 0.8em; background: #fdf3f2; }
 </style>"""
 
 
@@ -239,16 +243,19 @@ def _figures(field: xr.Dataset, surface: xr.Dataset | None) -> list[tuple[str, s
     ]
     if surface is not None:
         wide = (2400, 1000) if "truth" in surface.data_vars else figures.SIZE
+        # the page shows every figure at about the same width: the wide ones' text scaled up so
+        # that it reads at the size of the others'
+        text_scale = wide[0] / figures.SIZE[0]
         items += [
             ("fig10_recovered", "Fig. 10: recovered against true deformation along the x and y axes, "
              "with the error.", backend.figure_image(figures.fig10_recovered(surface))),
             ("surface_maps", "Recovered surface: truth, recovered and error over the aperture (µm).",
-             backend.figure_image(charts.surface_map(surface, wide))),
+             backend.figure_image(charts.surface_map(surface, wide, text_scale))),
         ]
     items.append(("field_3d", "The probe hemisphere coloured by FA over the reflector, focus and plane "
                   "wave marked; inset: the whole antenna.", field_image(field, "fa", figures.SIZE)))
     if surface is not None:
-        pl = surface_plotter(surface, wide)
+        pl = surface_plotter(surface, wide, text_scale=text_scale)
         items.append(("surface_3d", "Recovered surface as warped dishes (truth, recovered, error), one "
                       "exaggeration.", np.array(backend.screenshot(pl, None))))
         pl.close()
@@ -336,7 +343,8 @@ def numbers(field: xr.Dataset, surface: xr.Dataset | None, times: dict[str, floa
 
 
 def _accuracy(field: xr.Dataset, surface: xr.Dataset) -> list[tuple[str, str]]:
-    """RMS and RRMS rows, recomputed from the maps (RMS over the aperture, RRMS = RMS / M)."""
+    """RMS and RRMS rows, recomputed from the maps (RMS over the aperture, RRMS = RMS / M), the
+    error's harmonic part where the data cannot see it, and the paper's figure for such data."""
     panels = dict(surface_panels(surface))
     if "error" not in panels:
         return [("recovered", f"RMS {rms(panels['deformation']) * UM:.2f} µm (no truth to compare with)")]
@@ -344,15 +352,136 @@ def _accuracy(field: xr.Dataset, surface: xr.Dataset) -> list[tuple[str, str]]:
     err = rms(panels["error"])
     rows = [("truth", f"RMS {rms(panels['truth']) * UM:.2f} µm, peak-to-peak M = {M * UM:.1f} µm"),
             ("recovered - truth", f"RMS {err * UM:.2f} µm, RRMS = RMS / M = {100 * err / M:.2f} %")]
-    if _is_paper_case(field):
-        rows.append(("paper", PAPER_GO))
+    split = harmonic_error(surface) if _harmonic_unobservable(surface) else None
+    if split is not None:
+        harmonic, rest = split
+        rows.append(("harmonic part of the error",
+                     f"RMS {harmonic * UM:.2f} µm (unobservable without rim targets); the error less "
+                     f"it: RMS {rest * UM:.2f} µm, RRMS {100 * rest / M:.2f} %"))
+    paper = paper_row(field)
+    if paper is not None:
+        rows.append(("paper", paper))
     return rows
+
+
+def paper_row(field: xr.Dataset) -> str | None:
+    """The paper's own figure for the data of this run, naming its table, or None: for the
+    paper's case (its dish, sphere and Eq. 8 deformation at scale 1) the GO case's figures with
+    GO data; with PO or PO + PTD data at a frequency of Table 3, that row
+    (:data:`raysim.pipeline.paper.TABLE3`); nothing for other data (go+edge, measured, other
+    frequencies), which the paper has no figure for."""
+    if not _is_paper_case(field):
+        return None
+    method = str(field.attrs.get("method", ""))
+    if method == "go":
+        return PAPER_GO
+    if method not in PAPER_PO_METHODS:
+        return None
+    from raysim.pipeline.paper import TABLE3
+
+    f = float(field.attrs.get("frequency_hz", np.nan))
+    for hz, (rms_m, rrms_paper) in sorted(TABLE3.items()):
+        if abs(f - hz) <= 1e-6 * hz:
+            return (f"Table 3, PO & PTD data at {hz / 1e9:g} GHz: FDM (Gauss-Seidel, N = 256, 1000 "
+                    f"iterations) RMS {rms_m * UM:.2f} µm, RRMS {100 * rrms_paper:.2f} %")
+    return None
 
 
 def _is_paper_case(field: xr.Dataset) -> bool:
     a = field.attrs
     same = all(abs(float(a.get(k, np.nan)) - v) < 1e-9 for k, v in PAPER_CASE.items())
     return same and str(a.get("deformation", "")) == "paper Eq. 8 x 1"
+
+
+# --- what the data cannot determine ------------------------------------------------------------
+RIM_FIXED = "fixed by rim targets"  # the SurfaceMap's harmonic_part when rim targets fixed it
+
+
+def _harmonic_unobservable(surface: xr.Dataset) -> bool:
+    return str(surface.attrs.get("harmonic_part", "")) == "unobservable"
+
+
+def invert_lines(surface: xr.Dataset) -> list[str]:
+    """What ``raysim invert`` prints about the parts of the surface these data leave
+    undetermined (the UNOBSERVABLE lines of :func:`solver.run.summary`); [] where the SurfaceMap
+    lacks what that summary reads (a hand-made map) or the solver is not installed."""
+    try:
+        from solver.run import summary
+
+        return [line for line in summary(surface) if "UNOBSERVABLE" in line]
+    except (ImportError, KeyError, TypeError, ValueError):
+        return []
+
+
+def harmonic_error(surface: xr.Dataset) -> tuple[float, float] | None:
+    """(RMS of the error's harmonic part, RMS of the error less it) in m, or None without an
+    error map. The harmonic part is the harmonic function with the error's values at the rim
+    (:func:`solver.boundary.fit_harmonic` fitted to the error on the outermost ring of grid
+    cells): what rim targets decide and the intensities alone cannot see."""
+    from solver.boundary import RimTargets, fit_harmonic
+    from solver.errors import RimTargetsError
+
+    if "error" not in surface.data_vars:
+        return None
+    x, y = surface["x"].values, surface["y"].values
+    X, Y = np.meshgrid(x, y)
+    R = np.hypot(X, Y)
+    error = surface["error"].values
+    inside = np.isfinite(error)
+    if not inside.any():
+        return None
+    a = 0.5 * float(surface.attrs["diameter"]) if "diameter" in surface.attrs else float(R[inside].max())
+    ring = inside & (R > a - 1.5 * abs(float(x[1] - x[0])))
+    try:
+        h = fit_harmonic(RimTargets(X[ring], Y[ring], error[ring]), error[ring], a)
+    except RimTargetsError:  # too few cells on the rim to fit
+        return None
+    part = h(np.arctan2(Y[inside], X[inside]), R[inside])
+    return rms(part), rms(error[inside] - part)
+
+
+def cannot_determine(surface: xr.Dataset) -> list[str]:
+    """Sentences on what these data cannot determine: the harmonic part (unless rim targets
+    fixed it), with the share of the error it holds and how rim targets fix it, and any other
+    unobservable shape (a blocked centre's, delta_c with an estimated gain), in the words of
+    ``raysim invert`` (:func:`invert_lines`)."""
+    from solver.boundary import MAX_RADIUS_FACTOR, MIN_RADIUS_FACTOR, MIN_TARGETS
+
+    a = surface.attrs
+    lines = invert_lines(surface)
+    harmonic = [line for line in lines if line.startswith("harmonic part")]
+    sentences = []
+    if str(a.get("harmonic_part", "")) == RIM_FIXED:
+        sentences.append("The harmonic part (tilt, astigmatism, any r^n cos n phi) was fixed here by "
+                         f"rim targets ({a.get('boundary', '?')}).")
+    elif _harmonic_unobservable(surface):
+        sentences.append(_sentence(harmonic[0] if harmonic else "harmonic part unobservable"))
+        split = harmonic_error(surface)
+        panels = dict(surface_panels(surface))
+        if split is not None and "truth" in panels:
+            M = peak_to_peak(panels["truth"])
+            err = rms(panels["error"])
+            sentences.append(f"Of this map's error (RMS {_um(err)} µm, RRMS {_pct(err / M)} %), the "
+                             f"harmonic part has RMS {_um(split[0])} µm; the error less it has RMS "
+                             f"{_um(split[1])} µm, RRMS {_pct(split[1] / M)} %.")
+        sentences.append(f"Rim targets fix it: survey at least {MIN_TARGETS} points between "
+                         f"{MIN_RADIUS_FACTOR:g} and {MAX_RADIUS_FACTOR:g} times the rim radius (CSV "
+                         "x,y,dz in m) and run raysim invert FIELDMAP.nc -o SURFACE.nc --rim "
+                         "targets.csv.")
+    sentences += [_sentence(line) for line in lines if line not in harmonic]
+    return sentences
+
+
+def _um(metres: float) -> str:
+    return f"{metres * UM:.3g}" if metres * UM >= 0.01 else f"{metres * UM:.2f}"
+
+
+def _pct(fraction: float) -> str:
+    return f"{100 * fraction:.3g}" if 100 * fraction >= 0.01 else f"{100 * fraction:.2f}"
+
+
+def _sentence(line: str) -> str:
+    return line[:1].upper() + line[1:] + ("" if line.endswith(".") else ".")
 
 
 def _page(field: xr.Dataset, surface: xr.Dataset | None, blocks: list[str], times: dict[str, float]) -> str:
@@ -363,12 +492,16 @@ def _page(field: xr.Dataset, surface: xr.Dataset | None, blocks: list[str], time
                   "<h2>Scene</h2><p>None: a measured scan, drawn from the FieldMap's attributes.</p>")
     name = html.escape(str(field.attrs.get("scene_name", "scan")))
     summary = html.escape(error_summary(surface) if surface is not None else "")
+    limits = cannot_determine(surface) if surface is not None else []
+    limits_html = (f'<p class="limits"><strong>What the intensities alone cannot determine:</strong> '
+                   f'{html.escape(" ".join(limits))}</p>' if limits else "")
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">
 <title>raysim report: {name}</title>
 {PAGE_STYLE}</head><body>
 <h1>raysim report: {name}</h1>
 <p>Surface deformation from one intensity scan on a hemisphere about the focus. {summary}</p>
+{limits_html}
 <h2>Numbers of this run</h2><table>{rows}</table>
 <h2>Figures</h2>
 {"".join(blocks)}

@@ -181,12 +181,18 @@ def write_png(image: Any, output: str | os.PathLike[str]) -> Path:
     return path
 
 
-def figure(size: tuple[int, int]) -> Any:
-    """A matplotlib Figure of exactly ``size`` pixels (Agg canvas, no pyplot, no display)."""
+def figure(size: tuple[int, int], text_scale: float = 1.0) -> Any:
+    """A matplotlib Figure of exactly ``size`` pixels (Agg canvas, no pyplot, no display).
+
+    ``text_scale`` > 1 draws text and lines that many times larger at the same pixel size (more
+    dots per inch): a wide picture shown shrunk to a page's width keeps legible labels."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI, layout="constrained")
+    if not (0.25 <= text_scale <= 8.0):
+        raise RenderError(f"text_scale must lie in [0.25, 8], got {text_scale:g}")
+    dpi = DPI * text_scale
+    fig = Figure(figsize=(size[0] / dpi, size[1] / dpi), dpi=dpi, layout="constrained")
     FigureCanvasAgg(fig)
     return fig
 

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 from matplotlib.colors import TwoSlopeNorm
+from matplotlib.ticker import MaxNLocator
 
 from raysim.render import backend
 from raysim.render.data import (
@@ -118,11 +119,12 @@ def field_cut(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200),
 
 
 # --- SurfaceMap ------------------------------------------------------------------------------
-def surface_map(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200)) -> Any:
+def surface_map(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200), text_scale: float = 1.0) -> Any:
     """Figure: the deformation (µm) over the aperture; with a truth, truth / recovered / error
-    side by side (truth and recovered on one colour scale), each with its RMS."""
+    side by side (truth and recovered on one colour scale), each with its RMS. ``text_scale``:
+    text and lines that many times larger (:func:`backend.figure`)."""
     panels = surface_panels(ds)
-    fig = backend.figure(size)
+    fig = backend.figure(size, text_scale)
     summary = error_summary(ds)
     fig.suptitle(surface_title(ds) + "\n" + surface_subtitle(ds) + (f"\n{summary}" if summary else ""),
                  fontsize=12)
@@ -143,8 +145,9 @@ def surface_map(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200)) -> Any:
         if len(panels) == 1:
             fig.colorbar(image, ax=ax, label=f"{name} delta along z (µm)", shrink=0.8)
         else:
-            fig.colorbar(image, ax=ax, orientation="horizontal", label=f"{name} delta along z (µm)",
-                         shrink=0.9, pad=0.08)
+            bar = fig.colorbar(image, ax=ax, orientation="horizontal", label=f"{name} delta along z (µm)",
+                               shrink=0.9, pad=0.08)
+            bar.ax.xaxis.set_major_locator(MaxNLocator(nbins=4, steps=[1, 2, 2.5, 5, 10]))  # apart
     return fig
 
 

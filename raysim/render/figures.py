@@ -167,7 +167,9 @@ def fig9_equation(field: xr.Dataset, x: np.ndarray, lap: Delta | None, size: tup
         ax.set_title(f"along the {name}", fontsize=11)
         ax.set_ylabel("FA (dimensionless)")
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=9)
+    # one legend for both cuts, below them: inside an axes it would hide a stretch of the curves
+    fig.legend(handles=axes[0].get_lines(), loc="outside lower center", ncol=2, fontsize=10,
+               frameon=False)
     axes[-1].set_xlabel("position along the cut (m)")
     return fig
 

@@ -82,13 +82,15 @@ def warped_dish(ds: xr.Dataset, values: np.ndarray, k: float, n_r: int = 160, n_
 
 
 def surface_plotter(ds: xr.Dataset, size: tuple[int, int] = (2400, 1000), k: float | None = None,
-                    title: str | None = None) -> Any:
+                    title: str | None = None, text_scale: float = 1.0) -> Any:
     """Build (not render) the 3D picture of a SurfaceMap; returns the pyvista Plotter.
 
     A title strip on top; below it one view of the deformation, or truth / recovered / error
-    side by side when the map has a truth (subplots (1, 0), (1, 1), (1, 2)). ``k`` is the
-    exaggeration (None: chosen by :func:`exaggeration` from the largest shown map). Tests use
-    the plotter's renderers and cameras to project points to pixels.
+    side by side when the map has a truth (subplots (1, 0), (1, 1), (1, 2)), each with its
+    colour bar at the bottom (tick labels above the bar, its title below it). ``k`` is the
+    exaggeration (None: chosen by :func:`exaggeration` from the largest shown map);
+    ``text_scale`` enlarges every text by that factor (a wide picture shown shrunk to a page's
+    width). Tests use the plotter's renderers and cameras to project points to pixels.
     """
     panels = surface_panels(ds)
     a = aperture_radius_of(ds)
@@ -96,42 +98,61 @@ def surface_plotter(ds: xr.Dataset, size: tuple[int, int] = (2400, 1000), k: flo
     if k is None:
         k = exaggeration(np.concatenate([v.ravel() for n, v in panels if n != "error"]), 2 * a)
     n = len(panels)
-    pl = backend.plotter(size, shape=(2, n), row_weights=[0.13 if n == 1 else 0.16, 0.87],
-                         groups=[(0, np.s_[:])])
-    scale = min(size[1] / 900.0, size[0] / n / 700.0)
+    top = 0.13 if n == 1 else 0.16
+    pl = backend.plotter(size, shape=(2, n), row_weights=[top, 1.0 - top], groups=[(0, np.s_[:])])
+    scale = min(size[1] / 900.0, size[0] / n / 700.0) * text_scale
     shared = nice_ceiling(symmetric_limit(np.concatenate([v.ravel() for n, v in panels if n != "error"]),
                                           100.0) * UM)
+    title_size, label_size = backend.points(14 * scale), backend.points(13 * scale)
+    # VTK draws a colour bar's title on the side of its tick labels, on top of the middle one:
+    # the bar's labels go above it and its title, a text of its own, below it (heights as
+    # fractions of the panel's viewport; font sizes about pixels)
+    view = (1.0 - top) * size[1]
+    title_y = 0.015
+    bar_y = title_y + 1.3 * title_size / view
     for col, (name, values) in enumerate(panels):
         pl.subplot(1, col)
         limit = nice_ceiling(symmetric_limit(values, 100.0) * UM) if name == "error" else shared
-        bar = {"title": f"{name}: delta along z (µm)", "vertical": False, "position_x": 0.15,
-               "position_y": 0.03, "width": 0.7, "height": 0.07,
-               "title_font_size": backend.points(15 * scale),
-               "label_font_size": backend.points(13 * scale), "color": "black", "n_labels": 5,
-               "fmt": "%.0f" if limit >= 10 else "%.2f"}
+        bar_title = f"{name}: delta along z (µm)"
+        bar = {"title": bar_title, "vertical": False, "position_x": 0.15, "position_y": bar_y,
+               "width": 0.7, "height": 0.04 + 1.5 * label_size / view, "label_font_size": label_size,
+               "color": "black", "n_labels": 5, "fmt": "%.0f" if limit >= 10 else "%.2f"}
         dish = warped_dish(ds, values, k)
         pl.add_mesh(dish, scalars="delta_um", cmap="RdBu_r", clim=[-limit, limit],
                     smooth_shading=True, ambient=0.3, diffuse=0.75, specular=0.1, scalar_bar_args=bar,
                     name=f"dish_{name}")
+        scalar_bar = pl.scalar_bars[bar_title]
+        scalar_bar.SetTitle("")  # without a title VTK puts the labels above a horizontal bar
+        scalar_bar.SetTextPositionToSucceedScalarBar()
+        _text(pl, bar_title, title_y, title_size, f"bar_title_{name}", "bottom")
         pl.add_mesh(_guides(a, F, sampler(ds, values), k), color="#505050", line_width=1.0,
                     name=f"guides_{name}")
         pl.add_point_labels(np.array([[1.1 * a, 0.0, _z(1.1 * a, F)], [0.0, 1.1 * a, _z(1.1 * a, F)]]),
                             ["+x", "+y"], font_size=backend.points(14 * scale), text_color="black",
                             shape=None, show_points=False, always_visible=True, name=f"axes_{name}")
-        pl.add_text(f"{name}: RMS {rms(values) * UM:.4g} µm, p-v {peak_to_peak(values) * UM:.4g} µm",
-                    position="upper_edge", font_size=backend.points(12 * scale), color="black",
-                    name=f"label_{name}")
+        _text(pl, f"{name}: RMS {rms(values) * UM:.4g} µm, p-v {peak_to_peak(values) * UM:.4g} µm",
+              0.985, backend.points(15 * scale), f"label_{name}", "top")
         _camera(pl, a, F, 1.35 if n == 1 else 1.15)
     pl.subplot(0, 0)
     lines = [title or surface_title(ds), surface_subtitle(ds)]
     summary = error_summary(ds)
     lines.append(f"height exaggerated {k:g} x (delta along z); rings every {_ring_step(a):g} m"
                  + (f"; {summary}" if summary else ""))
-    pl.add_text("\n".join(lines), position="upper_edge", font_size=backend.points(12 * size[1] / 900),
-                color="black", name="title")
+    _text(pl, "\n".join(lines), 0.5, backend.points(14 * size[1] / 900 * text_scale), "title", "centered")
     if n > 1:
         pl.link_views(views=list(range(1, n + 1)))
     return pl
+
+
+def _text(pl: Any, text: str, y: float, size: int, name: str, align: str) -> Any:
+    """Text of ``size`` (about pixels) centred across the active view at height ``y`` (a fraction
+    of the view), its ``align`` (top, centered, bottom) edge there."""
+    actor = pl.add_text(text, position=(0.5, y), viewport=True, font_size=size / 2,  # pyvista doubles
+                        color="black", name=name)
+    prop = actor.GetTextProperty()
+    prop.SetJustificationToCentered()
+    getattr(prop, f"SetVerticalJustificationTo{align.capitalize()}")()
+    return actor
 
 
 def _z(r: Any, F: float) -> Any:

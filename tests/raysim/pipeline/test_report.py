@@ -16,7 +16,7 @@ from matplotlib.image import imread
 from raysim.errors import RaysimError
 from raysim.pipeline import report as report_module
 from raysim.render.backend import RenderError, colour_count
-from raysim.surface.deformation import PaperDeformation
+from raysim.surface.deformation import PaperDeformation, Zernike
 from tests.examples import equation_fieldmap, surfacemap
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -190,3 +190,191 @@ def test_a_failed_report_leaves_the_earlier_one_whole(tmp_path, monkeypatch):
     monkeypatch.setattr(raysim.simulate, "simulate", lambda scene, **kw: paper_field())
     report_module.report(ROOT / "scenes" / "paper_go.toml", old, invert=False)
     assert not (old / "surface.nc").exists() and (old / "field.nc").is_file()  # no stale surface
+
+
+# --- the paper's row: the paper's own figure for the same kind of data, naming its table --------
+def paper_row(method: str, frequency_hz: float, deformation: str = "paper Eq. 8 x 1") -> str | None:
+    """The page's "paper" row for the paper's dish and sphere with data of ``method`` at
+    ``frequency_hz`` (None: no such row)."""
+    field = paper_field()
+    field.attrs.update(method=method, frequency_hz=frequency_hz, deformation=deformation)
+    return dict(report_module.numbers(field, recovered_surface(N=48), {})).get("paper")
+
+
+def test_the_paper_row_quotes_the_papers_figure_for_the_same_kind_of_data(written, tmp_path, monkeypatch):
+    go = paper_row("go", 0.3e9)  # the paper's GO case: FDM 4.06 %, FFT 7.47 %
+    assert "GO data" in go and "Table 2" in go and "4.06 %" in go and "7.47 %" in go
+    assert "Table 3" not in go
+    # the paper's Table 3 (PO & PTD data): 0.1 GHz RMS 264.84 um, RRMS 22.07 %; 3 GHz 77.04 um, 6.42 %
+    po = paper_row("po", 0.1e9)
+    assert "Table 3" in po and "0.1 GHz" in po and "264.84 µm" in po and "22.07 %" in po
+    assert "4.06" not in po and "GO data" not in po
+    ptd = paper_row("po+ptd", 3e9)
+    assert "Table 3" in ptd and "3 GHz" in ptd and "77.04 µm" in ptd and "6.42 %" in ptd
+    # the paper has no figure for these: a frequency Table 3 does not list, other data, another
+    # deformation
+    assert paper_row("po", 0.2e9) is None
+    assert paper_row("po+ptd", 0.3e9 * 1.01) is None
+    assert paper_row("go+edge", 0.3e9) is None
+    assert paper_row("go", 0.3e9, deformation="paper Eq. 8 x 2") is None
+    # on the pages: the GO report quotes the GO case only, a PO report at 0.1 GHz Table 3 only
+    go_page = written[0].read_text(encoding="utf-8")
+    assert "4.06 %" in go_page and "Table 3" not in go_page
+    field = paper_field()
+    field.attrs.update(method="po", frequency_hz=0.1e9)
+    po_page = page_text(field, recovered_surface(N=48), tmp_path, monkeypatch)
+    assert "22.07 %" in po_page and "Table 3" in po_page and "4.06" not in po_page
+
+
+# --- what the data cannot determine -----------------------------------------------------------
+def page_text(field, surface, out, monkeypatch) -> str:
+    """The report page (unescaped) of ``field`` and ``surface`` without its figures."""
+    import html
+
+    monkeypatch.setattr(report_module, "_figures", lambda field, surface: [])
+    return html.unescape(report_module.write_report(field, surface, out).read_text(encoding="utf-8"))
+
+
+def limits_paragraph(text: str) -> str:
+    """The page's paragraph on what the data cannot determine, checked to stand beside the
+    headline accuracy, before the table of numbers."""
+    match = re.search(r'<p class="limits">(.*?)</p>', text, re.S)
+    assert match is not None
+    assert text.index("RMS error") < match.start() < text.index("Numbers of this run")
+    return match.group(1)
+
+
+ASTIGMATISM = Zernike(((2, 2, 100e-6),), D / 2)  # r^2 cos 2 phi: harmonic, no Laplacian, no FA
+
+
+def test_the_page_says_the_error_of_astigmatism_is_the_unobservable_harmonic_part(tmp_path, monkeypatch):
+    from solver.invert import invert
+    from solver.run import summary
+
+    field = equation_fieldmap(ASTIGMATISM, D, F, n_theta=45, n_phi=90)
+    surface = invert(field, N=64, truth=ASTIGMATISM, refine_iterations=0)
+    error = surface["error"].values
+    err_um = np.sqrt(np.nanmean(error**2)) * 1e6
+    assert err_um > 90  # the intensities see nothing of it: the whole deformation is the error
+    text = page_text(field, surface, tmp_path, monkeypatch)
+    limits = limits_paragraph(text)
+    # the sentence raysim invert prints, and how to fix it
+    said = next(line for line in summary(surface) if line.startswith("harmonic part"))
+    assert said[1:] in limits
+    assert "tilt, astigmatism, any r^n cos n phi) is UNOBSERVABLE without rim targets" in limits
+    assert "Rim targets fix it" in limits and "--rim" in limits
+    # and how much of the error it is: all of it, astigmatism being harmonic
+    row = re.search(r"harmonic part of the error</th><td>RMS ([\d.]+) µm .*?the error less it: RMS ([\d.]+) µm",
+                    text)
+    assert row is not None
+    assert float(row.group(1)) == pytest.approx(err_um, rel=0.01)
+    assert float(row.group(2)) < 0.01 * err_um
+
+
+def test_with_rim_targets_the_page_says_they_fixed_the_harmonic_part(tmp_path, monkeypatch):
+    from solver.boundary import RimTargets
+    from solver.invert import invert
+
+    field = equation_fieldmap(ASTIGMATISM, D, F, n_theta=45, n_phi=90)
+    phi = np.linspace(0.0, 2 * np.pi, 24, endpoint=False)
+    x, y = 0.98 * D / 2 * np.cos(phi), 0.98 * D / 2 * np.sin(phi)
+    surface = invert(field, N=64, truth=ASTIGMATISM, refine_iterations=0,
+                     rim=RimTargets(x, y, ASTIGMATISM(x, y)))
+    text = page_text(field, surface, tmp_path, monkeypatch)
+    limits = limits_paragraph(text)
+    assert "fixed here by rim targets" in limits and "24 points" in limits
+    assert "UNOBSERVABLE" not in limits and "--rim" not in limits
+    assert "harmonic part of the error" not in text
+
+
+A = D / 2
+
+
+@pytest.mark.parametrize("extra, share", [
+    (lambda x, y: 20e-6 * (1 - (x * x + y * y) / A**2) ** 2, 0.0),  # zero on the rim: none of it
+    (lambda x, y: 20e-6 * (x * x - y * y) / A**2 + 5e-6 * x / A, 1.0),  # astigmatism, tilt: all
+], ids=["zero-on-the-rim", "harmonic"])
+def test_the_harmonic_part_of_an_error_is_set_by_its_rim_values(extra, share):
+    truth = PaperDeformation(D, F)
+    surface = surfacemap(lambda x, y: truth(x, y) + extra(x, y), D, N=128, truth=truth, F=F)
+    error = surface["error"].values
+    err = np.sqrt(np.nanmean(error**2))
+    harmonic, rest = report_module.harmonic_error(surface)
+    assert harmonic == pytest.approx(share * err, abs=0.02 * err)
+    assert rest == pytest.approx((1 - share) * err, abs=0.02 * err)
+
+
+# --- the figures as the page shows them -------------------------------------------------------
+SHOWN_WIDTH = 1246  # px of a figure on the page in a 1280 px window (body padding, border off)
+
+
+def text_bands(image: np.ndarray, rows: slice, cols: slice) -> list[tuple[int, int]]:
+    """(first, last) rows of each run of rows holding black or grey text in image[rows, cols]."""
+    rgb = image[rows, cols, :3].astype(np.int64)
+    grey_dark = (rgb.max(axis=-1) < 110) & (rgb.max(axis=-1) - rgb.min(axis=-1) < 25)
+    hit = np.nonzero(grey_dark.sum(axis=1) > 0)[0]
+    bands: list[list[int]] = []
+    for r in hit:
+        if bands and r == bands[-1][1] + 1:
+            bands[-1][1] = r
+        else:
+            bands.append([r, r])
+    return [(first + (rows.start or 0), last + (rows.start or 0)) for first, last in bands]
+
+
+def bar_rows(image: np.ndarray, rows: slice, cols: slice) -> tuple[int, int]:
+    """First and last rows of a horizontal colour bar in image[rows, cols]: rows mostly coloured."""
+    rgb = image[rows, cols, :3].astype(np.int64)
+    coloured = (rgb.max(axis=-1) - rgb.min(axis=-1)) > 40
+    hit = np.nonzero(coloured.mean(axis=1) > 0.3)[0]
+    return hit[0] + (rows.start or 0), hit[-1] + (rows.start or 0)
+
+
+@pytest.mark.parametrize("name, panels", [("surface_3d", 3), ("fig8a_deformation", 1)])
+def test_3d_colour_bars_keep_their_title_off_the_tick_labels(written, name, panels):
+    image = (imread(written[0].parent / "figures" / f"{name}.png") * 255).astype(np.uint8)
+    height, width = image.shape[:2]
+    scale = SHOWN_WIDTH / width
+    for k in range(panels):
+        # the middle 80 % of the panel's width, the bottom 20 % of the picture: its colour bar
+        cols = slice(int((k + 0.1) * width / panels), int((k + 0.9) * width / panels))
+        rows = slice(int(0.8 * height), height)
+        top, bottom = bar_rows(image, rows, cols)
+        bands = text_bands(image, rows, cols)
+        above = [b for b in bands if b[1] < top]
+        below = [b for b in bands if b[0] > bottom]
+        assert len(above) == 1 and len(below) == 1, bands  # labels above the bar, its title below
+        assert not [b for b in bands if b[1] >= top and b[0] <= bottom]
+        labels, title = above[0], below[0]
+        # legible where the page shows the picture: digits' height, a line with (µm)'s height
+        assert (labels[1] - labels[0] + 1) * scale >= 8.0
+        assert (title[1] - title[0] + 1) * scale >= 11.0
+
+
+def test_wide_maps_text_reads_at_the_pages_width(written):
+    image = (imread(written[0].parent / "figures" / "surface_maps.png") * 255).astype(np.uint8)
+    height, width = image.shape[:2]
+    assert width == 2400
+    # each panel's colour bar label, the lowest line of text: a line with "(µm)" in it
+    for k in range(3):
+        cols = slice(int(k * width / 3), int((k + 1) * width / 3))
+        label = text_bands(image, slice(int(0.85 * height), height), cols)[-1]
+        assert (label[1] - label[0] + 1) * SHOWN_WIDTH / width >= 10.0  # 7 px before
+
+
+def test_fig9_legend_hides_no_curve():
+    from raysim.render import figures
+
+    field = paper_field()
+    x = figures.aperture_x(field, None)
+    fig = figures.fig9_equation(field, x, figures.truth_laplacian(figures.scene_deformation(field), None))
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    legends = fig.legends + [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None]
+    assert legends
+    for legend in legends:
+        box = legend.get_window_extent(renderer)
+        assert {t.get_text() for t in legend.get_texts()} == {"FA from the intensities",
+                                                              "G Laplacian(delta), true delta"}
+        for ax in fig.axes:  # outside every plot: no stretch of a curve under it
+            assert not box.overlaps(ax.get_window_extent(renderer))

@@ -121,3 +121,19 @@ def test_exaggeration_is_a_round_factor_giving_about_six_percent_of_d():
     k = exaggeration(values, 110.0)
     assert k == 5000.0
     assert 0.03 * 110 < k * 1212e-6 <= 0.06 * 110
+
+
+def test_text_scale_enlarges_the_text_not_the_picture(with_truth):
+    """A wide picture shown shrunk keeps legible labels: text_scale draws them larger on the same
+    pixels."""
+    heights = {}
+    for scale in (1.0, 1.7):
+        fig = charts.surface_map(with_truth, (2400, 1000), text_scale=scale)
+        image = backend.figure_image(fig)
+        assert image.shape == (1000, 2400, 3)
+        renderer = fig.canvas.get_renderer()
+        heights[scale] = np.median([t.get_window_extent(renderer).height
+                                    for t in fig.axes[0].get_xticklabels() if t.get_text()])
+    assert heights[1.7] == pytest.approx(1.7 * heights[1.0], rel=0.1)
+    with pytest.raises(backend.RenderError):
+        backend.figure((2400, 1000), text_scale=0.0)
