@@ -355,9 +355,11 @@ def _accuracy(field: xr.Dataset, surface: xr.Dataset) -> list[tuple[str, str]]:
     split = harmonic_error(surface) if _harmonic_unobservable(surface) else None
     if split is not None:
         harmonic, rest = split
-        rows.append(("harmonic part of the error",
-                     f"RMS {harmonic * UM:.2f} µm (unobservable without rim targets); the error less "
-                     f"it: RMS {rest * UM:.2f} µm, RRMS {100 * rest / M:.2f} %"))
+        rows.append(("harmonic part of the truth",
+                     f"RMS {harmonic * UM:.2f} µm (unobservable without rim targets); the error "
+                     f"without it: RMS {rest * UM:.2f} µm, RRMS {100 * rest / M:.2f} %"
+                     if _sizeable(harmonic, surface) else
+                     "negligible (under 1 % of the truth's RMS): the error is the inversion's own"))
     paper = paper_row(field)
     if paper is not None:
         rows.append(("paper", paper))
@@ -414,30 +416,40 @@ def invert_lines(surface: xr.Dataset) -> list[str]:
 
 
 def harmonic_error(surface: xr.Dataset) -> tuple[float, float] | None:
-    """(RMS of the error's harmonic part, RMS of the error less it) in m, or None without an
-    error map. The harmonic part is the harmonic function with the error's values at the rim
-    (:func:`solver.boundary.fit_harmonic` fitted to the error on the outermost ring of grid
-    cells): what rim targets decide and the intensities alone cannot see."""
+    """(RMS of the truth's harmonic part, RMS of the error with that part taken out) in m, or
+    None without a truth. The truth's harmonic part is the harmonic function with the truth's
+    values at the rim (:func:`solver.boundary.fit_harmonic` fitted on the outermost ring of grid
+    cells): what the intensities alone cannot see and a map without rim targets leaves out (it
+    assumes zero on the rim), so its error holds minus that part; the rest is the inversion's
+    own (a harmonic part also leaks a little into the interior: docs/physics.md)."""
     from solver.boundary import RimTargets, fit_harmonic
     from solver.errors import RimTargetsError
 
-    if "error" not in surface.data_vars:
+    if "error" not in surface.data_vars or "truth" not in surface.data_vars:
         return None
     x, y = surface["x"].values, surface["y"].values
     X, Y = np.meshgrid(x, y)
     R = np.hypot(X, Y)
-    error = surface["error"].values
-    inside = np.isfinite(error)
+    truth, error = surface["truth"].values, surface["error"].values
+    inside = np.isfinite(error) & np.isfinite(truth)
     if not inside.any():
         return None
     a = 0.5 * float(surface.attrs["diameter"]) if "diameter" in surface.attrs else float(R[inside].max())
     ring = inside & (R > a - 1.5 * abs(float(x[1] - x[0])))
     try:
-        h = fit_harmonic(RimTargets(X[ring], Y[ring], error[ring]), error[ring], a)
+        h = fit_harmonic(RimTargets(X[ring], Y[ring], truth[ring]), truth[ring], a)
     except RimTargetsError:  # too few cells on the rim to fit
         return None
     part = h(np.arctan2(Y[inside], X[inside]), R[inside])
-    return rms(part), rms(error[inside] - part)
+    return rms(part), rms(error[inside] + part)
+
+
+def _sizeable(harmonic: float, surface: xr.Dataset) -> bool:
+    """Whether a harmonic part of RMS ``harmonic`` (m) is worth a figure: 1 % of the truth's
+    RMS at least (below that, the ring of grid cells the fit reads, inside the rim, finds a
+    truth that is zero on the rim to be a little harmonic)."""
+    truth = surface["truth"].values
+    return harmonic >= 0.01 * rms(truth[np.isfinite(truth)])
 
 
 def cannot_determine(surface: xr.Dataset) -> list[str]:
@@ -458,12 +470,13 @@ def cannot_determine(surface: xr.Dataset) -> list[str]:
         sentences.append(_sentence(harmonic[0] if harmonic else "harmonic part unobservable"))
         split = harmonic_error(surface)
         panels = dict(surface_panels(surface))
-        if split is not None and "truth" in panels:
+        if split is not None and "truth" in panels and _sizeable(split[0], surface):
             M = peak_to_peak(panels["truth"])
             err = rms(panels["error"])
-            sentences.append(f"Of this map's error (RMS {_um(err)} µm, RRMS {_pct(err / M)} %), the "
-                             f"harmonic part has RMS {_um(split[0])} µm; the error less it has RMS "
-                             f"{_um(split[1])} µm, RRMS {_pct(split[1] / M)} %.")
+            sentences.append(f"The truth's harmonic part, which this map cannot hold, has RMS "
+                             f"{_um(split[0])} µm; without it the map's error (RMS {_um(err)} µm, "
+                             f"RRMS {_pct(err / M)} %) has RMS {_um(split[1])} µm, RRMS "
+                             f"{_pct(split[1] / M)} %.")
         sentences.append(f"Rim targets fix it: survey at least {MIN_TARGETS} points between "
                          f"{MIN_RADIUS_FACTOR:g} and {MAX_RADIUS_FACTOR:g} times the rim radius (CSV "
                          "x,y,dz in m) and run raysim invert FIELDMAP.nc -o SURFACE.nc --rim "
