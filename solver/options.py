@@ -118,7 +118,8 @@ class InvertOptions:
             _real_in("the SOR relaxation factor (omega)", self.omega, 0.0, 2.0)
         _integer("the uncertainty's Monte Carlo draws (uncertainty_samples)",
                  self.uncertainty_samples, 0, MAX_UNCERTAINTY_SAMPLES)
-        _integer("the random seed (seed)", self.seed, 0, 2**63 - 1)
+        if isinstance(self.seed, bool) or not isinstance(self.seed, numbers.Integral) or self.seed < 0:
+            raise SolverError(f"the random seed (seed) must be an integer >= 0, got {self.seed!r}")
         if self.rim is not None and self.solver == "fft":
             raise SolverError("the fft solver works on the enclosing square and cannot use rim "
                               "targets; choose direct, multigrid, sor or gauss-seidel")

@@ -55,7 +55,7 @@ def parse_levels(text: str) -> list[float]:
 
 def check_levels(levels: Sequence[float], shown: str) -> None:
     """Refuse noise levels (dB per reading) that are not numbers in (0, 10]."""
-    if (isinstance(levels, str | bytes) or not levels
+    if (isinstance(levels, str | bytes) or len(levels) == 0
             or any(isinstance(v, bool) or not isinstance(v, numbers.Real)
                    or not (math.isfinite(v) and 0.0 < v <= 10.0) for v in levels)):
         raise SolverError(f"--noise-db values must lie in (0, 10] dB, got {shown}")

@@ -1,6 +1,7 @@
 """budget_rows from Python refuses what the CLI's parser refuses (it answered -0.01 dB with the
 budget of +0.01, NaN with a NaN total, 2.5 readings with 2.5 readings per point)."""
 
+import numpy as np
 import pytest
 
 from raysim.pipeline.budget import budget_rows
@@ -27,3 +28,6 @@ def test_bad_budget_requests_are_refused(kwargs, says):
 def test_a_good_request_still_answers():
     (row,) = budget_rows("scan_demo", [0.01], readings=4)
     assert row.readings == 4
+    # numpy levels and counts, as a script passes them
+    rows = budget_rows("scan_demo", np.array([0.01, 0.02]), readings=np.int64(4))
+    assert [r.noise_db for r in rows] == [0.01, 0.02]
