@@ -316,8 +316,9 @@ def fit_paraboloid(points: NDArray, F: float | None = None) -> ParaboloidFit:
 
 #: a connected piece of a mesh is not reflector surface (a feed, a strut, a loose plate) when its
 #: vertices depart from the dish's paraboloid by more than this fraction of the dish's depth
-#: D^2 / (16 F) RMS, and by more than STRAY_OVER_MEDIAN times the other pieces' median
-#: (the panels of a dish that is not a paraboloid all depart alike, and stay)
+#: D^2 / (16 F) RMS, and by more than STRAY_OVER_MEDIAN times the other pieces' median, each
+#: weighted by its vertices (the panels of a dish that is not a paraboloid all depart alike, and
+#: stay; four legs beside a one-piece dish are four pieces against one, but few vertices)
 STRAY_PIECE_OF_DEPTH = 0.05
 STRAY_OVER_MEDIAN = 10.0
 
@@ -343,11 +344,12 @@ def _fit_dish(vertices: NDArray, faces: NDArray, F: float | None) -> ParaboloidF
         D = 2.0 * float(np.max(np.hypot(dx[kept], dy[kept])))
         depth = D * D / (16.0 * fit.F)
         left = [i for i in pieces if i not in {s for s, _, _ in stray}]
+        size = np.array([np.count_nonzero(on_faces & (piece == i)) for i in left])
         rms = np.array([np.sqrt(np.mean(departure[on_faces & (piece == i)] ** 2)) for i in left])
         worst = int(np.argmax(rms))
-        others = np.delete(rms, worst)
         if not (rms[worst] > STRAY_PIECE_OF_DEPTH * depth
-                and rms[worst] > STRAY_OVER_MEDIAN * float(np.median(others))):
+                and rms[worst] > STRAY_OVER_MEDIAN * _weighted_median(np.delete(rms, worst),
+                                                                      np.delete(size, worst))):
             break
         stray.append((int(left[worst]), float(rms[worst]), depth))
         kept &= piece != left[worst]
@@ -362,6 +364,13 @@ def _fit_dish(vertices: NDArray, faces: NDArray, F: float | None) -> ParaboloidF
                         "panels only: remove them, or give feed, legs or cabin as [[obstacle]] "
                         "entries")
     return fit
+
+
+def _weighted_median(values: NDArray, weights: NDArray) -> float:
+    """The value below which half the total weight lies."""
+    order = np.argsort(values)
+    cumulative = np.cumsum(weights[order])
+    return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
 
 
 def load_reflector(path: str | Path, unit: float = 1.0, F: float | None = None,

@@ -301,6 +301,18 @@ def test_pieces_that_are_not_dish_surface_are_refused_by_name(tmp_path: Path):
             load_reflector(_dish_with(tmp_path, extra, "dish.ply"))
     with pytest.raises(MeshError, match="2 pieces of the mesh are not dish surface"):
         load_reflector(_dish_with(tmp_path, trimesh.util.concatenate([horn, plate]), "two.ply"))
+    # a one-piece dish with four legs: five pieces, the legs the most of them (the median of
+    # the pieces was a leg's, and they passed, F fitted 3.6 m instead of 3)
+    one = paraboloid(10.0, 3.0, 0.25).mesh
+    legs = []
+    for angle in np.radians([45.0, 135.0, 225.0, 315.0]):
+        leg = trimesh.creation.box((0.1, 0.1, 3.0))
+        leg.apply_translation([4.0 * np.cos(angle), 4.0 * np.sin(angle), 2.5])
+        legs.append(leg)
+    path = tmp_path / "legs.ply"
+    trimesh.util.concatenate([one, *legs]).export(path)
+    with pytest.raises(MeshError, match="4 pieces of the mesh are not dish surface"):
+        load_reflector(path)
 
 
 def test_panels_that_all_depart_alike_are_not_stray(tmp_path: Path):
