@@ -397,17 +397,43 @@ def load_reflector(path: str | Path, unit: float = 1.0, F: float | None = None,
     D = 2.0 * float(np.max(np.hypot(vertices[:, 0], vertices[:, 1])))
     deformed = Reflector(vertices, faces, panel, facet_vertex_normals(vertices, faces), F_used, D)
     if ideal_path is not None:
-        ideal_mesh = _read_mesh(ideal_path, unit)
-        same = ideal_mesh.vertices.shape == mesh.vertices.shape
-        same = same and np.array_equal(ideal_mesh.faces, mesh.faces)
-        if not same:
-            raise MeshError(f"{ideal_path}: the ideal mesh must share the deformed mesh's triangulation")
-        iv = np.asarray(ideal_mesh.vertices, dtype=np.float64) - shift
+        iv = _ideal_vertices(ideal_path, path, unit, np.asarray(mesh.vertices, dtype=np.float64)) - shift
     else:
         iv = vertices.copy()
         iv[:, 2] = (iv[:, 0] ** 2 + iv[:, 1] ** 2) / (4.0 * F_used)
     ideal = Reflector(iv, faces, panel, facet_vertex_normals(iv, faces), F_used, D)
     return ideal, deformed, fit
+
+
+def _ideal_vertices(ideal_path: str | Path, path: str | Path, unit: float,
+                    merged: NDArray) -> NDArray[np.float64]:
+    """The ideal mesh's vertices (m) in the order of the deformed mesh's ``merged`` ones.
+
+    Both files must hold the same triangulation, vertex for vertex as written. Coincident
+    vertices are merged by the deformed mesh's coincidences, not the ideal's: panels that
+    touch on the design surface and part when deformed are one piece in the ideal file alone,
+    and merging each file by its own would give the two different triangulations.
+    """
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    ideal = _read_mesh(ideal_path, unit)  # the file's own checks (units, finite, triangles)
+    raw = [trimesh.load(Path(p), force="mesh", process=False) for p in (path, ideal_path)]
+    same = raw[0].vertices.shape == raw[1].vertices.shape and np.array_equal(raw[0].faces, raw[1].faces)
+    if not same:
+        raise MeshError(f"{ideal_path}: the ideal mesh must share the deformed mesh's triangulation")
+    raw_deformed = np.asarray(raw[0].vertices, dtype=np.float64) * unit
+    raw_ideal = np.asarray(raw[1].vertices, dtype=np.float64) * unit
+    tol = 1e-9 * max(float(np.ptp(merged)), 1.0)
+    distance, index = cKDTree(merged).query(raw_deformed)
+    used = distance <= tol  # vertices of dropped faces were removed from ``merged``
+    out = np.full_like(merged, np.nan)
+    out[index[used]] = raw_ideal[used]
+    spread = np.abs(out[index[used]] - raw_ideal[used]).max(initial=0.0)
+    if not np.all(np.isfinite(out)) or spread > 1e-6 * float(np.ptp(ideal.vertices)):
+        raise MeshError(f"{ideal_path}: the ideal mesh must share the deformed mesh's triangulation "
+                        "(vertices that coincide in the deformed mesh do not in the ideal)")
+    return out
 
 
 MAX_MESH_SPAN_M = 1000.0  # the largest dish this project is for is 110 m

@@ -326,3 +326,27 @@ def test_panels_that_all_depart_alike_are_not_stray(tmp_path: Path):
     mesh.export(path)
     _, loaded, _ = load_reflector(path)
     assert loaded.n_panels == 9
+
+
+@pytest.mark.parametrize("suffix", [".stl", ".ply"])
+def test_panels_that_touch_in_the_ideal_and_part_when_deformed_load_as_a_pair(tmp_path: Path, suffix):
+    """Panels without gaps share their edges' positions in the design file but not once each
+    is moved: each file merged by its own coincidences gave two triangulations, and the pair
+    was refused. The loaded deformation is each panel's piston (less the fit's)."""
+    import trimesh
+
+    layout = PanelLayout((0.0, 1.7, 3.4, 5.0), (6, 12, 18), 0.0)
+    design = paraboloid(10.0, 3.0, 0.25, layout)
+    piston = np.random.default_rng(0).normal(0.0, 100e-6, layout.n_panels)
+    moved = design.vertices.copy()
+    moved[:, 2] += piston[design.vertex_panel]
+    trimesh.Trimesh(design.vertices, design.faces, process=False).export(tmp_path / f"ideal{suffix}")
+    trimesh.Trimesh(moved, design.faces, process=False).export(tmp_path / f"dish{suffix}")
+    ideal, loaded, _ = load_reflector(tmp_path / f"dish{suffix}", F=3.0, ideal_path=tmp_path / f"ideal{suffix}")
+    assert loaded.n_panels == layout.n_panels
+    assert np.array_equal(ideal.faces, loaded.faces) and len(loaded.faces) == len(design.faces)
+    # face k is the files' face k (rewound at most): its corners moved by its panel's piston,
+    # the fit's shift being the same for both (float32 in STL: 1e-6 m of 5 m)
+    dz = loaded.vertices[:, 2] - ideal.vertices[:, 2]
+    expected = piston[design.vertex_panel[design.faces[:, 0]]]
+    assert np.allclose(dz[loaded.faces], expected[:, None], atol=2e-6)
