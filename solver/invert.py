@@ -284,24 +284,30 @@ def _truth_from_scene(attrs: dict) -> Callable | None:
     scene = scene_of(attrs)
     if scene is None:
         return None
-    return scene.deformation if scene.dish.mesh is None else _mesh_truth(scene)
+    return scene.deformation if scene.dish.mesh is None else _mesh_truth(scene, attrs)
 
 
-def _mesh_truth(scene) -> Callable | None:
+def _mesh_truth(scene, attrs: dict) -> Callable | None:
     """delta(x, y) (m, along z) of a mesh scene: the deformed mesh's z minus its ideal's (the
     ``ideal_mesh``, else the fitted paraboloid), vertex by vertex, linear over the ideal's
     (x, y) and the nearest vertex's beyond its hull. The scene's own deformation, if any, is
-    in it. None when the mesh no longer loads (the truth is then unknown: its zero deformation
-    made every mesh's map read as its own error)."""
+    in it. None when the mesh no longer loads, or departs from its ideal by another RMS than
+    the FieldMap's ``mesh_departure_rms_m`` (another file under its name): the truth is then
+    unknown (taking the scene's zero deformation made every mesh's map read as its own
+    error)."""
     from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
 
     from raysim.errors import RaysimError
-    from raysim.surface.mesh import reflectors_for
+    from raysim.surface.mesh import mesh_departure_rms, reflectors_for
 
     try:
         ideal, deformed = reflectors_for(scene)
     except (RaysimError, OSError):
         return None
+    recorded = attrs.get("mesh_departure_rms_m")
+    if recorded is not None and not np.isclose(mesh_departure_rms(ideal, deformed), float(recorded),
+                                               rtol=1e-6, atol=1e-12):
+        return None  # another file now has the name the scene gives: not the mesh simulated
     xy = ideal.vertices[:, :2]
     dz = deformed.vertices[:, 2] - ideal.vertices[:, 2]
     linear, nearest = LinearNDInterpolator(xy, dz), NearestNDInterpolator(xy, dz)

@@ -187,8 +187,11 @@ def scene_of(field: Any) -> Scene | None:
     text = attrs.get("scene") if isinstance(attrs, Mapping) else None
     if not text:
         return None
+    # the files it names resolve beside the scene file it came from, wherever this runs
+    folder = Path(str(attrs.get("scene_folder", "")))
     try:
-        return parse_scene(str(text), source="the FieldMap's scene")
+        return parse_scene(str(text), source="the FieldMap's scene",
+                           base=folder if folder.is_absolute() and folder.is_dir() else None)
     except SceneError:
         return None
 

@@ -565,6 +565,12 @@ def check_stated_dish(path: str | Path, loaded: Reflector, fit: ParaboloidFit,
                              f"{100 * MAX_DEPARTURE_OF_DEPTH:g} %)")
 
 
+def mesh_departure_rms(ideal: Reflector, deformed: Reflector) -> float:
+    """RMS (m) over the vertices of the deformed mesh's z less its ideal's (the FieldMap's
+    ``mesh_departure_rms_m``, and the check that a mesh read again is the one simulated)."""
+    return float(np.sqrt(np.mean((deformed.vertices[:, 2] - ideal.vertices[:, 2]) ** 2)))
+
+
 def reflectors_for(scene) -> tuple[Reflector, Reflector]:
     """The (ideal, deformed) reflector pair a :class:`~raysim.scene.scene.Scene` describes, both
     with the scene's obstacles (built on the reflector's focal length). A mesh's D and F are

@@ -62,3 +62,30 @@ def test_simulate_states_how_far_a_mesh_departs_from_its_ideal(tmp_path):
     expected = float(np.sqrt(np.mean(bump(v[:, 0], v[:, 1]) ** 2)))
     assert ds.attrs["mesh_departure_rms_m"] == pytest.approx(expected, rel=1e-3)  # float32 file
     assert "um RMS along z from its ideal" in summary(ds)
+
+
+def test_the_truth_of_a_mesh_scene_is_found_from_any_folder_and_only_for_its_own_file(tmp_path, monkeypatch):
+    """The scene's relative mesh names were resolved in the folder invert ran in: there the
+    truth was unknown, and elsewhere another file of the same name became the truth."""
+    from raysim.scene.scene import load_scene
+    from raysim.simulate import simulate
+    from solver.aperture import ApertureGrid
+    from solver.invert import truth_on_grid
+    from solver.linear import Scan
+
+    project = tmp_path / "project"
+    (project / "scenes").mkdir(parents=True)
+    text = _scene(project / "scenes", True).replace(str(project / "scenes") + "/", "")
+    (project / "scenes" / "s.toml").write_text(text)   # names dish.ply and ideal.ply beside it
+    field = simulate(load_scene(project / "scenes" / "s.toml"), method="go")
+    grid = ApertureGrid(D, 33)
+    X, Y = grid.XY
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    got = truth_on_grid("scene", Scan.from_fieldmap(field), grid)
+    assert got is not None and np.nanmax(np.abs(got - grid.masked(bump(X, Y)))) < 0.01 * A
+    # another dish under the same names where the scene's folder was: not this map's truth
+    other = paraboloid(D, F, 0.25)
+    trimesh.Trimesh(other.vertices, other.faces, process=False).export(project / "scenes" / "dish.ply")
+    assert truth_on_grid("scene", Scan.from_fieldmap(field), grid) is None
