@@ -136,6 +136,9 @@ def test_cli_writes_the_page_and_the_dataset_and_keeps_what_was_there(raysim_cli
     assert "GO against the wave engine" in stdout and "at 1 GHz (po+ptd) GO" in stdout
     page = (out / "check.html").read_text()
     assert "data:image/png;base64," in page and "Verdict" in page
+    # the engine rule, not the module's frame-and-units paragraph with its Sphinx markup
+    assert "Engine rule: PO + PTD (rim) is the reference wave engine" in page
+    assert ":class:" not in page and ":func:" not in page
     ds = xr.open_dataset(out / "check.nc")
     assert float(ds["fa_difference"][0]) > 0 and "error_go_model" in ds
     other = tmp_path / "other"
