@@ -134,3 +134,23 @@ def test_cuda_without_a_gpu_is_one_clear_error():
     wave = po.Illumination.plane_wave(0.3e9, (0, 0, -1), (1, 0, 0))
     with pytest.raises(DeviceError, match="no CUDA GPU"):
         po.scatter(paraboloid(D, F, 5.0), np.array([[0.0, 0.0, 25.0]]), wave, device="cuda")
+
+
+def test_a_sphere_close_above_the_vertex_is_warned_of_with_the_default_quadrature():
+    """With the sphere a few wavelengths above the vertex, PO's default 1.5 samples per
+    wavelength left FA tens of per cent off, and nothing said so. The FieldMap now records how
+    far above the vertex the sphere passes, and warns while that is under six wavelengths and
+    the quadrature is the default."""
+    from raysim.scene.scene import parse_scene
+    from raysim.simulate import simulate, summary
+
+    text = ('name = "near"\n[dish]\ndiameter_m = 5.0\nfocal_length_m = 2.0\nresolution_m = 0.25\n'
+            "[source]\nfrequency_hz = 1e9\n[sphere]\nradius_m = {R}\nn_theta = 4\nn_phi = 8\n")
+    wavelength = 299792458.0 / 1e9
+    near = simulate(parse_scene(text.format(R=1.5)), method="po")
+    assert near.attrs["sphere_gap_wavelengths"] == pytest.approx(0.5 / wavelength, rel=1e-6)
+    assert "WARNING: the sphere passes 1.7 wavelengths above" in summary(near)
+    given = simulate(parse_scene(text.format(R=1.5)), method="po", samples_per_wavelength=3.0)
+    assert "quadrature_warning" not in given.attrs
+    far = simulate(parse_scene(text.format(R=0.1)), method="po")  # 6.3 wavelengths above
+    assert "quadrature_warning" not in far.attrs and "WARNING" not in summary(far)
