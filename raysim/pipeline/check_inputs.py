@@ -6,8 +6,9 @@ in m, frequencies in Hz, angles in rad. Every defect a user can cause raises
 :class:`CheckError` with one line, before any simulation starts.
 
 The engine rule (:func:`choose_wave`; :data:`ENGINE_RULE` states it on the page): PO + PTD (rim)
-is the reference wave engine wherever its cost is affordable: the cost of its sums (quadrature samples of both reflectors radiated to the
-sphere's points) as the chosen radiator runs them, in direct pair evaluations
+is the reference wave engine wherever its cost is affordable: the cost of its sums (quadrature
+samples of both reflectors radiated to the sphere's points) as the chosen radiator runs them,
+in direct pair evaluations
 (:func:`raysim.optics.fast.radiator.estimated_cost` for the fast radiator, samples times points
 for the direct sum), within :data:`PO_PAIR_BUDGET` for the device, and its samples within
 simulate's memory cap; above either, go+edge.

@@ -40,8 +40,12 @@ def verdict_lines(ds: xr.Dataset) -> list[str]:
                      f"RRMS {100 * v['rrms_go_model']:.1f} %, against {1e6 * v['rms_go_data']:.1f} um "
                      "from GO's own data)")
         if "cost_wave_model" in v and math.isfinite(float(v["cost_wave_model"])):
-            text += (f"; the {v['model_wave_model']} refinement brings that to "
-                     f"{1e6 * v['cost_wave_model']:.1f} um (error {1e6 * v['rms_wave_model']:.1f} um, "
+            # "brings that to" read as a gain where the wave refinement cost more
+            cost, go_cost = float(v["cost_wave_model"]), float(v.get("cost_go_model", math.nan))
+            than = ("" if not math.isfinite(go_cost) else
+                    ", less than GO's" if cost < go_cost else ", no less than GO's")
+            text += (f"; with the {v['model_wave_model']} refinement the cost is "
+                     f"{1e6 * cost:.1f} um{than} (error {1e6 * v['rms_wave_model']:.1f} um, "
                      f"RRMS {100 * v['rrms_wave_model']:.1f} %)")
         lines.append(text + gap_text(ds, i))
     return lines
