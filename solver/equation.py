@@ -61,19 +61,33 @@ def power_gain(intensity: ArrayLike, intensity_ideal: ArrayLike,
     return float(np.sum(i_def[both] * area[both])) / total_ideal
 
 
-def noise_variance(fa: ArrayLike, n_rows: int) -> float:
-    """Relative variance v of the samples' noise from FA's second differences along phi.
+#: binomial difference stencils along phi: the n-th difference of white noise of variance v has
+#: variance v times the sum of the squared weights (6, 70, 924)
+DIFFERENCES = ((1.0, -2.0, 1.0), (1.0, -4.0, 6.0, -4.0, 1.0),
+               (1.0, -6.0, 15.0, -20.0, 15.0, -6.0, 1.0))
 
-    For white noise of variance v, f[j+1] - 2 f[j] + f[j-1] has variance 6 v; a smooth
-    signal adds little. The median absolute deviation makes it robust to stray samples.
+
+def noise_variance(fa: ArrayLike, n_rows: int) -> float:
+    """Relative variance v of the samples' noise from FA's differences along phi.
+
+    For white noise of variance v, the n-th difference f[j+n/2] - ... has variance v times the
+    sum of its squared weights; a smooth signal adds its own n-th derivative times dphi^n. On
+    a coarse phi grid the second difference is mostly the signal's curvature (60 cells found a
+    noise of 4e-5 in clean simulated data), the sixth far less; a signal that varies cell to
+    cell favours the second. Each order gives an estimate, the median absolute deviation
+    making it robust to stray samples; the least is taken.
     """
     block = np.asarray(fa, dtype=np.float64)[:n_rows]
-    d2 = np.roll(block, -1, axis=1) - 2.0 * block + np.roll(block, 1, axis=1)
-    d2 = d2[np.isfinite(d2)]
-    if d2.size < 16:
-        return 0.0
-    mad = float(np.median(np.abs(d2 - np.median(d2))))
-    return (1.4826 * mad) ** 2 / 6.0
+    estimates = []
+    for weights in DIFFERENCES:
+        half = len(weights) // 2
+        d = sum(w * np.roll(block, half - k, axis=1) for k, w in enumerate(weights))
+        d = d[np.isfinite(d)]
+        if d.size < 16:
+            return 0.0
+        mad = float(np.median(np.abs(d - np.median(d))))
+        estimates.append((1.4826 * mad) ** 2 / float(np.sum(np.square(weights))))
+    return min(estimates)
 
 
 def stated_noise_variance(intensity: ArrayLike, intensity_std: ArrayLike, n_rows: int) -> float:

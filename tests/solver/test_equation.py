@@ -1,6 +1,7 @@
 """FA, G, the power gain and the noise bias of the deformation-intensity equation."""
 
 import numpy as np
+import pytest
 
 from solver.equation import G, debias, intensity_ratio_fa, noise_variance, power_gain
 
@@ -89,3 +90,19 @@ def test_debias_removes_the_reciprocal_bias():
     fa = intensity_ratio_fa(i / power_gain(i, i0, 1.0), i0)
     assert abs(np.mean(fa) - np.mean(fa_true) - v) < 0.2 * v
     assert abs(np.mean(debias(fa, v)) - np.mean(fa_true)) < 0.2 * v
+
+
+def test_a_smooth_field_on_a_coarse_phi_grid_is_not_taken_for_noise():
+    """On 60 phi cells the second difference of clean simulated FA read as noise of 4e-5 (the
+    Gauss-Newton steps then stopped at that 'noise'); the higher differences see through the
+    curvature, and a real noise is still found."""
+    theta = (np.arange(30) + 0.5) * np.radians(80.0) / 30
+    phi = (np.arange(60) + 0.5) * 2 * np.pi / 60
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    fa = 2e-3 * np.sin(2 * t) * (np.cos(p) + 0.5 * np.sin(2 * p) + 0.2 * np.cos(3 * p))
+    curvature = np.std(np.roll(fa, 1, axis=1) - 2 * fa + np.roll(fa, -1, axis=1)) / np.sqrt(6)
+    assert curvature > 1e-5                                   # what the old estimate found
+    assert np.sqrt(noise_variance(fa, 28)) < 1e-6
+    for sigma in (1e-5, 1e-4):
+        noisy = fa + sigma * np.random.default_rng(2).standard_normal(fa.shape)
+        assert np.sqrt(noise_variance(noisy, 28)) == pytest.approx(sigma, rel=0.2)
