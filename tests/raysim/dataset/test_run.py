@@ -249,7 +249,7 @@ def test_separate_scheduler_and_worker_with_a_worker_killed(reference, spec, tmp
                 run.wait(timeout=15)
         assert killed, "the run ended before a worker could be killed"
         assert run.returncode == 0, err
-        assert f"{spec.samples}/{spec.samples} samples done" in out and "on 1 workers" in out
+        assert f"{spec.samples}/{spec.samples} samples done" in out and "on 1 worker in" in out
         assert_same_store(reference, store)
 
 
