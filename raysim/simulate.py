@@ -655,8 +655,8 @@ def ideal_resolution(scene: Scene) -> float:
 
 
 def summary(ds: xr.Dataset) -> str:
-    """One line: points, rays, time and power balance of a simulated FieldMap (and, for a mesh
-    file, its departure from its ideal)."""
+    """One line: points, rays, time and power balance of a simulated FieldMap (and PO's
+    quadrature warning, and a mesh file's departure from its ideal, where the map has them)."""
     line = _engine_summary(ds)
     if "quadrature_warning" in ds.attrs:
         line += f"; WARNING: {ds.attrs['quadrature_warning']}"
