@@ -16,7 +16,7 @@ import pytest
 
 from raysim.distributed.partial import partial_path
 from raysim.maps.fieldmap import load
-from raysim.scene.scene import parse_scene
+from raysim.scene.scene import load_scene
 from raysim.simulate import simulate
 from tests.cli import cli_env
 from tests.processes import dask_processes, wait_until, worker_processes
@@ -68,7 +68,7 @@ def _settled(output: Path, quiet: float = 3.0) -> None:
 def test_scheduler_and_two_workers_with_a_worker_and_the_client_killed(tmp_path):
     scene_path = tmp_path / "small.toml"
     scene_path.write_text(SCENE)
-    reference = simulate(parse_scene(SCENE), "po")
+    reference = simulate(load_scene(scene_path), "po")  # the same file: the same scene_folder
     with dask_processes(2) as (address, nanny_pid):
         # 1. a worker process killed after a few blocks: its nanny restarts it, the run completes
         first = tmp_path / "first.nc"
