@@ -8,6 +8,7 @@ and the bounds are the same wherever the options come from.
 from __future__ import annotations
 
 import numbers
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -111,6 +112,10 @@ class InvertOptions:
                       radiator_tol=self.radiator_tol)
         if self.weights not in WEIGHTS:
             raise SolverError(f"unknown weights {self.weights!r}: choose one of {', '.join(WEIGHTS)}")
+        if self.device is not None and not (isinstance(self.device, str)
+                                            and re.fullmatch(r"cpu|cuda(:\d+)?", self.device)):
+            # refused by the forward models' Warp launch, but accepted without a refinement
+            raise SolverError(f"unknown device {self.device!r}: use cpu or cuda")
         # a tolerance <= 0 left multigrid all NaN, NaN or >= 1 stopped at the zero start, and
         # an SOR factor outside (0, 2) diverges or never moves
         _real_in("the solver's relative tolerance (tol)", self.tol, 0.0, 1.0)

@@ -165,7 +165,8 @@ def test_bad_requests_raise_specific_errors(paper_field):
                       ({"solver": "sor", "omega": 0.0}, "relaxation"),
                       ({"solver": "sor", "omega": 2.0}, "relaxation"),
                       ({"seed": -1}, "seed"), ({"seed": 1.5}, "seed"),
-                      ({"uncertainty_samples": "3"}, "Monte Carlo")):
+                      ({"uncertainty_samples": "3"}, "Monte Carlo"),
+                      ({"device": "tpu"}, "unknown device 'tpu'")):
         with pytest.raises(SolverError, match=says):
             invert(paper_field, refine_iterations=0, **bad)
 
