@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from raysim.maps.probe import probe_of
+from raysim.maps.surfacemap import HARMONIC_FIXED, HARMONIC_UNOBSERVABLE
 from solver import metrics
 from solver.aperture import ApertureGrid
 from solver.fit import remove_terms
@@ -54,7 +55,7 @@ def surface_attrs(opts: InvertOptions, out: Outcome) -> dict[str, Any]:
         "solver": opts.solver, "solver_iterations": linear.info.iterations,
         "solver_residual": linear.info.residual, "solver_converged": linear.info.converged,
         "boundary": out.inverse.describe_boundary(),
-        "harmonic_part": "fixed by rim targets" if opts.rim is not None else "unobservable",
+        "harmonic_part": HARMONIC_FIXED if opts.rim is not None else HARMONIC_UNOBSERVABLE,
         "harmonic_observable": opts.rim is not None,
         "removed_terms": ",".join(opts.terms) or "none",
         "refine_iterations": opts.refine_iterations,

@@ -17,6 +17,7 @@ import xarray as xr
 from raysim.errors import RaysimError
 from raysim.files import check_output
 from raysim.maps.fieldmap import load as load_fieldmap
+from raysim.maps.surfacemap import HARMONIC_UNOBSERVABLE
 from raysim.progress import Progress
 from solver import boundary, surface
 from solver.fit import panel_adjustments, write_panel_csv
@@ -100,7 +101,7 @@ def summary(result: xr.Dataset) -> list[str]:
                      f"(noise {a['gn_noise_rms']:.2e}), LSQR {a['gn_lsqr_iterations']}, "
                      f"stopped: {a['gn_stopped']}")
     lines.append(f"boundary: {a['boundary']}")
-    if a["harmonic_part"] == "unobservable":
+    if a["harmonic_part"] == HARMONIC_UNOBSERVABLE:
         lines.append("harmonic part (tilt, astigmatism, any r^n cos n phi) is UNOBSERVABLE "
                      "without rim targets: the map assumes zero on the rim")
     if "removed_central_mode_m" in a:

@@ -32,6 +32,9 @@ from raysim.version import VERSION_ATTR, __version__
 REQUIRED_ATTRS = ("solver", "boundary", "harmonic_part", "removed_terms", "focal_length",
                   "diameter", "sphere_radius")
 OPTIONAL_VARS = ("truth", "error", "deformation_std")
+#: the two values of the ``harmonic_part`` attribute: without rim targets, and with them
+HARMONIC_UNOBSERVABLE = "unobservable"
+HARMONIC_FIXED = "fixed by rim targets"
 LONG_NAMES = {
     "deformation": "recovered surface deformation along z",
     "truth": "true surface deformation along z (same terms removed)",

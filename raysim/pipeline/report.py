@@ -24,6 +24,7 @@ import numpy as np
 import xarray as xr
 
 from raysim.files import write_bytes, write_text
+from raysim.maps.surfacemap import HARMONIC_FIXED, HARMONIC_UNOBSERVABLE
 from raysim.progress import Progress, silent
 from raysim.render import backend, figures
 from raysim.render.backend import RenderError
@@ -314,8 +315,10 @@ def figure_html(name: str, caption: str, png: bytes) -> str:
 
 
 # --- the page --------------------------------------------------------------------------------
-def numbers(field: xr.Dataset, surface: xr.Dataset | None, times: dict[str, float]) -> list[tuple[str, str]]:
-    """The run's figures as (label, value) rows: geometry, data, solver, RMS, RRMS, times."""
+def numbers(field: xr.Dataset, surface: xr.Dataset | None, times: dict[str, float],
+            split: tuple[float, float] | None = None) -> list[tuple[str, str]]:
+    """The run's figures as (label, value) rows: geometry, data, solver, RMS, RRMS, times
+    (``split``: :func:`unseen_harmonic` of ``surface`` where the caller has it already)."""
     a = field.attrs
     s = surface.attrs if surface is not None else {}
     data = f"{method_text(str(a.get('method', '?')))} at {frequency_text(float(a.get('frequency_hz', 0)))}"
@@ -335,16 +338,18 @@ def numbers(field: xr.Dataset, surface: xr.Dataset | None, times: dict[str, floa
                                                         if s.get("harmonic_part") else "")),
             ("removed terms", str(s.get("removed_terms", "none") or "none")),
         ]
-        rows += _accuracy(field, surface)
+        rows += _accuracy(field, surface, unseen_harmonic(surface) if split is None else split)
     time_rows = [("simulate", times.get("simulate", a.get("seconds_total"))),
                  ("invert", times.get("invert", s.get("time_s"))), ("draw the figures", times.get("draw"))]
     rows += [(f"time: {label}", f"{float(t):.1f} s") for label, t in time_rows if t is not None]
     return rows
 
 
-def _accuracy(field: xr.Dataset, surface: xr.Dataset) -> list[tuple[str, str]]:
+def _accuracy(field: xr.Dataset, surface: xr.Dataset,
+              split: tuple[float, float] | None) -> list[tuple[str, str]]:
     """RMS and RRMS rows, recomputed from the maps (RMS over the aperture, RRMS = RMS / M), the
-    error's harmonic part where the data cannot see it, and the paper's figure for such data."""
+    truth's harmonic part where the data cannot see it (``split``: :func:`unseen_harmonic`),
+    and the paper's figure for such data."""
     panels = dict(surface_panels(surface))
     if "error" not in panels:
         return [("recovered", f"RMS {rms(panels['deformation']) * UM:.2f} µm (no truth to compare with)")]
@@ -352,7 +357,6 @@ def _accuracy(field: xr.Dataset, surface: xr.Dataset) -> list[tuple[str, str]]:
     err = rms(panels["error"])
     rows = [("truth", f"RMS {rms(panels['truth']) * UM:.2f} µm, peak-to-peak M = {M * UM:.1f} µm"),
             ("recovered - truth", f"RMS {err * UM:.2f} µm, RRMS = RMS / M = {100 * err / M:.2f} %")]
-    split = harmonic_error(surface) if _harmonic_unobservable(surface) else None
     if split is not None:
         harmonic, rest = split
         rows.append(("harmonic part of the truth",
@@ -396,11 +400,14 @@ def _is_paper_case(field: xr.Dataset) -> bool:
 
 
 # --- what the data cannot determine ------------------------------------------------------------
-RIM_FIXED = "fixed by rim targets"  # the SurfaceMap's harmonic_part when rim targets fixed it
-
-
 def _harmonic_unobservable(surface: xr.Dataset) -> bool:
-    return str(surface.attrs.get("harmonic_part", "")) == "unobservable"
+    return str(surface.attrs.get("harmonic_part", "")) == HARMONIC_UNOBSERVABLE
+
+
+def unseen_harmonic(surface: xr.Dataset) -> tuple[float, float] | None:
+    """:func:`harmonic_error` where the harmonic part is unobservable (no rim targets), else
+    None: the figures both the numbers table and the limits paragraph quote."""
+    return harmonic_error(surface) if _harmonic_unobservable(surface) else None
 
 
 def invert_lines(surface: xr.Dataset) -> list[str]:
@@ -452,7 +459,7 @@ def _sizeable(harmonic: float, surface: xr.Dataset) -> bool:
     return harmonic >= 0.01 * rms(truth[np.isfinite(truth)])
 
 
-def cannot_determine(surface: xr.Dataset) -> list[str]:
+def cannot_determine(surface: xr.Dataset, split: tuple[float, float] | None = None) -> list[str]:
     """Sentences on what these data cannot determine: the harmonic part (unless rim targets
     fixed it), with the share of the error it holds and how rim targets fix it, and any other
     unobservable shape (a blocked centre's, delta_c with an estimated gain), in the words of
@@ -463,12 +470,12 @@ def cannot_determine(surface: xr.Dataset) -> list[str]:
     lines = invert_lines(surface)
     harmonic = [line for line in lines if line.startswith("harmonic part")]
     sentences = []
-    if str(a.get("harmonic_part", "")) == RIM_FIXED:
+    if str(a.get("harmonic_part", "")) == HARMONIC_FIXED:
         sentences.append("The harmonic part (tilt, astigmatism, any r^n cos n phi) was fixed here by "
                          f"rim targets ({a.get('boundary', '?')}).")
     elif _harmonic_unobservable(surface):
         sentences.append(_sentence(harmonic[0] if harmonic else "harmonic part unobservable"))
-        split = harmonic_error(surface)
+        split = unseen_harmonic(surface) if split is None else split
         panels = dict(surface_panels(surface))
         if split is not None and "truth" in panels and _sizeable(split[0], surface):
             M = peak_to_peak(panels["truth"])
@@ -498,14 +505,15 @@ def _sentence(line: str) -> str:
 
 
 def _page(field: xr.Dataset, surface: xr.Dataset | None, blocks: list[str], times: dict[str, float]) -> str:
+    split = unseen_harmonic(surface) if surface is not None else None  # one fit for both uses
     rows = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>"
-                   for k, v in numbers(field, surface, times))
+                   for k, v in numbers(field, surface, times, split))
     scene = field.attrs.get("scene")
     scene_html = (f"<h2>Scene</h2><pre>{html.escape(str(scene))}</pre>" if scene else
                   "<h2>Scene</h2><p>None: a measured scan, drawn from the FieldMap's attributes.</p>")
     name = html.escape(str(field.attrs.get("scene_name", "scan")))
     summary = html.escape(error_summary(surface) if surface is not None else "")
-    limits = cannot_determine(surface) if surface is not None else []
+    limits = cannot_determine(surface, split) if surface is not None else []
     limits_html = (f'<p class="limits"><strong>What the intensities alone cannot determine:</strong> '
                    f'{html.escape(" ".join(limits))}</p>' if limits else "")
     return f"""<!DOCTYPE html>
