@@ -142,16 +142,19 @@ def _local(workers: int | None, threads: int, device: str, tasks: int | None) ->
     else:
         n = max(1, usable_cores() // threads)
     n = max(1, min(n, tasks)) if tasks else n
+    held = _SignalsHeld()
     try:
         with warnings.catch_warnings():  # the scheduler's HTTP port taken: it picks another
             warnings.filterwarnings("ignore", message="Port .* is already in use")
-            with _workers_ignore_sigint():
+            with held, _workers_from_a_sigint_ignoring_forkserver():
                 cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                        host="127.0.0.1", dashboard_address=None,
                                        silence_logs=logging.ERROR, env={"RAYSIM_THREADS": str(threads)})
     except (RuntimeError, OSError) as exc:
+        held.deliver()
         raise ClusterError(f"could not start a local Dask cluster of {n} workers ({_reason(exc)})") from exc
     try:
+        held.deliver()  # a Ctrl-C or SIGTERM of the start acts now, with the cluster to close
         client = Client(cluster, set_as_default=False)
         try:
             yield Cluster(client, n, "local")
@@ -163,25 +166,77 @@ def _local(workers: int | None, threads: int, device: str, tasks: int | None) ->
 
 
 @contextlib.contextmanager
-def _workers_ignore_sigint() -> Iterator[None]:
-    """Start local worker processes with SIGINT ignored (they inherit it through exec).
+def _workers_from_a_sigint_ignoring_forkserver() -> Iterator[None]:
+    """Start local workers from a fork server that ignores SIGINT, so that they ignore it.
 
     Ctrl-C reaches the whole foreground process group: the client alone should stop, and it
     stops the workers quietly as it leaves; a worker that took the KeyboardInterrupt would
-    print its own tracebacks. Only the main thread can change a handler: elsewhere, nothing
-    changes.
+    print its own tracebacks. A fork server started with SIGINT ignored passes that on to every
+    process it forks (Python keeps an inherited SIG_IGN). Ignoring SIGINT in this process only
+    for the moment the server starts keeps Ctrl-C working here: ignoring it for the whole start
+    of the cluster, as before, lost a Ctrl-C of that second, and the run went on to exit 0.
+    The server is per process; one already running (started by something else) is used as it
+    is. Only the main thread can change a handler: elsewhere, the server starts as it is.
     """
+    import multiprocessing.forkserver
     import signal
     import threading
 
-    if threading.current_thread() is not threading.main_thread():
+    import dask
+    from distributed.utils import get_mp_context
+
+    with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
+        get_mp_context()  # the server's preloaded modules, set before it starts
+        if threading.current_thread() is threading.main_thread():
+            previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+            try:
+                multiprocessing.forkserver.ensure_running()
+            finally:
+                signal.signal(signal.SIGINT, previous)
         yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
+
+
+class _SignalsHeld:
+    """Hold SIGINT and SIGTERM while a local cluster starts, and deliver them after.
+
+    Raised in the middle of the start, they left a half-made cluster to Dask's exit hook (its
+    traceback after the one line); delivered once the cluster exists, the usual clean-up
+    closes it. Only the main thread can change a handler: elsewhere, nothing is held.
+    """
+
+    _SIGNALS = ("SIGINT", "SIGTERM")
+
+    def __init__(self) -> None:
+        self._previous: dict[int, Any] = {}
+        self._arrived: list[int] = []
+
+    def _record(self, signum: int, frame: object) -> None:
+        self._arrived.append(signum)
+
+    def __enter__(self) -> _SignalsHeld:
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            for name in self._SIGNALS:
+                sig = getattr(signal, name)
+                self._previous[sig] = signal.signal(sig, self._record)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        import signal
+
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        self._previous.clear()
+
+    def deliver(self) -> None:
+        """Raise the signals that arrived while held, once each, to this process's handlers."""
+        import signal
+
+        for sig in dict.fromkeys(self._arrived):
+            signal.raise_signal(sig)
+        self._arrived.clear()
 
 
 def _stop_workers(cluster: Any, timeout_s: float = 30.0) -> None:

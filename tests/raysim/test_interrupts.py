@@ -205,3 +205,50 @@ def test_a_signal_while_the_command_loads_is_the_one_line(sig, status, line):
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == status
     assert done.stderr == line + "\n"
+
+
+_SIGNAL_IN_THE_START = '''
+import os, signal, sys, time
+
+def run(when, sig):
+    import distributed
+    start = distributed.LocalCluster.__init__
+
+    def init(self, *args, **kwargs):  # the signal to the whole group at a fixed point
+        if when == "before the workers":
+            os.killpg(0, sig)
+        start(self, *args, **kwargs)
+        if when == "with the workers up":
+            os.killpg(0, sig)
+            time.sleep(1.0)  # a worker that took the signal prints its traceback meanwhile
+
+    distributed.LocalCluster.__init__ = init
+    sys.argv = ["raysim", "simulate", "s.toml", "-o", "o.nc", "--workers", "2"]
+    from raysim.console import main
+    main()
+
+if __name__ == "__main__":  # worker processes import this file again
+    run(sys.argv[1], int(sys.argv[2]))
+'''
+
+
+@pytest.mark.parametrize("when", ["before the workers", "with the workers up"])
+@pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_while_the_local_cluster_starts_is_the_one_line(tmp_path, when, sig, status):
+    """While a local cluster started, SIGINT was ignored in the client (so that its workers
+    inherited the ignoring) and the run went on to exit 0; SIGTERM left a half-made cluster to
+    Dask's exit hook, which printed a traceback. The signal goes to the process group, as
+    Ctrl-C does, at a fixed point of the start."""
+    import sys
+
+    from tests.cli import cli_env
+
+    (tmp_path / "s.toml").write_text(SCENE)
+    (tmp_path / "start.py").write_text(_SIGNAL_IN_THE_START)
+    done = subprocess.run([sys.executable, "start.py", when, str(int(sig))], cwd=tmp_path,
+                          env=cli_env(), capture_output=True, text=True, timeout=120,
+                          start_new_session=True)
+    assert done.returncode == status, done.stderr
+    assert done.stderr.splitlines() == [interrupted_line(
+        ["simulate", "s.toml", "-o", "o.nc", "--workers", "2"], sig == signal.SIGTERM)]
+    assert not (tmp_path / "o.nc").exists()
