@@ -204,13 +204,20 @@ def fold(full: NDArray[np.complex128], n: int) -> NDArray[np.complex128]:
     return half
 
 
-def degree_for(bandwidth: Any, digits: float) -> Any:
+def degree_for(bandwidth: Any, digits: float, nearness: Any = 0.1) -> Any:
     """The harmonic degree L that holds a field of phase bandwidth ``bandwidth`` (rad per rad
     of angle; a number or an array of them) to about 10^-digits: an excess bandwidth of the
-    multipole rule's form (Song and Chew: c d^(2/3) (k a)^(1/3)) plus a floor of d for the
-    amplitude's own variation; the constant 1.2 is measured
+    multipole rule's form (Song and Chew: c d^(2/3) (k a)^(1/3)) plus a floor for the
+    amplitude's own variation. The amplitude (1/|P - s| and the near-field terms) of a source
+    at distance D from the sphere's centre, read on the sphere of radius R, has harmonics
+    falling as q^l, q = R / D (the generating function of the Legendre polynomials): the floor
+    is d / log10(1 / q), ``nearness`` being q for the cluster's nearest source, and never less
+    than d (its value at q = 1/10). The constant 1.2 is measured
     (tests/raysim/optics/test_fast_radiator.py keeps it honest)."""
-    return bandwidth + 1.2 * digits ** (2.0 / 3.0) * np.maximum(bandwidth, 1.0) ** (1.0 / 3.0) + digits
+    excess = 1.2 * digits ** (2.0 / 3.0) * np.maximum(bandwidth, 1.0) ** (1.0 / 3.0) + digits
+    with np.errstate(divide="ignore"):
+        floor = digits / -np.log10(np.clip(nearness, 0.0, 1.0))
+    return bandwidth + np.maximum(excess, floor)
 
 
 def size_for(degree: float) -> int:

@@ -155,7 +155,8 @@ def _sizes(centres: NDArray[np.float64], radii: NDArray[np.float64], domain: Dom
     if np.any(r_min <= 0.05 * R):
         return None  # a cluster touches the target sphere: not separated
     B = k * radii * R / r_min
-    degrees = np.ceil(degree_for(B, digits)).astype(np.int64)  # size_for takes its ceiling
+    nearness = R / (R + r_min)  # R over the nearest source's distance from the sphere's centre
+    degrees = np.ceil(degree_for(B, digits, nearness)).astype(np.int64)  # size_for takes its ceiling
     table = {int(d): size_for(float(d)) for d in np.unique(degrees)}
     return np.array([table[int(d)] for d in degrees], dtype=np.int64).reshape(len(B))
 

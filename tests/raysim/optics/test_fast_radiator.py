@@ -2,8 +2,8 @@
 
 A scaled dish (D 10 m, F 3.3 m) at 1 GHz (about 33 wavelengths across) radiating to a sphere of
 1 m about the focus: the quadtree has five levels. The cost estimate picks the leaves as the
-stop level there, so :func:`test_every_step_of_the_tree` sets the stop level by hand (and a
-small chunk size) to run aggregation, the tree walked a few clusters at a time and both last
+stop level there, so :func:`test_every_step_of_the_tree` sets the leaf and stop levels by hand
+(and a small chunk size) to run aggregation, the tree walked a few clusters at a time and both last
 steps. The reference is the direct sum
 (:class:`raysim.optics.radiator.Radiator`), an independent implementation of the same sum.
 """
@@ -85,6 +85,24 @@ def test_every_kind_within_tolerance(kind: str) -> None:
     out, method = _fast(pts, src, kind, 1e-6)
     assert method.startswith("fast")
     assert _rel_rms(out, ref) < 1e-6
+
+
+@pytest.mark.parametrize("tol", [1e-3, 1e-6])
+def test_a_sphere_near_the_dish_within_tolerance(tol: float) -> None:
+    """The sphere's radius 0.6 F: the vertex's sources lie 1.7 R from its centre, so their
+    amplitude (1/r and the near-field terms) has harmonics falling only as 0.6^l on it. Grids
+    sized by the phase and a floor of d harmonics missed 1e-6 by 24 times here (and by 40 times
+    through simulate, three samples per wavelength, in a QA run)."""
+    pts = SphereGrid(0.6 * F, 24, 48).points(F).reshape(-1, 3)
+    src = _elements("electric")
+    r = Radiator(pts, K)
+    r.add_packed(src, "electric")
+    ref = r.sums_of("electric")
+    fast = FastRadiator(pts, K, tol=tol, centre=CENTRE, force=True)
+    fast.add_packed(src, "electric")
+    out = fast.sums_of("electric")
+    assert fast.method["electric"].startswith("fast")
+    assert _rel_rms(out, ref) < tol
 
 
 def test_error_shrinks_with_tolerance_on_scan_points() -> None:
@@ -188,6 +206,18 @@ def test_a_block_of_points_gives_the_same_bits(stop_chunks: int, monkeypatch) ->
     assert np.array_equal(block, whole[100:333])
 
 
+def _leaves_at_4(plan, domain):
+    """``plan`` with its leaves at level 4, each on a grid of its own size, whichever level the
+    cost estimate prefers."""
+    from dataclasses import replace
+
+    from raysim.optics.fast import multilevel
+
+    leaves = plan.levels[4]
+    return replace(plan, leaf=4, leaf_sizes=multilevel._sizes(leaves.centres, leaves.radii, domain, K,
+                                                              plan.digits))
+
+
 def _planned(pts: np.ndarray, src: np.ndarray, kind: str, stop: int, last=(0, 0)) -> np.ndarray:
     """The multilevel sum with the plan's stop level set by hand (whatever the cost estimate
     prefers), so that every step runs: leaves, aggregation, and the last step (``last``: (0, 0)
@@ -199,7 +229,7 @@ def _planned(pts: np.ndarray, src: np.ndarray, kind: str, stop: int, last=(0, 0)
     from raysim.optics.fast.radiator import _segments
 
     domain = domain_of(pts, CENTRE)
-    plan = multilevel.plan([src], domain, K, 1e-6 / 8, (last,))
+    plan = _leaves_at_4(multilevel.plan([src], domain, K, 1e-6 / 8, (last,)), domain)
     plan = replace(plan, stop=stop, oversampling=last[0], p=last[1])
 
     def grids():
@@ -220,8 +250,7 @@ def test_every_step_of_the_tree(stop: int, last: tuple[int, int], monkeypatch) -
 
     pts = _grid_points()
     src = _elements("magnetic")
-    plan = multilevel.plan([src], domain_of(pts, CENTRE), K, 1e-6 / 8, (last,))
-    assert plan is not None and plan.leaf == 4
+    plan = _leaves_at_4(multilevel.plan([src], domain_of(pts, CENTRE), K, 1e-6 / 8, (last,)), domain_of(pts, CENTRE))
     assert len(np.unique(plan.leaf_sizes)) > 1  # each leaf aggregated from a grid of its own size
     whole = _planned(pts, src, "magnetic", stop, last)
     assert _rel_rms(whole, _direct(pts, src, "magnetic")) < 1e-6
