@@ -33,6 +33,11 @@ from raysim.errors import RaysimError
 
 CONNECT_TIMEOUT_S = 20.0
 WORKER_WAIT_S = 120.0
+#: what a local cluster's processes log to the shared stderr: nothing below CRITICAL. A task's
+#: error reaches the client as its exception; what workers log at ERROR is their shutdown
+#: (heartbeats to a scheduler that closed while a task ran: pages of tracebacks after an
+#: interrupt sent to the client alone)
+_WORKER_LOG_LEVEL = logging.CRITICAL
 _ADDRESS = re.compile(r"(?:(?P<scheme>tcp|tls|ws|wss|ucx)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[\w.-]+):(?P<port>\d{1,5})")
 
 
@@ -149,7 +154,7 @@ def _local(workers: int | None, threads: int, device: str, tasks: int | None) ->
             with held, _workers_from_a_sigint_ignoring_forkserver():
                 cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                        host="127.0.0.1", dashboard_address=None,
-                                       silence_logs=logging.ERROR, env={"RAYSIM_THREADS": str(threads)})
+                                       silence_logs=_WORKER_LOG_LEVEL, env={"RAYSIM_THREADS": str(threads)})
     except (RuntimeError, OSError) as exc:
         held.deliver()
         raise ClusterError(f"could not start a local Dask cluster of {n} workers ({_reason(exc)})") from exc
