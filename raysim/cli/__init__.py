@@ -30,10 +30,12 @@ from raysim.cli import (  # noqa: F401  (register commands)
     scenes,
     simulate,
 )
-from raysim.cli.common import app, error_line, interrupt_notes, say_error
+from raysim.cli.common import app, error_line, interrupt_notes, reflow_help, say_error
 from raysim.errors import RaysimError
 
 __all__ = ["app", "main"]
+
+reflow_help(app)
 
 
 def _usage_error(exc: Exception) -> bool:
@@ -102,7 +104,7 @@ def main(argv: list[str] | None = None) -> None:
             sys.exit(0)
         if not _usage_error(exc):
             raise
-        say_error(error_line(exc))
+        say_error(error_line(exc, command, args))
         sys.exit(2)
     _if_interrupted(args)
     sys.exit(code if isinstance(code, int) else 0)

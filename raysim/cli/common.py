@@ -8,10 +8,12 @@ so ``[track]`` stays ``[track]``) and never wrapped.
 
 from __future__ import annotations
 
+import inspect
 import os
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import typer
 from rich.console import Console
@@ -65,11 +67,38 @@ def say_error(message: str, prefix: str = "error:") -> None:
                   soft_wrap=True, highlight=False)
 
 
-def error_line(exc: Exception) -> str:
-    """The one line of a usage error of the CLI framework: command, problem, where to look."""
+def error_line(exc: Exception, command: Any = None, args: Sequence[str] = ()) -> str:
+    """The one line of a usage error of the CLI framework: command, problem, where to look.
+    The framework names the command where it knows it; where it does not (an option missing its
+    value), the subcommands of ``command`` (the root click group) that ``args`` name."""
     ctx = getattr(exc, "ctx", None)
-    where = getattr(ctx, "command_path", None) or "raysim"
+    where = getattr(ctx, "command_path", None) or command_path(command, args)
     return f"{where}: {exc.format_message()} (see '{where} --help')"  # type: ignore[attr-defined]
+
+
+def command_path(command: Any, args: Sequence[str]) -> str:
+    """``raysim`` and the subcommands (of the click group ``command``) that lead ``args``."""
+    path = ["raysim"]
+    for arg in args:
+        commands = getattr(command, "commands", None)
+        if not commands or arg not in commands:
+            break
+        command = commands[arg]
+        path.append(arg)
+    return " ".join(path)
+
+
+def reflow_help(typer_app: typer.Typer) -> None:
+    """Join the lines of each paragraph of every command's docstring, so that the help wraps
+    them to the terminal (the framework keeps a docstring's line breaks: at 80 columns a
+    sentence broke mid-way, leaving fragments of a word or two on lines of their own)."""
+    for info in typer_app.registered_commands:
+        text = info.help or (info.callback.__doc__ if info.callback else None)
+        if text:
+            info.help = "\n\n".join(" ".join(p.split()) for p in inspect.cleandoc(text).split("\n\n"))
+    for group in typer_app.registered_groups:
+        if group.typer_instance is not None:
+            reflow_help(group.typer_instance)
 
 
 def _version(value: bool) -> None:

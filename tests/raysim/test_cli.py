@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -101,3 +102,51 @@ def test_help_explains_units(tmp_path: Path):
     assert run.returncode == 0 and "metres" in run.stdout and "Hz" in run.stdout
     sim = run_cli("simulate", "--help", cwd=tmp_path)
     assert "(Hz)" in sim.stdout and "radians" in sim.stdout
+
+
+def _broken_early(lines: list[str], width: int) -> list[str]:
+    """Lines of a paragraph (consecutive non-blank ``lines``) that end although the next one's
+    first word would have fitted after them: a line break the text carried, not the wrap."""
+    out = []
+    for a, b in itertools.pairwise(lines):
+        if a.strip() and b.strip():
+            room = width - 2 - len(a.rstrip())
+            if len(b.split()[0]) + 1 <= room:
+                out.append(a.strip())
+    return out
+
+
+@pytest.mark.parametrize("args", [(), ("budget",), ("check",), ("correct",), ("dataset",), ("scan",),
+                                  ("simulate",), ("report",)])
+def test_help_text_wraps_to_the_terminal(tmp_path: Path, args: tuple[str, ...]):
+    """At 80 columns, the command's description wraps at the terminal's width, and the root's
+    list of commands within its column: the docstrings' own line breaks cut sentences
+    mid-way ("... the inversion's linear" / "operator (no Monte Carlo) ...")."""
+    from tests.cli import cli_env
+
+    run = run_cli(*args, "--help", cwd=tmp_path, env=cli_env(COLUMNS="80"))
+    assert run.returncode == 0
+    lines = run.stdout.splitlines()
+    if not args:  # the commands' box: "│ name    summary │", continuations start with blanks
+        box = lines[next(i for i, line in enumerate(lines) if "Commands" in line):]
+        rows: list[list[str]] = []
+        for line in (line for line in box if line.startswith("│ ")):
+            cell = line.strip("│ ")
+            if line.startswith("│           ") and rows:
+                rows[-1].append(cell)
+            else:
+                rows.append([cell.split(None, 1)[-1]])
+        broken = [b for row in rows for b in _broken_early(row, 80 - 14)]
+    else:  # the description: between the usage line and the first box
+        top = next(i for i, line in enumerate(lines) if line.lstrip().startswith("╭"))
+        broken = _broken_early([line for line in lines[2:top]], 80)
+    assert broken == []
+
+
+def test_an_option_missing_its_value_names_the_command(tmp_path: Path):
+    """The framework does not say which command an option without its value belongs to; the
+    line named the root and sent the user to the root's help."""
+    run = run_cli("simulate", "paper_go", "-o", cwd=tmp_path)
+    assert run.returncode == 2
+    assert run.stderr.splitlines() == [
+        "error: raysim simulate: Option '-o' requires an argument. (see 'raysim simulate --help')"]
