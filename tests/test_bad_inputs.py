@@ -301,6 +301,8 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         # issue 31: the fast radiator's options
         (["simulate", "scene.toml", "-o", "o.nc", "--method", "po", "--radiator", "fmm"],
          "unknown radiator 'fmm'"),
+        (["simulate", "scene.toml", "-o", "o.nc", "--method", "po", "--radiator", ""],
+         "unknown radiator ''"),  # was taken as the default, fast
         # accepted with GO and ignored before: the user believed the fast sum had run
         (["simulate", "scene.toml", "-o", "o.nc", "--radiator", "direct"],
          "--radiator and --radiator-tol apply to --method po and po+ptd only"),

@@ -80,7 +80,8 @@ def simulate(
     loaded = load_scene(scene).with_overrides(frequency, n_theta, n_phi)
     method = method or loaded.method
     given_radiator = (radiator, radiator_tol) != (None, None)
-    radiator, radiator_tol = radiator or "fast", 1e-6 if radiator_tol is None else radiator_tol
+    radiator = "fast" if radiator is None else radiator  # an empty --radiator is refused below
+    radiator_tol = 1e-6 if radiator_tol is None else radiator_tol
     check_options(loaded, method=method, device=device, total=total, save_field=save_field,
                   samples_per_wavelength=samples_per_wavelength, edges=edges, fresnel=fresnel,
                   radiator=radiator, radiator_tol=radiator_tol)
