@@ -111,12 +111,27 @@ def jvp(state: EdgeState, wave: Illumination, points: ArrayLike, dz: ArrayLike, 
     t = EPS / size
     plans: dict = {}
     fields = []
+    radiator, sum_tol = _sums(radiator, tol)
     for sign in (1.0, -1.0):
-        rad = make_radiator(points, wave.k, device, block=1024, radiator=radiator, tol=tol * FAST_TOL_FACTOR,
+        rad = make_radiator(points, wave.k, device, block=1024, radiator=radiator, tol=sum_tol,
                             centre=centre, force=force, plans=plans)
         rad.add_packed(_rows(state, wave, sign * t * dz, sign * t * dhx, sign * t * dhy), "fringe")
         fields.append(rad.field())
     return (fields[0] - fields[1]) / (2.0 * t)
+
+
+def _sums(radiator: str, tol: float) -> tuple[str, float]:
+    """The radiator and the tolerance of the sums of a Jacobian held to ``tol``: the sums
+    :data:`FAST_TOL_FACTOR` finer, and the direct sum where that is finer than the fast one's
+    finest (a ``tol`` below 1e-10 was refused as "got 1e-13", naming no value given).
+    RaysimError naming ``tol`` when it is not a radiator tolerance."""
+    from raysim.optics.fast.radiator import MIN_TOL, tol_problem
+
+    problem = tol_problem(tol)
+    if problem:
+        raise RaysimError(problem)
+    finer = tol * FAST_TOL_FACTOR
+    return ("direct", tol) if finer < MIN_TOL else (radiator, finer)
 
 
 def vjp(state: EdgeState, wave: Illumination, points: ArrayLike, c: ArrayLike,
@@ -135,6 +150,7 @@ def vjp(state: EdgeState, wave: Illumination, points: ArrayLike, c: ArrayLike,
 
     if radiator not in RADIATORS:
         raise RaysimError(f"unknown radiator {radiator!r}: use one of {', '.join(RADIATORS)}")
+    radiator, sum_tol = _sums(radiator, tol)
     wp = runtime.init()
     dev = runtime.resolve_device(device)
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -153,7 +169,7 @@ def vjp(state: EdgeState, wave: Illumination, points: ArrayLike, c: ArrayLike,
         from raysim.optics.fast import adjoint
 
         acc = adjoint.transposed_sum(po_derivative.segments_fringe_adjoint, rows, pts, b, wave.k,
-                                     centre, dev, tol=tol * FAST_TOL_FACTOR, force=force, info=info,
+                                     centre, dev, tol=sum_tol, force=force, info=info,
                                      kind="fringe")
     if acc is None:
         if info is not None:

@@ -249,3 +249,25 @@ def test_fringe_jvp_through_the_fast_radiator(points) -> None:
     lhs = float(np.real(np.sum(np.conj(c) * fast)))
     rhs = sum(float(g @ d) for g, d in zip(grads, v, strict=True))
     assert abs(lhs - rhs) <= 1e-6 * abs(lhs)
+
+
+def test_fringe_jacobian_at_the_finest_tolerance(points) -> None:
+    """A tolerance of 1e-11 is a radiator tolerance like any other; the fringe Jacobian's sums,
+    held a hundred times finer, were refused ("must lie in [1e-12, 1), got 1e-13"). Finer than
+    the fast sum's finest, they are the direct sum's; a tolerance that is none is refused
+    naming it."""
+    from raysim.optics import ptd_jacobian
+    from raysim.optics.illumination import Illumination
+    from raysim.surface.mesh import paraboloid
+
+    wave = Illumination.plane_wave(1e9, (0, 0, -1), (1, 0, 0))
+    state = ptd_jacobian.edge_state(paraboloid(D, F, 1.0), wave)
+    c = np.ones((len(points), 3), dtype=np.complex128)
+    direct = ptd_jacobian.vjp(state, wave, points, c)
+    info: dict = {}
+    fast = ptd_jacobian.vjp(state, wave, points, c, radiator="fast", tol=1e-11, centre=CENTRE, info=info)
+    assert info["method"] == "direct"
+    for a, b in zip(fast, direct, strict=True):
+        assert _rel_rms(a, b) < 1e-11
+    with pytest.raises(RaysimError, match="got 2.0"):
+        ptd_jacobian.vjp(state, wave, points, c, radiator="fast", tol=2.0, centre=CENTRE)
