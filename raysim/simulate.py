@@ -656,10 +656,15 @@ def ideal_resolution(scene: Scene) -> float:
 
 def summary(ds: xr.Dataset) -> str:
     """One line: points, rays, time and power balance of a simulated FieldMap (and PO's
-    quadrature warning, and a mesh file's departure from its ideal, where the map has them)."""
+    quadrature warning, the panel-gap edges' warning, and a mesh file's departure from its
+    ideal, where the map has them)."""
     line = _engine_summary(ds)
     if "quadrature_warning" in ds.attrs:
         line += f"; WARNING: {ds.attrs['quadrature_warning']}"
+    if ds.attrs.get("edge_gap_wavelengths", math.inf) < 1.0:
+        line += (f"; WARNING: the panel gaps are {ds.attrs['edge_gap_wavelengths']:.3g} wavelengths "
+                 "wide, and --edges all treats each gap edge as a lone half-plane, which "
+                 "overstates gaps narrower than a wavelength (docs/engines.md)")
     if "mesh_departure_rms_m" in ds.attrs:
         line += (f"; the mesh departs {ds.attrs['mesh_departure_rms_m'] * 1e6:.3g} um RMS along z "
                  "from its ideal (its deformation; a file not in the reflector frame adds to it)")

@@ -136,6 +136,12 @@ def test_simulate_adds_the_edges_to_po():
     assert both.attrs["edge_gap_wavelengths"] == pytest.approx(GAP / (po.C0 / 0.3e9))
     assert rim_only.attrs["edges"] == "rim" and "edge_gap_wavelengths" not in rim_only.attrs
     assert rim_only.attrs["edge_points"] < both.attrs["edge_points"]
+    # gaps far below a wavelength: the line a user reads warns that the edge model overstates them
+    from raysim.simulate import summary
+
+    assert GAP / (po.C0 / 0.3e9) < 1.0
+    assert "overstates gaps narrower than a wavelength" in summary(both)
+    assert "overstates" not in summary(rim_only)
 
 
 @pytest.mark.parametrize(("method", "edges", "message"), [
