@@ -399,6 +399,8 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["report", "report/field.nc", "-o", "report"], "holds the FieldMap"),
         (["report", "f.nc", "-o", "user_folder"], "holds files that are not a raysim report"),
         (["report", "f.nc", "-o", "notes.txt"], "exists and is not a folder"),
+        (["report", "f.nc", "-o", "notes.txt/rep"], "notes.txt is a file, not a folder"),
+        (["report", "f.nc", "-o", "/proc/rep"], "cannot write in /proc"),  # before the work
         (["report", "missing.toml", "-o", "rep_new"], "no such scene file"),
         (["report", "corrupt.nc", "-o", "rep_new"], "not a readable NetCDF file"),
     ],
@@ -412,6 +414,7 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["check", "dish_mm.stl", "-o", "rep_new", "--frequency", "1e9"], "not a dish in metres"),
         (["check", "scene.toml", "-o", "user_folder"], "holds files that are not a raysim check"),
         (["check", "scene.toml", "-o", "notes.txt"], "exists and is not a folder"),
+        (["check", "scene.toml", "-o", "/proc/chk"], "cannot write in /proc"),
         # issue 31: the fast radiator's options
         (["check", "scene.toml", "-o", "rep_new", "--radiator", "fmm"], "unknown radiator 'fmm'"),
         (["check", "scene.toml", "-o", "rep_new", "--radiator-tol", "1.5"], "--radiator-tol must lie in [1e-12, 1)"),

@@ -148,7 +148,25 @@ def output_folder(out_dir: str | os.PathLike[str], inputs, files: tuple[str, ...
         if other:
             raise RenderError(f"{target}: holds files that are not {what} ({other[0]}, ...); "
                               "give a new or empty folder")
+    _check_writable(target)
     return target
+
+
+def _check_writable(target: Path) -> None:
+    """Refuse, before any work, an output folder whose parent takes no new folder (the
+    staging folder is made there; a read-only mount failed at the end of the run, naming the
+    staging folder's internal name)."""
+    import tempfile
+
+    parent = target.resolve().parent
+    blocking = next((p for p in (parent, *parent.parents) if p.exists()), None)
+    if blocking is not None and not blocking.is_dir():
+        raise RenderError(f"{target}: {blocking} is a file, not a folder")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryDirectory(dir=parent, prefix=".raysim-probe-").cleanup()
+    except OSError as exc:
+        raise RenderError(f"{target}: cannot write in {parent} ({exc.strerror})") from exc
 
 
 @contextlib.contextmanager
