@@ -432,6 +432,7 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
     ],
     "dataset": [
         (["dataset", "missing.toml", "-o", "d.zarr"], "no such dataset spec file"),
+        (["dataset", "spec.toml", "-o", "/proc/d.zarr"], "cannot write in /proc"),
         (["dataset", "spec_typo.toml", "-o", "d.zarr"], "unknown key 'sede' (did you mean 'seed'?)"),
         (["dataset", "spec_nan.toml", "-o", "d.zarr"], "'errors[0].rms_um' must be a finite number"),
         (["dataset", "spec_ghz.toml", "-o", "d.zarr"], "in Hz, not GHz"),

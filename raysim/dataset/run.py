@@ -14,6 +14,7 @@ workers can import raysim and reach the store's path.
 from __future__ import annotations
 
 import shutil
+import tempfile
 import time
 import uuid
 from collections.abc import Callable
@@ -210,6 +211,11 @@ def check_run_options(spec: DatasetSpec, store: str | Path, *, workers: int | No
         path.resolve().parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise DatasetError(f"{path}: cannot create its folder ({exc.strerror})") from exc
+    where = path.resolve() if path.is_dir() else path.resolve().parent  # a store resumed, or made
+    try:  # a real probe: a read-only mount failed later, naming the store's scratch folder
+        tempfile.TemporaryDirectory(dir=where, prefix=".raysim-probe-").cleanup()
+    except OSError as exc:
+        raise DatasetError(f"{path}: cannot write in {where} ({exc.strerror})") from exc
 
 
 def _run(client, path: str, spec: DatasetSpec, device: str, pending: np.ndarray,
