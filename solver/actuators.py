@@ -183,23 +183,44 @@ def read_actuators(path: str | Path, layout) -> ActuatorLayout:
             raise ActuatorError(f"{path}: actuator row {k + 1} has unknown "
                                 f"{'key' if path.suffix.lower() == '.toml' else 'column'} "
                                 f"{', '.join(unknown)} (known: {', '.join(ACTUATOR_KEYS)})")
+        where = f"{path}: actuator row {k + 1}"
         try:
             ids.append(str(row["id"]))
-            xy.append((float(row["x_m"]), float(row["y_m"])))
-            panels = row["panels"]
-            if isinstance(panels, str):
-                panels = panels.replace(";", " ").split()
-            members.append([int(p) for p in panels])
+            xy.append((_number(row["x_m"], "x_m", where), _number(row["y_m"], "y_m", where)))
+            members.append(_panel_ids(row["panels"], where))
             lo, hi = row.get("min_m"), row.get("max_m")
-            ranges.append((-np.inf if lo in (None, "") else float(lo),
-                           np.inf if hi in (None, "") else float(hi)))
+            ranges.append((-np.inf if lo in (None, "") else _number(lo, "min_m", where),
+                           np.inf if hi in (None, "") else _number(hi, "max_m", where)))
+        except ActuatorError:
+            raise
         except (KeyError, ValueError, TypeError) as exc:
-            raise ActuatorError(f"{path}: actuator row {k + 1} needs id, x_m, y_m, panels "
+            raise ActuatorError(f"{where} needs id, x_m, y_m, panels "
                                 f"(numbers; panels as ids): {exc}") from exc
         if any(math.isnan(v) for v in ranges[-1]):
             raise ActuatorError(f"{path}: actuator {ids[-1]}: min_m and max_m must be numbers "
                                 "(leave them out for an unbounded actuator)")
     return build_layout(ids, np.array(xy), members, np.array(ranges), layout, str(path))
+
+
+def _number(value, key: str, where: str) -> float:
+    """A position or range (m) from a CSV cell or a TOML value; a TOML boolean is no number
+    (``float(True)`` would silently be 1 m)."""
+    if isinstance(value, bool):
+        raise ActuatorError(f"{where}: {key} = {str(value).lower()} is a boolean, give a number in metres")
+    return float(value)
+
+
+def _panel_ids(panels, where: str) -> list[int]:
+    """Panel ids from a CSV cell ("3 4" or "3;4") or a TOML list of integers; booleans and
+    fractional numbers are refused (``int(True)`` is panel 1, ``int(6.5)`` panel 6)."""
+    if isinstance(panels, str):
+        return [int(p) for p in panels.replace(";", " ").split()]
+    if not isinstance(panels, list):
+        raise ActuatorError(f"{where}: panels must be a list of panel ids, got {panels!r}")
+    bad = [p for p in panels if isinstance(p, bool) or not isinstance(p, int)]
+    if bad:
+        raise ActuatorError(f"{where}: panels must be integer panel ids, got {bad[0]!r}")
+    return list(panels)
 
 
 def _toml_rows(data: dict, path: Path) -> list:
@@ -231,6 +252,7 @@ def build_layout(ids, xy, members, ranges, layout, source: str = "actuators") ->
             if not 0 <= p < layout.n_panels:
                 raise ActuatorError(f"{source}: actuator {ids[a]} names panel {p}; the layout has "
                                     f"panels 0..{layout.n_panels - 1}")
+            _check_on_panel(layout, p, ids[a], float(xy[a, 0]), float(xy[a, 1]), source)
             supports[p].append((a, float(xy[a, 0]), float(xy[a, 1])))
     for p, sup in enumerate(supports):
         if not sup:
@@ -238,11 +260,54 @@ def build_layout(ids, xy, members, ranges, layout, source: str = "actuators") ->
         if len(sup) > len(MONOMIALS):
             raise ActuatorError(f"{source}: panel {p} has {len(sup)} actuators; at most "
                                 f"{len(MONOMIALS)} are supported")
-    if np.any(ranges[:, 0] > ranges[:, 1]):
-        raise ActuatorError(f"{source}: an actuator's min_m exceeds its max_m")
+    _check_ranges(ids, ranges, source)
     bounded = np.isfinite(ranges).any()
     return ActuatorLayout(tuple(ids), np.asarray(xy, dtype=np.float64),
                           tuple(tuple(s) for s in supports), ranges if bounded else None)
+
+
+def _check_ranges(ids, ranges: NDArray[np.float64], source: str) -> None:
+    """Each stroke range (m) must be [min_m, max_m] with min_m <= 0 <= max_m: a command is a
+    stroke from where the actuator stands now, 0."""
+    for name, (lo, hi) in zip(ids, ranges, strict=True):
+        if lo > hi:
+            raise ActuatorError(f"{source}: actuator {name}: min_m = {lo:g} exceeds max_m = {hi:g}")
+        if lo > 0 or hi < 0:
+            raise ActuatorError(f"{source}: actuator {name}: its range [{lo:g}, {hi:g}] m excludes 0 "
+                                "(a command is a stroke from the present position: min_m <= 0 <= max_m)")
+
+
+def panel_distance(layout, panel: int, x: float, y: float) -> float:
+    """Distance (m) from the aperture point (x, y) (m) to ``panel``'s outline between its cut
+    lines (gaps not taken off): 0 on the panel, its edges and corners."""
+    r = math.hypot(x, y)
+    ring = int(layout.ring(panel))
+    r_in, r_out = layout.ring_edges[ring], layout.ring_edges[ring + 1]
+    radial = max(r_in - r, r - r_out, 0.0)
+    phi_a, phi_b = layout.angular_limits(panel)
+    if layout.panels_per_ring[ring] == 1 or r == 0.0:
+        return radial
+    if (math.atan2(y, x) - phi_a) % (2.0 * math.pi) <= phi_b - phi_a:
+        return radial
+    # outside the panel's angles (a sector of at most pi): the nearest point is on a cut line
+    out = math.inf
+    for phi in (phi_a, phi_b):
+        along = min(max(x * math.cos(phi) + y * math.sin(phi), r_in), r_out)
+        out = min(out, math.hypot(x - along * math.cos(phi), y - along * math.sin(phi)))
+    return out
+
+
+def _check_on_panel(layout, panel: int, name: str, x: float, y: float, source: str) -> None:
+    """An actuator holds only panels it lies on or at the edge or corner of: within 2 cm plus 1 %
+    of the panel's size (sqrt of its area, m); a wrong panel id in a file is refused here."""
+    ring = int(layout.ring(panel))
+    r_in, r_out = layout.ring_edges[ring], layout.ring_edges[ring + 1]
+    size = math.sqrt(math.pi * (r_out**2 - r_in**2) / layout.panels_per_ring[ring])
+    d = panel_distance(layout, panel, x, y)
+    if d > 0.02 + 0.01 * size:
+        raise ActuatorError(f"{source}: actuator {name} at ({x:g}, {y:g}) m is {d:.3g} m from panel "
+                            f"{panel}, which it is said to hold (an actuator holds the panels it "
+                            "lies on or at the edge or corner of)")
 
 
 def shape_functions(layout, panel: int, support: tuple[tuple[int, float, float], ...],

@@ -7,11 +7,15 @@ sum over the panel points of (delta' + A c)^2, where delta' is the map with the 
 (piston, tilt, focus: left to pointing and subreflector focus) fitted and taken off, and A the
 influence matrix of :mod:`solver.actuators` (each panel moved as the shape its support points
 impose). The predicted surface after the correction is delta' + A c. With stroke ranges the
-problem is bounded least squares (:func:`scipy.optimize.lsq_linear`).
+problem is bounded least squares (:func:`scipy.optimize.lsq_linear`), the ``remove`` terms
+fitted jointly as free columns (the commands' bounds may leave some of them, which pointing
+takes up): after = delta' + A c + G t.
 
 Gain: the Ruze aperture efficiency exp(-(4 pi sigma / lambda)^2), sigma the area-weighted RMS
-over the aperture (m). Zernike content: least-squares Noll coefficients (m, each term's RMS over
-the disk) of :class:`raysim.surface.deformation.Zernike` terms up to a radial order.
+over the panels (m) of the half-path-length error dz / (1 + rho^2 / (4 F^2)) (Ruze 1966), the
+``remove`` terms taken off it again; the axial RMS where F is unknown. Zernike content:
+least-squares Noll coefficients (m, each term's RMS over the disk) of
+:class:`raysim.surface.deformation.Zernike` terms up to a radial order.
 """
 
 from __future__ import annotations
@@ -26,13 +30,14 @@ from scipy.optimize import lsq_linear
 from raysim.constants import C0
 from raysim.surface.deformation import Zernike, noll_norm
 from solver.actuators import ActuatorError, ActuatorLayout, shape_functions
-from solver.fit import remove_terms
+from solver.fit import _design, remove_terms
 
 
 @dataclass
 class Correction:
     """Commands (m, one per actuator), the maps before (terms removed) and after (m, (N, N), NaN
-    off the aperture), their RMS (m) and the command standard deviations (m) when known."""
+    off the aperture), their RMS (m), the command standard deviations (m) when known and, when
+    the focal length is known, the RMS (m) of the half-path-length error before and after."""
 
     commands: NDArray[np.float64]
     before: NDArray[np.float64]
@@ -44,6 +49,8 @@ class Correction:
     command_std: NDArray[np.float64] | None = None
     clipped: int = 0
     notes: list[str] = field(default_factory=list)
+    path_rms_before: float | None = None
+    path_rms_after: float | None = None
 
 
 def influence_matrix(grid, ids: NDArray[np.int64], layout, actuators: ActuatorLayout) -> sp.csr_matrix:
@@ -84,8 +91,11 @@ def rms(values: NDArray[np.float64]) -> float:
 
 
 def correct(grid, delta: NDArray[np.float64], layout, actuators: ActuatorLayout,
-            remove: tuple[str, ...] = (), delta_std: NDArray[np.float64] | None = None) -> Correction:
-    """Least-squares commands for the map ``delta`` (m) and what they leave (see the module)."""
+            remove: tuple[str, ...] = (), delta_std: NDArray[np.float64] | None = None,
+            focal_length: float | None = None) -> Correction:
+    """Least-squares commands for the map ``delta`` (m) and what they leave (see the module).
+    ``focal_length`` (m): the dish's F, for the half-path-length RMS Ruze's law takes
+    (:func:`half_path_rms`); None leaves it out."""
     before, removed = remove_terms(grid, np.asarray(delta, dtype=np.float64), remove)
     ids = panel_ids(grid, before, layout)
     A = influence_matrix(grid, ids, layout, actuators)
@@ -93,63 +103,134 @@ def correct(grid, delta: NDArray[np.float64], layout, actuators: ActuatorLayout,
     notes = []
     if not held.all():
         notes.append(f"{int((~held).sum())} actuators touch no map point: commanded 0")
+    free = held & _unlocked(actuators, held, notes)
     on = ids.ravel() >= 0
     d = before.ravel()[on]
-    Ah = A[:, held]
-    clipped = 0
+    Af = A[:, free]
+    notes += _undetermined_note(Af, np.flatnonzero(free), actuators)
     commands = np.zeros(actuators.n_actuators)
+    clipped = 0
+    extra = np.zeros(on.sum())
     if actuators.ranges is None:
-        N = (Ah.T @ Ah).toarray()
-        sol, *_ = np.linalg.lstsq(N, -(Ah.T @ d), rcond=None)
-    else:
-        lo, hi = actuators.ranges[held, 0], actuators.ranges[held, 1]
-        if np.any(lo > 0) or np.any(hi < 0):
-            raise ActuatorError("an actuator's range excludes 0 (min_m > 0 or max_m < 0)")
-        # a range that includes 0 and is one value is a locked actuator: it stays at 0
-        free = lo < hi
-        if not free.all():
-            notes.append(f"{int((~free).sum())} actuators locked (min_m = max_m = 0): commanded 0")
-        sol = np.zeros(len(lo))
-        if free.any():
-            lo, hi = lo[free], hi[free]
-            sol[free] = moved = _bounded(Ah[:, free], d, lo, hi)
-            clipped = int(np.sum((moved <= lo + 1e-15) & np.isfinite(lo))
-                          + np.sum((moved >= hi - 1e-15) & np.isfinite(hi)))
-    commands[held] = sol
+        commands[free], *_ = np.linalg.lstsq((Af.T @ Af).toarray(), -(Af.T @ d), rcond=None)
+    elif free.any():
+        G, names = _term_columns(grid, ids, remove)
+        commands[free], coef, clipped = _bounded_fit(Af, d, actuators.ranges[free], G)
+        extra = G @ coef  # the removed terms, refitted jointly with the bounded commands
+        removed = {k: v + (float(coef[names.index(k)]) if k in names else 0.0)
+                   for k, v in removed.items()}
     after_flat = np.full(before.size, np.nan)
-    after_flat[on] = d + A @ commands
+    after_flat[on] = d + A @ commands + extra
     # points in the gaps between panels are no surface: NaN after, and left out of both RMS
     after = grid.masked(after_flat.reshape(before.shape))
     std = None
     if delta_std is not None and np.isfinite(delta_std).any():
-        std = np.zeros(actuators.n_actuators)
-        std[held] = command_std(Ah, np.asarray(delta_std, dtype=np.float64).ravel()[on])
+        std = np.zeros(actuators.n_actuators)  # locked actuators do not move: exactly 0
+        std[free] = command_std(Af, np.asarray(delta_std, dtype=np.float64).ravel()[on])
     on_panels = np.where(ids >= 0, before, np.nan)
-    return Correction(commands, before, after, rms(on_panels), rms(after), removed,
-                      within_panel_rms(grid, before, ids), std, clipped, notes)
+    result = Correction(commands, before, after, rms(on_panels), rms(after), removed,
+                        within_panel_rms(grid, before, ids), std, clipped, notes)
+    if focal_length is not None:
+        result.path_rms_before = half_path_rms(grid, on_panels, focal_length, remove)
+        result.path_rms_after = half_path_rms(grid, after, focal_length, remove)
+    return result
 
 
-def _bounded(A: sp.csr_matrix, d: NDArray[np.float64], lo, hi) -> NDArray[np.float64]:
-    """argmin ||A c + d|| with lo <= c <= hi (BVLS). With A^T A = L L^T (Cholesky) the problem
-    is the small one ||L^T c + L^-1 A^T d|| (the same objective less a constant); the dense
-    (points x actuators) problem only when A^T A is singular."""
-    N = (A.T @ A).toarray()
-    try:
-        L = np.linalg.cholesky(N)
-    except np.linalg.LinAlgError:
-        return lsq_linear(A.toarray(), -d, bounds=(lo, hi), method="bvls", tol=1e-14).x
-    rhs = np.linalg.solve(L, A.T @ d)
-    return lsq_linear(L.T, -rhs, bounds=(lo, hi), method="bvls", tol=1e-14).x
+def _unlocked(actuators: ActuatorLayout, held: NDArray[np.bool_], notes: list[str]) -> NDArray[np.bool_]:
+    """Which actuators may move: all without ranges; else those whose range (m) is not one
+    value (min_m = max_m = 0: locked, counted in ``notes``). A range excluding 0 is refused."""
+    n = actuators.n_actuators
+    if actuators.ranges is None:
+        return np.ones(n, dtype=bool)
+    lo, hi = actuators.ranges[:, 0], actuators.ranges[:, 1]
+    bad = np.flatnonzero(held & ((lo > 0) | (hi < 0)))
+    if bad.size:
+        a = int(bad[0])
+        raise ActuatorError(f"actuator {actuators.ids[a]}: its range [{lo[a]:g}, {hi[a]:g}] m "
+                            "excludes 0 (min_m > 0 or max_m < 0)")
+    locked = held & (lo >= hi)
+    if locked.any():
+        notes.append(f"{int(locked.sum())} actuators locked (min_m = max_m = 0): commanded 0")
+    return ~locked
+
+
+def _undetermined_note(A: sp.csr_matrix, columns: NDArray[np.int64], actuators: ActuatorLayout) -> list[str]:
+    """A note when the map does not fix every command: actuators (``columns`` of the layout)
+    with a share in the null space of A^T A (a panel with fewer map points than actuators,
+    or points on a line) get the minimum-norm choice; the panels they hold are counted."""
+    if A.shape[1] == 0:
+        return []
+    w, V = np.linalg.eigh((A.T @ A).toarray())
+    null = V[:, w <= max(w.max(), 0.0) * 1e-10]
+    if null.shape[1] == 0:
+        return []
+    loose = columns[np.linalg.norm(null, axis=1) > 1e-6]
+    loose_set = set(loose.tolist())
+    panels = {p for p, sup in enumerate(actuators.supports) if any(a in loose_set for a, _, _ in sup)}
+    return [f"{len(loose)} actuators on {len(panels)} panels are not determined by the map (too "
+            "few map points on their panels): their commands are the least-norm choice"]
+
+
+def _term_columns(grid, ids: NDArray[np.int64], terms) -> tuple[NDArray[np.float64], list[str]]:
+    """Columns (points on the panels, k) of the ``terms`` (piston, tilt, focus; see
+    :mod:`solver.fit`) at the grid points with ``ids`` >= 0, and the coefficient names."""
+    X, Y = grid.XY
+    on = ids.ravel() >= 0
+    if not terms:
+        return np.zeros((int(on.sum()), 0)), []
+    return _design(X.ravel()[on], Y.ravel()[on], terms)
+
+
+def _bounded_fit(A: sp.csr_matrix, d: NDArray[np.float64], ranges: NDArray[np.float64],
+                 G: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+    """(commands (m), term coefficients, how many commands sit at a limit) of :func:`_bounded`
+    with the stroke ``ranges`` (m, (actuators, 2))."""
+    lo, hi = ranges[:, 0], ranges[:, 1]
+    c, t = _bounded(A, d, lo, hi, G)
+    clipped = int(np.sum((c <= lo + 1e-15) & np.isfinite(lo)) + np.sum((c >= hi - 1e-15) & np.isfinite(hi)))
+    return c, t, clipped
+
+
+def _bounded(A: sp.csr_matrix, d: NDArray[np.float64], lo, hi,
+             G: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """argmin ||A c + G t + d|| over lo <= c <= hi (m) and free coefficients t of the columns
+    ``G`` (the removed terms: pointing takes them whatever the commands leave); returns (c, t).
+    With Q an orthonormal basis of G the problem in c is ||(I - Q Q^T)(A c + d)||, whose normal
+    matrix N = V diag(w) V^T gives the small equivalent ||diag(sqrt w) V^T c - y|| (BVLS on
+    (actuators x actuators), never the dense points x actuators matrix; singular N allowed)."""
+    Q, _ = np.linalg.qr(G) if G.shape[1] else (np.zeros((len(d), 0)), None)
+    QA = np.asarray((A.T @ Q).T)  # (k, actuators)
+    N = (A.T @ A).toarray() - QA.T @ QA
+    b = A.T @ d - QA.T @ (Q.T @ d)
+    w, V = np.linalg.eigh(N)
+    keep = w > max(w.max(), 0.0) * 1e-13
+    root = np.sqrt(w[keep])
+    R = root[:, None] * V[:, keep].T
+    y = -(V[:, keep].T @ b) / root
+    c = lsq_linear(R, y, bounds=(lo, hi), method="bvls", tol=1e-14).x
+    t = np.linalg.lstsq(G, -(A @ c + d), rcond=None)[0] if G.shape[1] else np.zeros(0)
+    return c, t
 
 
 def command_std(A: sp.csr_matrix, point_std: NDArray[np.float64]) -> NDArray[np.float64]:
     """Standard deviation (m) of each unbounded least-squares command from independent map
-    errors of standard deviation ``point_std`` (m) at the rows of ``A``:
-    diag(P A^T diag(s^2) A P), P the pseudo-inverse of A^T A."""
+    errors of standard deviation ``point_std`` (m) at the rows of ``A`` (the free actuators'
+    columns: a locked one is no unknown): diag(P A^T diag(s^2) A P), P the pseudo-inverse of
+    A^T A."""
     s = np.where(np.isfinite(point_std), point_std, 0.0)
     P = np.linalg.pinv((A.T @ A).toarray())
     G = (A.T @ sp.diags(s * s) @ A).toarray()
     return np.sqrt(np.maximum(np.einsum("ij,jk,ki->i", P, G, P), 0.0))
+
+
+def half_path_rms(grid, axial: NDArray[np.float64], focal_length: float, remove=()) -> float:
+    """RMS (m) of the half-path-length error Ruze's law takes (Ruze 1966, Proc. IEEE 54(4)) of
+    an axial surface error ``axial`` (m, NaN off the panels) of a paraboloid of focal length F
+    (m): dz / (1 + rho^2 / (4 F^2)) = dz cos^2(theta / 2) at radius rho, with the ``remove``
+    terms fitted to it and taken off again (what pointing and focus take up is in the path)."""
+    X, Y = grid.XY
+    path = axial / (1.0 + (X * X + Y * Y) / (4.0 * focal_length**2))
+    return rms(remove_terms(grid, path, remove)[0]) if remove else rms(path)
 
 
 def within_panel_rms(grid, delta: NDArray[np.float64], ids: NDArray[np.int64]) -> float:

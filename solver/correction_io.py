@@ -6,7 +6,12 @@ the output folder: ``commands.csv`` and ``commands.toml`` (one row per actuator,
 unit, a header saying what a positive number does and the RMS before and after),
 ``residual.nc`` (the predicted surface after the correction, a SurfaceMap), ``zernike.csv``
 (Noll content of the map and of the residual) and ``summary.txt``. Files are written through a
-temporary name and renamed; nothing is written when an input is bad.
+temporary name and renamed; nothing is written when an input is bad, and an output name that is
+a file the run reads (the SurfaceMap, the scene and the files it names, the actuator file, the
+source FieldMap) is refused. The commands files carry the stroke ranges (m) when the run had
+them, so that they read back as the same actuator file. The Ruze efficiencies take the RMS of
+the half-path-length error (:func:`solver.correction.half_path_rms`, F from the SurfaceMap or
+the scene).
 """
 
 from __future__ import annotations
@@ -33,6 +38,10 @@ from solver.fit import parse_terms
 
 OUTPUTS = ("commands.csv", "commands.toml", "zernike.csv", "summary.txt", "residual.nc")
 UNITS = {"um": 1e-6, "mm": 1e-3, "mil": 25.4e-6}
+#: decimals of the commands and their std in each unit: 1e-4 um or finer (0.1 nm, 0.025 nm)
+DECIMALS = {"um": 4, "mm": 7, "mil": 6}
+#: an RMS (m) below this is round-off: a flat map, nothing to correct
+FLAT_M = 1e-12
 SIGN = ("a positive command moves the surface at the actuator along +z (away from the vertex, "
         "toward the focus) by that many {unit}; the actuator moves by minus the measured error")
 
@@ -50,23 +59,28 @@ class CorrectionRun:
     zernike_before: list
     zernike_after: list
     files: list[Path]
+    focal_length: float | None = None
 
 
-def layout_for(surface_map, scene_path: str | os.PathLike[str] | None, source: str):
-    """The panel layout: from ``scene_path`` or the scene the SurfaceMap's source FieldMap records
-    (a relative source path is read from the SurfaceMap's own folder, ``source``'s). The
-    scene's dish must be the map's: the same diameter."""
+def scene_for(surface_map, scene_path: str | os.PathLike[str] | None, source: str):
+    """(scene, source FieldMap path): the scene at ``scene_path``, or the one the SurfaceMap's
+    source FieldMap records (a relative source path is read from the SurfaceMap's own folder,
+    ``source``'s); either may be None."""
     from raysim.scene.scene import load_scene, scene_of
 
+    src = source_fieldmap(surface_map, source)
     if scene_path is not None:
-        scene = load_scene(scene_path)
-    else:
-        scene = None
-        src = source_fieldmap(surface_map, source)
-        if src is not None:
-            from raysim.maps.fieldmap import load as load_fieldmap
+        return load_scene(scene_path), src
+    if src is None:
+        return None, None
+    from raysim.maps.fieldmap import load as load_fieldmap
 
-            scene = scene_of(load_fieldmap(src))
+    return scene_of(load_fieldmap(src)), src
+
+
+def layout_for(surface_map, scene, source: str):
+    """The panel layout of ``scene`` (see :func:`scene_for`); the scene's dish must be the
+    map's: the same diameter (m)."""
     if scene is None or scene.panels is None:
         raise RaysimError(f"{source}: no panel layout (give --scene with a [panels] table, or a "
                           "SurfaceMap whose source FieldMap records one); per-panel commands need it")
@@ -76,6 +90,45 @@ def layout_for(surface_map, scene_path: str | os.PathLike[str] | None, source: s
         raise RaysimError(f"{source}: the map is of a {D:g} m dish, the panel layout of a {rim:g} m "
                           "one; give the scene of the dish that was measured")
     return scene.panels
+
+
+def focal_length_for(surface_map, scene) -> tuple[float | None, str]:
+    """The dish's focal length (m) for the half-path-length error: the SurfaceMap's
+    ``focal_length`` attribute, else the scene's; (None, a note) when neither knows it."""
+    try:
+        F = float(surface_map.attrs.get("focal_length", math.nan))
+    except (TypeError, ValueError):
+        F = math.nan
+    if math.isfinite(F) and F > 0:
+        return F, ""
+    if scene is not None and scene.dish.focal_length is not None:
+        return float(scene.dish.focal_length), ""
+    return None, ("the SurfaceMap records no focal_length and no scene gives one: the Ruze "
+                  "efficiencies use the axial RMS, not the half-path-length error")
+
+
+def input_paths(surface_path, scene, scene_path, actuators, fieldmap) -> dict[Path, str]:
+    """Every file the run reads, resolved, with what it is: the SurfaceMap, the scene and the
+    files it names (deformation maps, meshes), the actuator file and the source FieldMap."""
+    named = [(surface_path, "the SurfaceMap"), (scene_path, "the scene"),
+             (actuators, "the actuator file"), (fieldmap, "the SurfaceMap's source FieldMap")]
+    if scene is not None:
+        named += [(p, f"{what} ({scene.name})") for what, p in scene.inputs()]
+    return {Path(p).resolve(): what for p, what in named if p is not None}
+
+
+def check_outputs(out: Path, inputs: dict[Path, str]) -> None:
+    """Refuse an output name that is one of the ``inputs`` (or a folder): writing it would
+    destroy what the run reads."""
+    for name in OUTPUTS:
+        target = (out / name).resolve()
+        same = [what for p, what in inputs.items()
+                if p == target or (target.exists() and p.exists() and os.path.samefile(p, target))]
+        if same:
+            raise SolverError(f"{out / name}: is an input ({same[0]}); write the correction to "
+                              "another folder")
+        if (out / name).is_dir():
+            raise SolverError(f"{out / name}: is a folder; write the correction to another folder")
 
 
 def source_fieldmap(surface_map, source: str) -> Path | None:
@@ -128,26 +181,27 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
                           "actuator's range in its min_m and max_m")
     terms = parse_terms(remove)
     out = Path(outdir)
-    inputs = {Path(p).resolve() for p in (surface_path, scene, actuators) if p is not None}
-    for name in OUTPUTS:
-        if (out / name).resolve() in inputs:
-            raise SolverError(f"{out / name}: is an input; write the correction to another folder")
-        if (out / name).is_dir():
-            raise SolverError(f"{out / name}: is a folder; write the correction to another folder")
+    check_outputs(out, input_paths(surface_path, None, scene, actuators, None))
     smap = surface.load(surface_path)
     if not np.isfinite(smap["deformation"].values).any():
         raise SolverError(f"{surface_path}: the map holds no finite deformation; nothing to correct")
-    layout = layout_for(smap, scene, str(surface_path))
+    scene_obj, fieldmap = scene_for(smap, scene, str(surface_path))
+    check_outputs(out, input_paths(surface_path, scene_obj, scene, actuators, fieldmap))
+    layout = layout_for(smap, scene_obj, str(surface_path))
     acts = actuators_for(layout, layout_kind, actuators, screws)
     if stroke is not None:
         acts = ActuatorLayout(acts.ids, acts.xy, acts.supports,
                               np.tile([-stroke, stroke], (acts.n_actuators, 1)), acts.kind)
+    F, f_note = focal_length_for(smap, scene_obj)
     grid = surface.grid_of(smap)
     std = smap["deformation_std"].values if "deformation_std" in smap else None
-    corr = correct(grid, smap["deformation"].values, layout, acts, terms, std)
-    run = CorrectionRun(corr, acts, unit, freqs, ruze(corr.rms_before, freqs),
-                        ruze(corr.rms_after, freqs), zernike_fit(grid, corr.before, zernike_order),
-                        zernike_fit(grid, corr.after, zernike_order), [])
+    corr = correct(grid, smap["deformation"].values, layout, acts, terms, std, focal_length=F)
+    if f_note:
+        corr.notes.append(f_note)
+    sigma_before, sigma_after = ruze_sigmas(corr)
+    run = CorrectionRun(corr, acts, unit, freqs, ruze(sigma_before, freqs), ruze(sigma_after, freqs),
+                        zernike_fit(grid, corr.before, zernike_order),
+                        zernike_fit(grid, corr.after, zernike_order), [], F)
     header = header_lines(run, terms)
     attrs = {k: v for k, v in smap.attrs.items() if k not in ("rms_m", "rrms")}
     attrs.update(correction="predicted surface after the actuator commands",
@@ -167,6 +221,14 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
     return run
 
 
+def ruze_sigmas(c: Correction) -> tuple[float, float]:
+    """The RMS (m) before and after that Ruze's law takes: the half-path-length error where the
+    focal length was known, else the axial RMS."""
+    if c.path_rms_before is None or c.path_rms_after is None:
+        return c.rms_before, c.rms_after
+    return c.path_rms_before, c.path_rms_after
+
+
 def header_lines(run: CorrectionRun, terms) -> list[str]:
     c = run.correction
     lines = [SIGN.format(unit=run.unit),
@@ -174,23 +236,34 @@ def header_lines(run: CorrectionRun, terms) -> list[str]:
              f"terms left to pointing/focus (removed before fitting): {','.join(terms) or 'none'}",
              f"surface RMS before {c.rms_before / 1e-6:.3f} um, predicted after {c.rms_after / 1e-6:.3f} um",
              f"out of reach within the panels (rigid-panel floor) {c.within_panel_rms / 1e-6:.3f} um"]
+    if c.path_rms_before is not None and c.path_rms_after is not None:
+        lines.append(f"half-path-length error dz / (1 + rho^2 / 4F^2) (Ruze's epsilon, F = "
+                     f"{run.focal_length or math.nan:g} m), RMS before {c.path_rms_before / 1e-6:.3f} "
+                     f"um, predicted after {c.path_rms_after / 1e-6:.3f} um")
+    sigma = "half-path-length" if c.path_rms_before is not None else "axial"
     for f, b, a in zip(run.frequencies, run.efficiency_before, run.efficiency_after, strict=True):
-        lines.append(f"Ruze efficiency at {f / 1e9:g} GHz: {b:.5f} before, {a:.5f} after")
+        lines.append(f"Ruze efficiency at {f / 1e9:g} GHz: {b:.5f} before, {a:.5f} after "
+                     f"(from the {sigma} RMS)")
     return lines
 
 
 def _rows(run: CorrectionRun) -> list[dict]:
-    scale = UNITS[run.unit]
-    c = run.correction
+    """One row per actuator: id, position (m), panels, stroke range (m, when the run had one:
+    the files read back as actuator files keep it; '' for an open end) and the command (and
+    its std) in the run's unit."""
+    scale, places = UNITS[run.unit], DECIMALS[run.unit]
+    c, acts = run.correction, run.actuators
     rows = []
-    for i, name in enumerate(run.actuators.ids):
+    for i, name in enumerate(acts.ids):
         # positions to the micrometre: the files are read back as actuator files
-        row = {"id": name, "x_m": f"{run.actuators.xy[i, 0]:.6f}",
-               "y_m": f"{run.actuators.xy[i, 1]:.6f}",
-               "panels": " ".join(str(p) for p in run.actuators.panels_of(i)),
-               f"command_{run.unit}": f"{c.commands[i] / scale:.4f}"}
+        row = {"id": name, "x_m": f"{acts.xy[i, 0]:.6f}", "y_m": f"{acts.xy[i, 1]:.6f}",
+               "panels": " ".join(str(p) for p in acts.panels_of(i))}
+        if acts.ranges is not None:
+            row["min_m"], row["max_m"] = (repr(float(v)) if math.isfinite(v) else ""
+                                          for v in acts.ranges[i])
+        row[f"command_{run.unit}"] = f"{c.commands[i] / scale:.{places}f}"
         if c.command_std is not None:
-            row[f"command_std_{run.unit}"] = f"{c.command_std[i] / scale:.4f}"
+            row[f"command_std_{run.unit}"] = f"{c.command_std[i] / scale:.{places}f}"
         rows.append(row)
     return rows
 
@@ -218,6 +291,8 @@ def commands_toml(run: CorrectionRun, header: list[str]) -> str:
                 lines.append(f"id = {json.dumps(v)}")  # a TOML basic string, escapes included
             elif k == "panels":
                 lines.append(f"panels = [{', '.join(v.split())}]")
+            elif v == "":
+                continue  # an open end of a range: no key
             else:
                 lines.append(f"{k} = {v}")
         lines.append("")
@@ -234,25 +309,32 @@ def zernike_csv(run: CorrectionRun, header: list[str]) -> str:
 
 
 def _left(c: Correction) -> str:
-    """What share of the RMS the correction leaves, in words."""
-    if c.rms_before > 0:
+    """What share of the RMS the correction leaves, in words (a map flat to round-off after the
+    removed terms has nothing to correct)."""
+    if c.rms_before > FLAT_M:
         return f"{100 * c.rms_after / c.rms_before:.1f} % left"
     return "a flat surface, nothing to correct"
 
 
 def summary_lines(run: CorrectionRun) -> list[str]:
-    c = run.correction
+    """What ``raysim correct`` prints and writes in summary.txt: the actuators, the RMS before
+    and after (axial and half-path-length), the commands (in the run's unit), the Ruze
+    efficiencies and the notes."""
+    c, unit, scale = run.correction, run.unit, UNITS[run.unit]
     lines = [f"{run.actuators.n_actuators} actuators ({run.actuators.kind}); "
              f"{run.actuators.shape_description()}",
              f"RMS {c.rms_before / 1e-6:.2f} um before, {c.rms_after / 1e-6:.2f} um predicted after "
              f"({_left(c)}; rigid-panel floor, out of reach of "
-             f"rigid panel motions: {c.within_panel_rms / 1e-6:.2f} um)",
-             f"commands: max |c| {np.max(np.abs(c.commands)) / UNITS[run.unit]:.3f} {run.unit}"
-             + (f", {c.clipped} at their range limit" if c.clipped else "")]
+             f"rigid panel motions: {c.within_panel_rms / 1e-6:.2f} um)"]
+    if c.path_rms_before is not None and c.path_rms_after is not None:
+        lines.append(f"half-path-length error (Ruze's epsilon, F = {run.focal_length or math.nan:g} m): "
+                     f"RMS {c.path_rms_before / 1e-6:.2f} um before, {c.path_rms_after / 1e-6:.2f} um after")
+    lines.append(f"commands: max |c| {np.max(np.abs(c.commands)) / scale:.{DECIMALS[unit] - 1}f} {unit}"
+                 + (f", {c.clipped} at their range limit" if c.clipped else ""))
     if c.command_std is not None:
-        lines.append(f"command error from the map's std: median {np.median(c.command_std) / 1e-6:.3f} "
-                     f"um, max {np.max(c.command_std) / 1e-6:.3f} um")
-    lines += header_lines(run, ())[5:]
+        med, top = np.median(c.command_std) / scale, np.max(c.command_std) / scale
+        lines.append(f"command error from the map's std: median {med:.{DECIMALS[unit]}f} {unit}, "
+                     f"max {top:.{DECIMALS[unit]}f} {unit}")
+    lines += [line for line in header_lines(run, ()) if line.startswith("Ruze")]
     lines += c.notes
     return lines
-
