@@ -83,6 +83,7 @@ def main(argv: list[str] | None = None) -> None:
     if argv is None:  # the real command (not a test calling main in its own process)
         signal.signal(signal.SIGTERM, _on_signal)
         signal.signal(signal.SIGINT, _on_signal)
+        _printable_streams()
     try:
         code = command.main(args=args, prog_name="raysim", standalone_mode=False)
     except RaysimError as exc:
@@ -108,6 +109,16 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(2)
     _if_interrupted(args)
     sys.exit(code if isinstance(code, int) else 0)
+
+
+def _printable_streams() -> None:
+    """Print what the terminal's encoding cannot hold as escapes (a um sign, a degree sign, a
+    file name in another script): under an ASCII locale with Python's UTF-8 mode off, a command
+    that had written its output ended in a UnicodeEncodeError traceback when it named it."""
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None:
+            reconfigure(errors="backslashreplace")
 
 
 def _if_interrupted(args: list[str]) -> None:

@@ -150,3 +150,17 @@ def test_an_option_missing_its_value_names_the_command(tmp_path: Path):
     assert run.returncode == 2
     assert run.stderr.splitlines() == [
         "error: raysim simulate: Option '-o' requires an argument. (see 'raysim simulate --help')"]
+
+
+def test_an_ascii_terminal_gets_escapes_not_a_traceback(tmp_path: Path):
+    """Under an ASCII locale with the output's encoding ASCII, a command that had written its
+    file ended in a UnicodeEncodeError traceback when it named a non-ASCII path."""
+    from tests.cli import cli_env
+
+    scene = tmp_path / "small.toml"
+    scene.write_text(SMALL)
+    run = run_cli("simulate", scene, "-o", tmp_path / "dïsh µ.nc", cwd=tmp_path,
+                  env=cli_env(LC_ALL="C", PYTHONIOENCODING="ascii"))
+    assert run.returncode == 0, run.stderr
+    assert (tmp_path / "dïsh µ.nc").is_file()
+    assert "d\\xefsh \\xb5.nc" in run.stdout and "Traceback" not in run.stderr
