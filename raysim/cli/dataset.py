@@ -15,8 +15,10 @@ def dataset(
     spec: Path = typer.Argument(..., help="Dataset spec TOML, or a shipped example's name "
                                           "(dataset_demo)."),
     output: Path = typer.Option(..., "-o", "--output", help="Zarr store to write (a folder, data.zarr)."),
-    workers: int | None = typer.Option(None, "--workers",
-                                       help="Local worker processes (default: one per usable core)."),
+    workers: int | None = typer.Option(
+        None, "--workers",
+        help="Local worker processes (default: the usable cores divided by --threads, and no more "
+             "than the samples to compute)."),
     scheduler: str | None = typer.Option(None, "--scheduler",
                                          help="Address of a running Dask scheduler (tcp://host:port) "
                                               "instead of a local cluster; it must answer within "
