@@ -12,22 +12,25 @@ from raysim.cli.common import app, note, output_path, say
 @app.command()
 def render(
     file: Path = typer.Argument(..., help="FieldMap or SurfaceMap NetCDF file."),
-    output: Path = typer.Option(..., "-o", "--output", help="PNG file to write."),
+    output: str = typer.Option(..., "-o", "--output", help="PNG file to write."),
     kind: str | None = typer.Option(
         None, "--kind", help="3d, map or cut (default: 3d for a FieldMap, map for a SurfaceMap)."),
     size: str | None = typer.Option(None, "--size", help="Width x height in pixels, e.g. 1600x1200."),
-    quantity: str = typer.Option("fa", "--quantity",
-                                 help="FieldMap colour: fa (I_ideal/I_def - 1), intensity, or normalized "
-                                      "(intensity over the ideal GO law)."),
+    quantity: str | None = typer.Option(
+        None, "--quantity", help="FieldMap colour: fa (I_ideal/I_def - 1, the default), intensity, or "
+                                 "normalized (intensity over the ideal GO law). Not for a SurfaceMap."),
 ) -> None:
     """Draw a FieldMap (hemisphere over the dish) or a SurfaceMap (deformation in um) as PNG.
 
     Works with no display (EGL off-screen rendering).
     """
     from raysim.render import render as run
+    from raysim.render.api import check_output_name
 
-    written = run(file, output_path(output, [("file to draw", file)]), kind=kind, size=size,
-                  quantity=quantity)
+    # an input named as the output first (the message says what would be lost), then the name
+    # as typed (a Path drops the trailing slash of "x.png/")
+    output_path(Path(output), [("file to draw", file)])
+    written = run(file, check_output_name(output), kind=kind, size=size, quantity=quantity)
     say(f"{written}")
 
 

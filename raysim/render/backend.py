@@ -19,7 +19,7 @@ from raysim.errors import RaysimError
 
 EGL_WINDOW = "vtkEGLRenderWindow"
 EGL_PLATFORM_DEVICE_EXT = 0x313F
-MIN_SIZE = (200, 150)
+MIN_SIZE = (800, 600)  # smaller pictures cannot hold their labels legibly
 MAX_SIZE = (8000, 8000)
 DPI = 100  # matplotlib dots per inch: a figure of W x H pixels is W/100 x H/100 inches
 

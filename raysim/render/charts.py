@@ -20,12 +20,12 @@ from raysim.render import backend
 from raysim.render.data import (
     UM,
     Quantity,
+    deformation_limit,
     error_summary,
     fa,
     field_quantity,
     field_subtitle,
     field_title,
-    nice_ceiling,
     peak_to_peak,
     rim_theta,
     rms,
@@ -45,7 +45,7 @@ def field_map(ds: xr.Dataset, quantity: str | Quantity = "fa", size: tuple[int, 
     cells) as a plan view (radius = theta, deg) and as a rectangular (phi, theta) map, with the
     rim image dashed."""
     q = quantity if isinstance(quantity, Quantity) else field_quantity(ds, quantity)
-    fig = backend.figure(size)
+    fig = backend.figure(size, fitted_text_scale(size, (1600, 1200)))
     fig.suptitle(field_title(ds, title or q.label) + "\n" + field_subtitle(ds), fontsize=12)
     left, right = fig.subplots(1, 2, width_ratios=[1.0, 1.35])
     image = plan_view(left, ds, q)
@@ -91,30 +91,42 @@ def field_cut(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200),
               phis_deg: tuple[float, ...] = (0.0, 90.0, 180.0, 270.0)) -> Any:
     """Figure: intensity (deformed and ideal) and FA against theta along cuts of constant phi
     (the cells nearest ``phis_deg``)."""
-    fig = backend.figure(size)
+    fig = backend.figure(size, fitted_text_scale(size, (1600, 1200)))
     fig.suptitle(field_title(ds, "Cuts of constant phi") + "\n" + field_subtitle(ds), fontsize=12)
     top, bottom = fig.subplots(2, 1, sharex=True)
     theta = np.degrees(ds["theta"].values)
     phi = np.degrees(ds["phi"].values)
     ratio = fa(ds)
+    intensity, ideal = ds["intensity"].values, ds["intensity_ideal"].values
     colours = ["C0", "C1", "C2", "C3", "C4", "C5"]
-    for k, target in enumerate(phis_deg):
-        j = int(np.argmin(np.abs((phi - target + 180.0) % 360.0 - 180.0)))
+    # the cells nearest the asked azimuths, each once (a coarse map may have one cell for two)
+    columns = dict.fromkeys(int(np.argmin(np.abs((phi - target + 180.0) % 360.0 - 180.0)))
+                            for target in phis_deg)
+    # a few rows: points marked, so a single row still shows
+    style = {"marker": "o", "markersize": 4} if theta.size < 20 else {}
+    for k, j in enumerate(columns):
         c = colours[k % len(colours)]
-        top.plot(theta, ds["intensity"].values[:, j], color=c, label=f"deformed, phi = {phi[j]:.1f}°")
-        top.plot(theta, ds["intensity_ideal"].values[:, j], color=c, linestyle=":", linewidth=1.0)
-        bottom.plot(theta, ratio[:, j], color=c, label=f"phi = {phi[j]:.1f}°")
-    top.plot([], [], color="0.3", linestyle=":", label="ideal (dotted)")
-    for ax in (top, bottom):
-        ax.axvline(np.degrees(rim_theta(ds)), **RIM_STYLE)
-        ax.grid(True, alpha=0.3)
+        # a curve is listed in the legend only when it has something to draw
+        if np.isfinite(intensity[:, j]).any():
+            top.plot(theta, intensity[:, j], color=c, label=f"deformed, phi = {phi[j]:.1f}°", **style)
+        if np.isfinite(ideal[:, j]).any():
+            top.plot(theta, ideal[:, j], color=c, linestyle=":", linewidth=1.0, **style)
+        if np.isfinite(ratio[:, j]).any():
+            bottom.plot(theta, ratio[:, j], color=c, label=f"phi = {phi[j]:.1f}°", **style)
+    if np.isfinite(ideal[:, list(columns)]).any():
+        top.plot([], [], color="0.3", linestyle=":", label="ideal (dotted)")
     top.set_ylabel("intensity |E|² / |E_inc|²")
-    top.legend(fontsize=9, ncol=2)
+    if top.get_legend_handles_labels()[0]:
+        top.legend(fontsize=9, ncol=2)
     bottom.set_ylabel("FA = I_ideal / I_def - 1")
     limit = symmetric_limit(ratio, 99.5)
     bottom.set_ylim(-1.3 * limit, 1.3 * limit)
     bottom.set_xlabel("theta (deg) from -z at the focus; dashed: rim image")
-    bottom.legend(fontsize=9, ncol=2)
+    if bottom.get_legend_handles_labels()[0]:
+        bottom.legend(fontsize=9, ncol=2)
+    else:
+        bottom.text(0.5, 0.5, "no FA value on these cuts", transform=bottom.transAxes, ha="center",
+                    va="center", color="0.3")
     return fig
 
 
@@ -124,16 +136,20 @@ def surface_map(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200), text_scale
     side by side (truth and recovered on one colour scale), each with its RMS. ``text_scale``:
     text and lines that many times larger (:func:`backend.figure`)."""
     panels = surface_panels(ds)
-    fig = backend.figure(size, text_scale)
+    fig = backend.figure(size, fitted_text_scale(size, (2400, 1000) if len(panels) > 1 else (1600, 1200),
+                                                 text_scale))
+    # the layout measures the colour bars' labels a few pixels short (µ's descender): 1.5 % of
+    # the height kept free below them; and with equal-aspect maps it leaves the middle panel's
+    # title under the suptitle unless the rows keep more room between them
+    fig.get_layout_engine().set(rect=(0.0, 0.015, 1.0, 0.985), h_pad=0.15)
     summary = error_summary(ds)
     fig.suptitle(surface_title(ds) + "\n" + surface_subtitle(ds) + (f"\n{summary}" if summary else ""),
                  fontsize=12)
     axes = np.atleast_1d(fig.subplots(1, len(panels)))
-    shared = nice_ceiling(symmetric_limit(np.concatenate([v.ravel() for n, v in panels if n != "error"]),
-                                          100.0) * UM)
+    shared = deformation_limit(np.concatenate([v.ravel() for n, v in panels if n != "error"]))
     x, y = ds["x"].values, ds["y"].values
     for ax, (name, values) in zip(axes, panels, strict=True):
-        limit = nice_ceiling(symmetric_limit(values, 100.0) * UM) if name == "error" else shared
+        limit = deformation_limit(values) if name == "error" else shared
         image = ax.pcolormesh(cell_edges(x), cell_edges(y), np.ma.masked_invalid(values * UM), cmap="RdBu_r",
                               vmin=-limit, vmax=limit, shading="flat", rasterized=True)
         rim_circle(ax, aperture_radius(ds))
@@ -155,7 +171,7 @@ def surface_cut(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200)) -> Any:
     """Figure: profiles (µm) along the x axis (y = 0) and the y axis (x = 0): recovered, truth
     and error when a truth exists."""
     panels = dict(surface_panels(ds))
-    fig = backend.figure(size)
+    fig = backend.figure(size, fitted_text_scale(size, (1600, 1200)))
     summary = error_summary(ds)
     fig.suptitle(surface_title(ds, "Surface deformation along cuts") + "\n" + surface_subtitle(ds)
                  + (f"\n{summary}" if summary else ""), fontsize=12)
@@ -173,7 +189,7 @@ def surface_cut(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200)) -> Any:
             right = ax.twinx()
             error = take(panels["error"]) * UM
             handles += right.plot(coord, error, color="0.35", linewidth=1.0, label="error (right scale)")
-            limit = 1.2 * nice_ceiling(symmetric_limit(error, 100.0))
+            limit = 1.2 * deformation_limit(error / UM)
             right.set_ylim(-limit, limit)
             right.set_ylabel("error (µm)", color="0.35")
             right.tick_params(axis="y", colors="0.35")
@@ -187,6 +203,14 @@ def surface_cut(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200)) -> Any:
 
 
 # --- helpers ---------------------------------------------------------------------------------
+def fitted_text_scale(size: tuple[int, int], reference: tuple[int, int], text_scale: float = 1.0) -> float:
+    """Text scale for a figure of ``size`` px whose text is laid out for ``reference`` px: text
+    grows and shrinks with the picture (the smaller of the two ratios, not below 0.6, where
+    it would stop being legible), times ``text_scale``."""
+    ratio = min(size[0] / reference[0], size[1] / reference[1])
+    return float(np.clip(max(ratio, 0.6) * text_scale, 0.25, 8.0))
+
+
 def profile_at_zero(values: np.ndarray, coord: np.ndarray, axis: int) -> np.ndarray:
     """The profile of ``values`` (y, x) at ``coord`` = 0 along ``axis``, linear between the
     two grid lines either side (NaN where either is NaN)."""

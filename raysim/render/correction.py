@@ -18,7 +18,7 @@ import xarray as xr
 
 from raysim.render import backend
 from raysim.render.charts import cell_edges, colour_map, rim_circle
-from raysim.render.data import UM, nice_ceiling, symmetric_limit
+from raysim.render.data import UM, deformation_limit, nice_ceiling
 
 
 def blocked_on_aperture(field: xr.Dataset, x: np.ndarray) -> np.ndarray | None:
@@ -68,7 +68,7 @@ def correction_figure(x: np.ndarray, layout, actuators, correction, blocked: np.
     if blocked is not None:
         before[blocked] = np.nan
         after[blocked] = np.nan
-    limit = nice_ceiling(symmetric_limit(before, 100.0) * UM)
+    limit = deformation_limit(before)
     edges = cell_edges(x)
     a = float(np.abs(edges).max())
     titles = (f"before: RMS {correction.rms_before * UM:.3g} µm",

@@ -91,8 +91,9 @@ def check_surface(ds: xr.Dataset, source: str = "SurfaceMap") -> None:
     for coord in ("x", "y"):
         if ds[coord].attrs.get("units", "m") != "m":
             raise RenderError(f"{source}: coordinate '{coord}' must be in m")
-    if not np.any(np.isfinite(ds["deformation"].values)):
-        raise RenderError(f"{source}: 'deformation' holds no finite value")
+    for name in ("deformation", "truth", "error"):
+        if name in ds.data_vars:
+            require_finite(ds[name].values, f"{source}: '{name}'")
     if "focal_length" in ds.attrs and not float(ds.attrs["focal_length"]) > 0:
         raise RenderError(f"{source}: attribute 'focal_length' must be > 0 m")
 
@@ -159,15 +160,29 @@ def field_quantity(ds: xr.Dataset, name: str = "fa") -> Quantity:
     raise RenderError(f"unknown quantity {name!r}: use one of {', '.join(FIELD_QUANTITIES)}")
 
 
-def symmetric_limit(values: NDArray[np.float64], percentile: float = 99.0) -> float:
-    """Colour limit L for a diverging map on [-L, L]: a high percentile of |values|, > 0."""
+def symmetric_limit(values: NDArray[np.float64], percentile: float = 99.0, fallback: float = 1.0) -> float:
+    """Colour limit L for a diverging map on [-L, L]: a high percentile of |values|, > 0.
+
+    ``fallback`` (in the unit of ``values``) when no value is finite or all are 0."""
     finite = np.abs(values[np.isfinite(values)])
     if finite.size == 0:
-        return 1.0
+        return fallback
     limit = float(np.percentile(finite, percentile))
     if not limit > 0:
         limit = float(finite.max())
-    return limit if limit > 0 else 1.0
+    return limit if limit > 0 else fallback
+
+
+def deformation_limit(values: NDArray[np.float64]) -> float:
+    """Colour limit (µm) for deformations ``values`` (m): the round ceiling of their largest
+    |value| in micrometres; 1 µm when all are 0 (a flat map)."""
+    return nice_ceiling(symmetric_limit(np.asarray(values, dtype=np.float64) * UM, 100.0, 1.0))
+
+
+def require_finite(values: NDArray[np.float64], what: str) -> None:
+    """RenderError (one line) when ``values`` hold no finite number: nothing to draw."""
+    if not np.any(np.isfinite(values)):
+        raise RenderError(f"{what} holds no finite value: nothing to draw")
 
 
 def nice_ceiling(value: float) -> float:
@@ -201,7 +216,7 @@ def method_text(method: str) -> str:
 
 def field_title(ds: xr.Dataset, what: str) -> str:
     """``what`` with the scene, method and frequency of a FieldMap."""
-    name = ds.attrs.get("scene_name") or ("measured scan" if ds.attrs.get("method") == "measured" else "")
+    name = ds.attrs.get("scene_name") or ""
     parts = [what, method_text(str(ds.attrs.get("method", "?"))),
              frequency_text(float(ds.attrs.get("frequency_hz", np.nan)))]
     if name:
@@ -209,14 +224,22 @@ def field_title(ds: xr.Dataset, what: str) -> str:
     return " — ".join([parts[0], ", ".join(parts[1:])])
 
 
+def field_subtitle_lines(ds: xr.Dataset) -> list[str]:
+    """Geometry of a FieldMap: [D, F and R; the grid and the rim image]."""
+    from raysim.maps.fieldmap import grid_of
+
+    D, F, R = (float(ds.attrs[k]) for k in ("diameter", "focal_length", "sphere_radius"))
+    grid = grid_of(ds)
+    dt, dp = np.degrees(grid.dtheta), np.degrees(grid.dphi)
+    steps = f"{dt:.2g}°" if np.isclose(dt, dp, rtol=1e-3) else f"{dt:.2g}° in theta x {dp:.2g}° in phi"
+    return [f"D = {D:g} m, F = {F:g} m, sphere R = {R:g} m about the focus",
+            f"{grid.n_theta} x {grid.n_phi} cells ({steps}), rim image at theta = "
+            f"{np.degrees(rim_theta(ds)):.2f}°"]
+
+
 def field_subtitle(ds: xr.Dataset) -> str:
     """Geometry line: D, F, R and the grid of a FieldMap."""
-    D, F, R = (float(ds.attrs[k]) for k in ("diameter", "focal_length", "sphere_radius"))
-    n_t, n_p = ds.sizes["theta"], ds.sizes["phi"]
-    theta = ds["theta"].values
-    dt = np.degrees(float(theta[1] - theta[0])) if n_t > 1 else np.nan
-    return (f"D = {D:g} m, F = {F:g} m, sphere R = {R:g} m about the focus, {n_t} x {n_p} cells "
-            f"({dt:.2g}°), rim image at theta = {np.degrees(rim_theta(ds)):.2f}°")
+    return ", ".join(field_subtitle_lines(ds))
 
 
 def surface_title(ds: xr.Dataset, what: str = "Surface deformation") -> str:
@@ -279,5 +302,6 @@ def error_summary(ds: xr.Dataset) -> str:
         return ""
     err = rms(panels["error"])
     M = peak_to_peak(panels["truth"])
-    rrms = err / M if M > 0 else float("nan")
-    return f"RMS error {err * UM:.3g} µm, RRMS {100 * rrms:.3g} % (M = {M * UM:.4g} µm)"
+    if not M > 0:  # a flat truth: RRMS = RMS / M means nothing
+        return f"RMS error {err * UM:.3g} µm; the truth is flat (M = 0 µm), no RRMS"
+    return f"RMS error {err * UM:.3g} µm, RRMS {100 * err / M:.3g} % (M = {M * UM:.4g} µm)"

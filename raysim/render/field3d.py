@@ -19,7 +19,7 @@ import xarray as xr
 
 from raysim.maps.fieldmap import grid_of
 from raysim.render import backend
-from raysim.render.data import Quantity, field_quantity, field_subtitle, field_title, frequency_text
+from raysim.render.data import Quantity, field_quantity, field_subtitle_lines, field_title, frequency_text
 
 DISH_CELLS = 70  # triangle edge of the drawn dish: D / DISH_CELLS (coarse; gaps drawn as lines)
 NAN_COLOR = "#b0b0b0"
@@ -104,8 +104,8 @@ def field_plotter(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = 
     q = field_quantity(ds, quantity)
     D, F, R = (float(ds.attrs[k]) for k in ("diameter", "focal_length", "sphere_radius"))
     pl = backend.plotter(size)
-    scale = size[1] / 900.0
-    _add_hemisphere(pl, ds, q, scale, bar=not overview)
+    t = text_unit(size)
+    _add_hemisphere(pl, ds, q, size, bar=not overview)
     what = "no reflector drawn"
     if show_reflector:
         dish, edges, what = reflector(ds)
@@ -113,17 +113,22 @@ def field_plotter(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = 
                     smooth_shading=True, name="reflector")
         if edges.n_cells:
             pl.add_mesh(edges, color="#6e6e6e", line_width=1.0, name="panel_edges")
-    _add_focus_and_source(pl, ds, F, R, D, scale, labels=not overview)
+    _add_focus_and_source(pl, ds, F, R, D, t, labels=not overview)
     if overview:
         _overview_camera(pl, D, F)
         return pl
+    w, h = size
+    margin = MARGIN * unit(size)
     title = field_title(ds, f"{what_of(q)} on the probe hemisphere").replace(" — ", "\n", 1)
-    pl.add_text(title, position="upper_edge", font_size=backend.points(13 * scale), color="black",
-                name="title")
-    notes = [f"colour: {q.label}; grey: no value", field_subtitle(ds), f"reflector: {what}"]
-    pl.add_text("\n".join(notes), position="lower_right", font_size=backend.points(9 * scale),
-                color="#202020", name="notes")
+    pixel_text(pl, vtk_text(title), (w / 2, h - margin), 30 * t, "title", "center", "top", w - 2 * margin)
+    notes = [f"colour: {vtk_text(q.label)}; grey: no value", *field_subtitle_lines(ds), f"reflector: {what}"]
+    inset_w, _ = inset_size(size)
+    pixel_text(pl, "\n".join(notes), (w - margin, margin), 19 * t, "notes", "right", "bottom",
+               w - inset_w - 4 * margin, color="#202020")
     _camera(pl, np.array([0.0, 0.0, F - 0.55 * R]), 0.72 * D, 58.0, -78.0)
+    # the scene a little left of the middle, clear of the colour bar (a shift of the picture,
+    # in units of half its width)
+    pl.camera.SetWindowCenter(0.12 * REFERENCE[0] * unit(size) / w, 0.0)
     return pl
 
 
@@ -135,19 +140,66 @@ def field_image(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = (1
     pl = field_plotter(ds, quantity, size)
     image = np.array(backend.screenshot(pl, None))
     if inset:
-        for name in ("title", "notes", "labels"):
+        for name in ("title", "notes", "labels", "bar_title"):
             pl.remove_actor(name, render=False)
         pl.remove_scalar_bar(render=False)
-        w, h = int(0.3 * size[0]), int(0.3 * size[1])
+        w, h = inset_size(size)
         pl.window_size = [w, h]
         _overview_camera(pl, float(ds.attrs["diameter"]), float(ds.attrs["focal_length"]))
         picture = np.array(backend.screenshot(pl, None))[:h, :w]
         picture[[0, -1], :] = 60
         picture[:, [0, -1]] = 60
-        bottom = size[1] - int(0.02 * size[1])
-        image[bottom - h:bottom, :w] = picture
+        margin = round(MARGIN * unit(size))
+        bottom = size[1] - margin
+        image[bottom - h:bottom, margin:margin + w] = picture
     pl.close()
     return image
+
+
+MARGIN = 12.0  # px at the reference size, scaled by unit()
+REFERENCE = (1600, 1200)  # the picture the text sizes (px) are chosen for
+
+
+def unit(size: tuple[int, int]) -> float:
+    """Scale of text and margins: the largest 4:3 box inside the picture over the reference
+    1600 x 1200 (the scene fills that box, so text keeps its size relative to the scene)."""
+    w, h = size
+    return min(w / REFERENCE[0], h / REFERENCE[1])
+
+
+def text_unit(size: tuple[int, int]) -> float:
+    """Scale of text sizes: the picture's area over the reference's, square-rooted, at most 1.6
+    :func:`unit` (a tall picture has room for larger text than its width alone gives)."""
+    w, h = size
+    return min(math.sqrt(w * h / (REFERENCE[0] * REFERENCE[1])), 1.6 * unit(size))
+
+
+def inset_size(size: tuple[int, int]) -> tuple[int, int]:
+    """The overview inset (width, height) px: 4:3, 30 % of the 4:3 box's width."""
+    u = unit(size)
+    return int(0.3 * REFERENCE[0] * u), int(0.3 * REFERENCE[1] * u)
+
+
+def vtk_text(text: str) -> str:
+    """``text`` in a notation VTK's text renders (it drops the | of |E|)."""
+    return text.replace("|E|² / |E_inc|²", "I / I_inc").replace("|E|²/|E_inc|²", "I / I_inc")
+
+
+def pixel_text(pl: Any, text: str, xy: tuple[float, float], size: float, name: str, halign: str,
+               valign: str, max_width: float, color: str = "black") -> Any:
+    """Text of ``size`` px with its (``halign``, ``valign``) corner at pixel ``xy`` (from the
+    lower left), shrunk to ``max_width`` px if wider."""
+    actor = pl.add_text(text, position=(float(xy[0]), float(xy[1])), font_size=max(7, round(size)) / 2,
+                        color=color, name=name)  # pyvista doubles font_size for positioned text
+    prop = actor.GetTextProperty()
+    getattr(prop, f"SetJustificationTo{'Centered' if halign == 'center' else halign.capitalize()}")()
+    getattr(prop, f"SetVerticalJustificationTo{'Centered' if valign == 'center' else valign.capitalize()}")()
+    box = [0.0] * 4
+    actor.GetBoundingBox(pl.renderer, box)
+    width = box[1] - box[0]
+    if width > max_width > 0:
+        prop.SetFontSize(max(7, int(prop.GetFontSize() * max_width / width)))
+    return actor
 
 
 def what_of(q: Quantity) -> str:
@@ -156,17 +208,30 @@ def what_of(q: Quantity) -> str:
             "normalized": "Intensity over the ideal GO law"}[q.name]
 
 
-def _add_hemisphere(pl: Any, ds: xr.Dataset, q: Quantity, scale: float, bar: bool = True) -> None:
+def _add_hemisphere(pl: Any, ds: xr.Dataset, q: Quantity, size: tuple[int, int], bar: bool = True) -> None:
     mesh = hemisphere(ds, q.values)
-    args = {"title": q.short + "\n", "vertical": True, "position_x": 0.89, "position_y": 0.25,
-            "height": 0.55, "width": 0.045, "title_font_size": backend.points(14 * scale),
-            "label_font_size": backend.points(12 * scale), "color": "black", "n_labels": 5,
-            "fmt": _fmt(q.clim)}
+    w, h = size
+    u, t = unit(size), text_unit(size)
+    box_h = REFERENCE[1] * u
+    # the colour bar at the right edge, its labels right of it, its title (a text of its own:
+    # VTK centres a bar's title on the bar, cut at the picture's edge) above it
+    right = w - MARGIN * u
+    left = right - 45 * u - 125 * t
+    bottom, top = h / 2 - 0.25 * box_h, h / 2 + 0.3 * box_h
+    args = {"title": "colour", "vertical": True, "position_x": left / w, "position_y": bottom / h,
+            "height": (top - bottom) / h, "width": (right - left) / w, "label_font_size": round(19 * t),
+            "color": "black", "n_labels": 5, "fmt": _fmt(q.clim), "unconstrained_font_size": True}
     # data surfaces unlit, so the colour on the picture is the colour on the bar; only the inner
     # face (towards the focus) is drawn, as the probe sees it
     pl.add_mesh(mesh, scalars="value", cmap=q.cmap, clim=list(q.clim), nan_color=NAN_COLOR,
                 lighting=False, scalar_bar_args=args, name="hemisphere", show_scalar_bar=bar,
                 culling="back")
+    if bar:
+        scalar_bar = pl.scalar_bars["colour"]
+        scalar_bar.SetTitle("")
+        scalar_bar.SetBarRatio(45 * u / (right - left))
+        pixel_text(pl, vtk_text(q.short), (right, top + 20 * t), 21 * t, "bar_title", "right", "bottom",
+                   0.45 * w)
     pv = backend.pyvista()
     grid = grid_of(ds)
     # the open edge of the hemisphere (theta = 90 deg) as a thin circle for the shape
@@ -175,10 +240,10 @@ def _add_hemisphere(pl: Any, ds: xr.Dataset, q: Quantity, scale: float, bar: boo
                                       manifold_edges=False, non_manifold_edges=False)
     edge.translate((0.0, 0.0, float(ds.attrs["focal_length"]) - grid.radius * math.cos(grid.theta_max)),
                    inplace=True)
-    pl.add_mesh(edge, color="#303030", line_width=max(1.0, 1.5 * scale), name="hemisphere_edge")
+    pl.add_mesh(edge, color="#303030", line_width=max(1.0, 2.0 * unit(size)), name="hemisphere_edge")
 
 
-def _add_focus_and_source(pl: Any, ds: xr.Dataset, F: float, R: float, D: float, scale: float,
+def _add_focus_and_source(pl: Any, ds: xr.Dataset, F: float, R: float, D: float, u: float,
                           labels: bool = True) -> None:
     pv = backend.pyvista()
     focus = np.array([0.0, 0.0, F])
@@ -200,7 +265,7 @@ def _add_focus_and_source(pl: Any, ds: xr.Dataset, F: float, R: float, D: float,
     hz = float(ds.attrs.get("frequency_hz", float("nan")))
     points = np.array([focus + np.array([0.08 * R, 0.0, 0.08 * R]), tails[0] + np.array([0.0, 0.0, 0.1 * R])])
     pl.add_point_labels(points, ["focus", f"plane wave, {frequency_text(hz)}"],
-                        font_size=backend.points(13 * scale), text_color="black",
+                        font_size=backend.points(21 * u), text_color="black",
                         shape=None, show_points=False, always_visible=True, name="labels")
 
 
@@ -211,7 +276,16 @@ def _camera(pl: Any, centre: np.ndarray, distance: float, elevation_deg: float, 
     pl.camera.focal_point = tuple(centre)
     pl.camera.position = tuple(centre + direction * distance)
     pl.camera.up = (0.0, 0.0, 1.0)
-    pl.camera.view_angle = 30.0
+    pl.camera.SetWindowCenter(0.0, 0.0)
+    # 30 deg vertically in a 4:3 window; a narrower window keeps that width (the scene would
+    # fill a portrait picture's width and run under the colour bar), a wider one that height
+    w, h = pl.window_size
+    if w / h < 4.0 / 3.0:
+        pl.camera.SetUseHorizontalViewAngle(True)
+        pl.camera.view_angle = math.degrees(2.0 * math.atan(math.tan(math.radians(15.0)) * 4.0 / 3.0))
+    else:
+        pl.camera.SetUseHorizontalViewAngle(False)
+        pl.camera.view_angle = 30.0
     pl.camera.clipping_range = (0.02 * distance, 4.0 * distance)
 
 

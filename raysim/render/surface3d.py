@@ -21,14 +21,13 @@ from scipy.ndimage import distance_transform_edt
 from raysim.render import backend
 from raysim.render.data import (
     UM,
+    deformation_limit,
     error_summary,
-    nice_ceiling,
     peak_to_peak,
     rms,
     surface_panels,
     surface_subtitle,
     surface_title,
-    symmetric_limit,
 )
 
 RELIEF = 0.06  # exaggerated peak-to-peak as a fraction of D
@@ -101,8 +100,7 @@ def surface_plotter(ds: xr.Dataset, size: tuple[int, int] = (2400, 1000), k: flo
     top = 0.13 if n == 1 else 0.16
     pl = backend.plotter(size, shape=(2, n), row_weights=[top, 1.0 - top], groups=[(0, np.s_[:])])
     scale = min(size[1] / 900.0, size[0] / n / 700.0) * text_scale
-    shared = nice_ceiling(symmetric_limit(np.concatenate([v.ravel() for n, v in panels if n != "error"]),
-                                          100.0) * UM)
+    shared = deformation_limit(np.concatenate([v.ravel() for n, v in panels if n != "error"]))
     title_size, label_size = backend.points(14 * scale), backend.points(13 * scale)
     # VTK draws a colour bar's title on the side of its tick labels, on top of the middle one:
     # the bar's labels go above it and its title, a text of its own, below it (heights as
@@ -112,7 +110,7 @@ def surface_plotter(ds: xr.Dataset, size: tuple[int, int] = (2400, 1000), k: flo
     bar_y = title_y + 1.3 * title_size / view
     for col, (name, values) in enumerate(panels):
         pl.subplot(1, col)
-        limit = nice_ceiling(symmetric_limit(values, 100.0) * UM) if name == "error" else shared
+        limit = deformation_limit(values) if name == "error" else shared
         bar_title = f"{name}: delta along z (µm)"
         bar = {"title": bar_title, "vertical": False, "position_x": 0.15, "position_y": bar_y,
                "width": 0.7, "height": 0.04 + 1.5 * label_size / view, "label_font_size": label_size,
@@ -152,6 +150,13 @@ def _text(pl: Any, text: str, y: float, size: int, name: str, align: str) -> Any
     prop = actor.GetTextProperty()
     prop.SetJustificationToCentered()
     getattr(prop, f"SetVerticalJustificationTo{align.capitalize()}")()
+    # shrunk to 96 % of the view's width when wider (a narrow picture or a long line)
+    x0, _, x1, _ = pl.renderer.GetViewport()
+    room = 0.96 * (x1 - x0) * pl.window_size[0]
+    box = [0.0] * 4
+    actor.GetBoundingBox(pl.renderer, box)
+    if box[1] - box[0] > room:
+        prop.SetFontSize(max(7, int(prop.GetFontSize() * room / (box[1] - box[0]))))
     return actor
 
 
