@@ -36,6 +36,10 @@ from raysim.render.data import (
 )
 
 RIM_STYLE = {"color": "black", "linestyle": "--", "linewidth": 0.9}
+#: the picture size (px) the one-panel charts' text is laid out for: the report's figures
+#: (raysim.render.figures.SIZE), whose text reads on the page at the size of the wide ones';
+#: larger and smaller pictures scale it (:func:`fitted_text_scale`)
+TEXT_SIZE_FOR = (1400, 1050)
 
 
 # --- FieldMap --------------------------------------------------------------------------------
@@ -45,7 +49,7 @@ def field_map(ds: xr.Dataset, quantity: str | Quantity = "fa", size: tuple[int, 
     cells) as a plan view (radius = theta, deg) and as a rectangular (phi, theta) map, with the
     rim image dashed."""
     q = quantity if isinstance(quantity, Quantity) else field_quantity(ds, quantity)
-    fig = backend.figure(size, fitted_text_scale(size, (1600, 1200)))
+    fig = backend.figure(size, fitted_text_scale(size, TEXT_SIZE_FOR))
     fig.suptitle(field_title(ds, title or q.label) + "\n" + field_subtitle(ds), fontsize=12)
     left, right = fig.subplots(1, 2, width_ratios=[1.0, 1.35])
     image = plan_view(left, ds, q)
@@ -91,7 +95,7 @@ def field_cut(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200),
               phis_deg: tuple[float, ...] = (0.0, 90.0, 180.0, 270.0)) -> Any:
     """Figure: intensity (deformed and ideal) and FA against theta along cuts of constant phi
     (the cells nearest ``phis_deg``)."""
-    fig = backend.figure(size, fitted_text_scale(size, (1600, 1200)))
+    fig = backend.figure(size, fitted_text_scale(size, TEXT_SIZE_FOR))
     fig.suptitle(field_title(ds, "Cuts of constant phi") + "\n" + field_subtitle(ds), fontsize=12)
     top, bottom = fig.subplots(2, 1, sharex=True)
     theta = np.degrees(ds["theta"].values)
@@ -136,7 +140,7 @@ def surface_map(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200), text_scale
     side by side (truth and recovered on one colour scale), each with its RMS. ``text_scale``:
     text and lines that many times larger (:func:`backend.figure`)."""
     panels = surface_panels(ds)
-    fig = backend.figure(size, fitted_text_scale(size, (2400, 1000) if len(panels) > 1 else (1600, 1200),
+    fig = backend.figure(size, fitted_text_scale(size, (2400, 1000) if len(panels) > 1 else TEXT_SIZE_FOR,
                                                  text_scale))
     # the layout measures the colour bars' labels a few pixels short (µ's descender): 1.5 % of
     # the height kept free below them; and with equal-aspect maps it leaves the middle panel's
@@ -171,7 +175,7 @@ def surface_cut(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200)) -> Any:
     """Figure: profiles (µm) along the x axis (y = 0) and the y axis (x = 0): recovered, truth
     and error when a truth exists."""
     panels = dict(surface_panels(ds))
-    fig = backend.figure(size, fitted_text_scale(size, (1600, 1200)))
+    fig = backend.figure(size, fitted_text_scale(size, TEXT_SIZE_FOR))
     summary = error_summary(ds)
     fig.suptitle(surface_title(ds, "Surface deformation along cuts") + "\n" + surface_subtitle(ds)
                  + (f"\n{summary}" if summary else ""), fontsize=12)
