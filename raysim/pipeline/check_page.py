@@ -21,7 +21,7 @@ from raysim.pipeline.check_verdict import summary_rows, verdict_lines
 from raysim.pipeline.report import PAGE_STYLE, figure_html, png_bytes
 from raysim.render import backend
 from raysim.render.charts import RIM_STYLE, cell_edges, colour_map, rim_circle
-from raysim.render.data import UM, nice_ceiling, symmetric_limit
+from raysim.render.data import UM, deformation_limit, symmetric_limit
 
 SIZE = (1800, 620)
 
@@ -84,11 +84,11 @@ def surface_figure(ds: xr.Dataset, i: int):
                if f"error_{n}" in ds]
     panels = [(label, v) for label, v in panels if v is not None]
     fig = backend.figure((450 * len(panels), 520))
-    errors = [symmetric_limit(v, 100.0) for _, v in panels[1:]]
-    error_limit = nice_ceiling(max(errors) * UM) if errors else 1.0
+    errors = [deformation_limit(v) for _, v in panels[1:]]
+    error_limit = max(errors) if errors else 1.0
     for k, (ax, (label, values)) in enumerate(zip(np.atleast_1d(fig.subplots(1, len(panels))), panels,
                                                   strict=True)):
-        limit = nice_ceiling(symmetric_limit(values, 100.0) * UM) if k == 0 else error_limit
+        limit = deformation_limit(values) if k == 0 else error_limit
         image = ax.pcolormesh(cell_edges(x), cell_edges(y), np.ma.masked_invalid(values * UM),
                               cmap="RdBu_r", vmin=-limit, vmax=limit, shading="flat", rasterized=True)
         rim_circle(ax, 0.5 * float(ds.attrs["diameter"]))
