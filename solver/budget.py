@@ -199,6 +199,9 @@ class NoiseResponse:
     along_delta_c: float
     reference: tuple[tuple[int, int, float], ...] = ()
     unused_cells: int = 0   # usable cells that carry no data (blocked), counted as such
+    #: ``modes`` once delta_c is removed (an estimated gain): the m = 0 shares of the map minus
+    #: its projection on delta_c, from the m = 0 coefficients' covariance (see the module)
+    modes_without_delta_c: tuple[tuple[int, int, float], ...] = ()
 
     def reference_share(self, gain_known: bool) -> float:
         """Mean square (m^2) per unit reference variance; m = 0 goes with an estimated gain."""
@@ -213,13 +216,20 @@ class NoiseResponse:
         v = sigma**2
         noise = self.total if gain_known else max(self.total - self.along_delta_c, 0.0)
         harmonic = harmonic_rms(rim_targets, target_std) if rim_targets else None
-        largest = sorted(self.modes, key=lambda mode: -mode[2])[:n_modes]
-        reference = 0.0
+        reference, v_ref = 0.0, 0.0
         if self.reference and reference_samples > 0:
             v_ref = relative_std(noise_db, reference_samples) ** 2
             reference = math.sqrt(v_ref * self.reference_share(gain_known))
+        shares = self.modes if gain_known else (self.modes_without_delta_c or self.modes)
+        # each mode's share of the readings' and of the references' parts (m = 0 references go
+        # with an estimated gain, as in reference_share)
+        own = {(m, n): v * ms for m, n, ms in shares}
+        for m, n, ms in self.reference:
+            if (m, n) in own and (gain_known or m > 0):
+                own[(m, n)] += v_ref * ms
+        largest = sorted(own.items(), key=lambda item: -item[1])[:n_modes]
         return Budget(math.sqrt(v * noise), math.sqrt(v * self.along_delta_c), not gain_known,
-                      harmonic, tuple(Mode(m, n, math.sqrt(v * ms)) for m, n, ms in largest),
+                      harmonic, tuple(Mode(m, n, math.sqrt(ms)) for (m, n), ms in largest),
                       sigma, reference)
 
     def readings_for(self, target: float, noise_db: float, **options) -> int | None:
@@ -304,6 +314,7 @@ def noise_response(sphere: SphereGrid, F: float, D: float, delta_c: str = "refoc
     shares: list[tuple[int, int, float]] = []
     references: list[tuple[int, int, float]] = []
     kernel = _radial_kernel(ring)
+    axisymmetric = None  # the m = 0 modes' covariance and radial factors
     for m, zeros, norm2, rows in _mode_rows(ring, a, kernel):
         # <FA / G, phi_k> = sum over cells of noise x (row weight) x (azimuthal weight)
         spline = (ring.dphi * spline_response(m, ring.dphi)) ** 2
@@ -312,6 +323,10 @@ def noise_response(sphere: SphereGrid, F: float, D: float, delta_c: str = "refoc
         scale = norm2 / (zeros / a) ** 4 / area
         var = phases * spline * cells * scale * np.sum(rows**2 * factors, axis=1)
         shares += [(m, n + 1, float(v)) for n, v in enumerate(var)]
+        if m == 0:  # the same sums between two modes: their coefficients' covariance
+            root = np.sqrt(scale)
+            cov = spline * cells * np.outer(root, root) * ((rows * factors) @ rows.T)
+            axisymmetric = (cov, zeros, norm2)
         if H is not None:
             # one error per line, the same in every row: the rows' weights add first
             lines = float(np.sum((H.T @ np.cos(m * phi)) ** 2)
@@ -325,7 +340,25 @@ def noise_response(sphere: SphereGrid, F: float, D: float, delta_c: str = "refoc
     along = float(ring.n_phi * ring.dphi**2
                   * np.sum(((psi * kernel) @ ring.basis[0].T) ** 2 * factors))
     return NoiseResponse(tuple(shares), sum(v for *_, v in shares), along / area,
-                         tuple(references), unused)
+                         tuple(references), unused,
+                         _without_delta_c(shares, axisymmetric, s, unit, a))
+
+
+def _without_delta_c(shares: list[tuple[int, int, float]], axisymmetric, s: NDArray[np.float64],
+                     unit: NDArray[np.float64], a: float) -> tuple[tuple[int, int, float], ...]:
+    """``shares`` with the m = 0 ones of the map less its projection on the unit delta_c shape
+    ``unit`` (on the radius samples ``s``): with c the shape's coefficients on the m = 0 modes,
+    the coefficients become (1 - c c^T) x, of covariance (1 - c c^T) C (1 - c c^T). Without
+    it a mode close to delta_c (J0(j0,1 r/a) for a refocus) was listed at its share before the
+    removal, above the whole budget's total."""
+    if axisymmetric is None:
+        return tuple(shares)
+    cov, zeros, norm2 = axisymmetric
+    modes = np.sqrt(norm2)[:, None] * jv(0, np.outer(zeros, s / a))
+    c = trapezoid(2.0 * math.pi * s * unit * modes, s, axis=1)
+    P = np.eye(len(c)) - np.outer(c, c)
+    after = np.diag(P @ cov @ P)
+    return tuple((m, n, float(after[n - 1]) if m == 0 else v) for m, n, v in shares)
 
 
 def noise_budget(sphere: SphereGrid, F: float, D: float, noise_db: float, readings: int = 1,
