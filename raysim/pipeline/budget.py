@@ -27,6 +27,9 @@ from solver.budget import Budget, noise_response
 from solver.errors import SolverError
 
 MAX_READINGS = 100_000
+#: dB per reading above which the linear noise model (sigma = ln 10 / 10 s) is off by more than
+#: a few per cent (the log-normal reading's own spread: 4 % at 1 dB, 40 % at 3 dB)
+LINEAR_NOISE_DB = 1.0
 
 
 @dataclass(frozen=True)
@@ -120,13 +123,16 @@ def table_rows(rows: list[BudgetRow]) -> list[list[str]]:
                 "unbounded (none)" if b.harmonic is None else f"{b.harmonic * 1e6:.2f}",
                 f"{row.hours:.2f}"]
         if row.target is not None:
-            line += ["out of reach" if row.readings_needed is None else str(row.readings_needed),
+            line += ["out of reach" if row.readings_needed is None
+                     else f"more than {MAX_READINGS}" if row.readings_needed > MAX_READINGS
+                     else str(row.readings_needed),
                      "-" if row.hours_needed is None else f"{row.hours_needed:.1f}"]
         out.append(line)
     return out
 
 
 def mode_lines(rows: list[BudgetRow]) -> list[str]:
-    """The largest Dirichlet-mode shares of the noise part at each level (um)."""
+    """The largest Dirichlet-mode shares of the readings' and the references' noise at each
+    level (um), after delta_c's removal when the gain is estimated."""
     return [f"{row.noise_db:g} dB: largest modes " + ", ".join(
         f"{m.label} {m.rms * 1e6:.2f}" for m in row.budget.modes) for row in rows]

@@ -31,3 +31,17 @@ def test_a_good_request_still_answers():
     # numpy levels and counts, as a script passes them
     rows = budget_rows("scan_demo", np.array([0.01, 0.02]), readings=np.int64(4))
     assert [r.noise_db for r in rows] == [0.01, 0.02]
+
+
+def test_a_count_beyond_the_cap_and_a_large_noise_are_said_so(tmp_path):
+    """A target a million times too fine needed 4e20 readings per point, printed in full; noise
+    of 3 dB per reading, where the linear model reads 17 % low against a Monte Carlo, came
+    without a word."""
+    from tests.cli import run_cli
+
+    run = run_cli("budget", "scan_demo", "--noise-db", "0.01,3", "--target-um", "1e-9", cwd=tmp_path)
+    assert run.returncode == 0, run.stderr
+    assert "readings for 1e-09 um" in run.stdout
+    assert "more than 100000" in run.stdout or "out of reach" in run.stdout
+    assert not any(len(word) > 12 and word.isdigit() for word in run.stdout.split())
+    assert "linear noise model underestimates" in run.stdout
