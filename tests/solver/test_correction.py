@@ -321,13 +321,20 @@ def test_the_commands_files_read_back_as_actuator_files(tmp_path):
         np.testing.assert_allclose(again.correction.commands, expected, atol=1e-9)
 
 
-def test_locked_actuators_stay_at_zero_and_the_others_fit_without_them():
+def _locked_layout(indices: list[int]):
+    """The corner layout with the actuators at ``indices`` locked (min_m = max_m = 0), the others
+    free within 1 m: (the layout, which are locked, the corner layout)."""
     acts = corners_layout(LAYOUT)
     locked = np.zeros(acts.n_actuators, dtype=bool)
-    locked[[3, 17, 40]] = True
+    locked[indices] = True
     ranges = np.where(locked[:, None], 0.0, np.array([-1.0, 1.0]))
     bounded = build_layout(acts.ids, acts.xy, [acts.panels_of(a) for a in range(acts.n_actuators)],
                            ranges, LAYOUT)
+    return bounded, locked, acts
+
+
+def test_locked_actuators_stay_at_zero_and_the_others_fit_without_them():
+    bounded, locked, acts = _locked_layout([3, 17, 40])
     result = correct(GRID, _rng_map(), LAYOUT, bounded)
     assert np.all(result.commands[locked] == 0.0)
     assert any("3 actuators locked" in note for note in result.notes)

@@ -17,7 +17,15 @@ from solver.actuators import ActuatorError, build_layout, corners_layout, read_a
 from solver.correction import correct
 from solver.correction_io import focal_length_for, run_correct
 from solver.errors import SolverError
-from tests.solver.test_correction import GRID, LAYOUT, SCENE, _dense_system, _rng_map, _surface_file
+from tests.solver.test_correction import (
+    GRID,
+    LAYOUT,
+    SCENE,
+    _dense_system,
+    _locked_layout,
+    _rng_map,
+    _surface_file,
+)
 
 F = 33.0
 
@@ -108,12 +116,7 @@ def test_a_stroke_run_writes_its_ranges(tmp_path):
 
 # --- F3: command_std over the free actuators only ----------------------------------------
 def test_command_std_with_locked_actuators_matches_a_dense_fit_without_their_columns():
-    acts = corners_layout(LAYOUT)
-    locked = np.zeros(acts.n_actuators, dtype=bool)
-    locked[[0, 10, 33]] = True
-    ranges = np.where(locked[:, None], 0.0, np.array([-1.0, 1.0]))
-    bounded = build_layout(acts.ids, acts.xy, [acts.panels_of(a) for a in range(acts.n_actuators)],
-                           ranges, LAYOUT)
+    bounded, locked, acts = _locked_layout([0, 10, 33])
     delta = _rng_map()
     std = GRID.masked(np.full(delta.shape, 2e-6))
     result = correct(GRID, delta, LAYOUT, bounded, delta_std=std)
