@@ -44,6 +44,6 @@ plt.show()
 # %%
 # The SurfaceMap: the recovered deformation beside the truth and the error
 # ------------------------------------------------------------------------
-show(render_image(surface, kind="map", size="1500x500"), "SurfaceMap, --kind map")
-show(render_image(surface, kind="3d", size="800x600"), "SurfaceMap, --kind 3d")
+show(render_image(surface, kind="map", size="1800x750"), "SurfaceMap, --kind map")
+show(render_image(surface, kind="3d", size="1800x750"), "SurfaceMap, --kind 3d")
 plt.show()
