@@ -303,6 +303,7 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
          "unknown radiator 'fmm'"),
         (["simulate", "scene.toml", "-o", "o.nc", "--method", "po", "--radiator", ""],
          "unknown radiator ''"),  # was taken as the default, fast
+        (["simulate", "scene.toml", "-o", "o.nc/"], "ends in a slash"),  # wrote o.nc
         # accepted with GO and ignored before: the user believed the fast sum had run
         (["simulate", "scene.toml", "-o", "o.nc", "--radiator", "direct"],
          "--radiator and --radiator-tol apply to --method po and po+ptd only"),
@@ -378,6 +379,7 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         # issue 31: the fast radiator's options on the refinement's model
         (["invert", "f.nc", "-o", "o.nc", "--radiator", "fmm"], "unknown radiator 'fmm'"),
         (["invert", "f.nc", "-o", "o.nc", "--radiator-tol", "0"], "--radiator-tol must lie in [1e-12, 1)"),
+        (["invert", "f.nc", "-o", "o.nc/"], "ends in a slash"),
         (["invert", "f.nc", "-o", "o.nc", "--radiator-tol", "1e-13"], "--radiator-tol must lie in [1e-12, 1)"),
     ],
     "render": [

@@ -67,6 +67,14 @@ def say_error(message: str, prefix: str = "error:") -> None:
                   soft_wrap=True, highlight=False)
 
 
+def output_file(text: str) -> Path:
+    """An output file's name as typed (typer's ``parser``): a trailing slash names a folder
+    (``Path`` drops it, and ``-o x.nc/`` wrote the file ``x.nc``)."""
+    if text.endswith(("/", os.sep)):
+        raise typer.BadParameter(f"{text}: ends in a slash, so it names a folder: give a file name")
+    return Path(text)
+
+
 def error_line(exc: Exception, command: Any = None, args: Sequence[str] = ()) -> str:
     """The one line of a usage error of the CLI framework: command, problem, where to look.
     The framework names the command where it knows it; where it does not (an option missing its

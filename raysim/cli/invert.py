@@ -8,14 +8,15 @@ from pathlib import Path
 
 import typer
 
-from raysim.cli.common import app, note, output_path, progress_bar, say
+from raysim.cli.common import app, note, output_file, output_path, progress_bar, say
 from raysim.cli.tables import check_json_path, json_option, json_to_stdout, write_json
 
 
 @app.command("invert")
 def invert_command(
     field: Path = typer.Argument(..., help="FieldMap NetCDF (simulated or measured scan)."),
-    output: Path = typer.Option(..., "-o", "--output", help="SurfaceMap NetCDF to write."),
+    output: Path = typer.Option(..., "-o", "--output", parser=output_file,
+                                help="SurfaceMap NetCDF to write."),
     solver: str = typer.Option("multigrid", help="direct, multigrid, gauss-seidel, sor or fft."),
     grid: int = typer.Option(256, help="Aperture grid points across the diameter, 16 to 4096."),
     rim: Path | None = typer.Option(None, help="Rim targets, CSV with header x,y,dz (m), at least 8 "

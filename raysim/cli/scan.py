@@ -13,7 +13,7 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
-from raysim.cli.common import app, note_interrupt, output_path, progress_bar, say
+from raysim.cli.common import app, note_interrupt, output_file, output_path, progress_bar, say
 from raysim.errors import RaysimError
 
 rig_app = typer.Typer(help="The scanning rig (track, slider, rotation, power meter).",
@@ -38,7 +38,8 @@ def _vector3(text: str | None, option: str) -> tuple[float, float, float] | None
 def scan(
     plan: Path = typer.Argument(..., help="Scan plan (TOML), or a shipped example's name "
                                           "(scan_demo)."),
-    output: Path = typer.Option(..., "-o", "--output", help="Measured FieldMap to write (.nc)."),
+    output: Path = typer.Option(..., "-o", "--output", parser=output_file,
+                                help="Measured FieldMap to write (.nc)."),
     resource: list[str] | None = typer.Option(
         None, "--resource", help="Instrument address ROLE=VISA, ROLE meter or motion (twice)."),
     simulate: Path | None = typer.Option(

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from raysim.cli.common import app, output_path, progress_bar, say
+from raysim.cli.common import app, output_file, output_path, progress_bar, say
 from raysim.methods import METHODS
 from raysim.scene.scene import MAX_CELLS, MAX_N_PHI, MAX_N_THETA
 
@@ -15,7 +15,8 @@ from raysim.scene.scene import MAX_CELLS, MAX_N_PHI, MAX_N_THETA
 def simulate(
     scene: Path = typer.Argument(..., help="Scene TOML file, or the name of a shipped example "
                                            "(raysim scenes lists them)."),
-    output: Path = typer.Option(..., "-o", "--output", help="FieldMap NetCDF file to write."),
+    output: Path = typer.Option(..., "-o", "--output", parser=output_file,
+                                help="FieldMap NetCDF file to write."),
     method: str | None = typer.Option(None, "--method",
                                       help=f"{', '.join(METHODS)} (default: the scene's method "
                                            "key, else go)."),
