@@ -380,6 +380,10 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["invert", "f.nc", "-o", "o.nc", "--radiator", "fmm"], "unknown radiator 'fmm'"),
         (["invert", "f.nc", "-o", "o.nc", "--radiator-tol", "0"], "--radiator-tol must lie in [1e-12, 1)"),
         (["invert", "f.nc", "-o", "o.nc/"], "ends in a slash"),
+        # accepted with a GO model and ignored before (simulate refused the same pairing)
+        (["invert", "f.nc", "-o", "o.nc", "--radiator", "direct"], "apply to a po or po+ptd refinement model"),
+        (["invert", "f.nc", "-o", "o.nc", "--model", "po", "--refine", "0", "--radiator-tol", "1e-3"],
+         "this run's model is none (--refine 0)"),
         (["invert", "f.nc", "-o", "o.nc", "--radiator-tol", "1e-13"], "--radiator-tol must lie in [1e-12, 1)"),
     ],
     "render": [

@@ -52,14 +52,15 @@ def invert_command(
              "cell in eight (every 2nd theta ring, every 4th phi column; each iteration about eight "
              "times cheaper), their step still judged on all cells (default 0; fewer than "
              "--gn-steps)."),
-    radiator: str = typer.Option(
-        "fast", "--radiator",
+    radiator: str | None = typer.Option(
+        None, "--radiator",
         help="po, po+ptd model: fast (the multilevel sum of the elements' fields, in the model's "
              "fields and Gauss-Newton's Jacobian, where its cost estimate beats the direct sum) "
-             "or direct (the reference sum)."),
-    radiator_tol: float = typer.Option(
-        1e-6, "--radiator-tol",
-        help="po, po+ptd model: relative RMS accuracy of the fast radiator, in [1e-12, 1)."),
+             "or direct (the reference sum); default fast."),
+    radiator_tol: float | None = typer.Option(
+        None, "--radiator-tol",
+        help="po, po+ptd model: relative RMS accuracy of the fast radiator, in [1e-12, 1); "
+             "default 1e-6."),
     panels_csv: Path | None = typer.Option(None, help="Write the per-panel adjustment table."),
     gain: str = typer.Option(
         "auto", help="auto (known for simulated data, estimated for a measured scan), known "
@@ -86,6 +87,10 @@ def invert_command(
                   remove=remove, model=model, refine_method=refine_method,
                   blocks=bool(scheduler) or workers is not None, radiator=radiator,
                   radiator_tol=radiator_tol)
+    if (radiator, radiator_tol) != (None, None):
+        _radiator_applies(field, model, refine)
+    radiator = "fast" if radiator is None else radiator
+    radiator_tol = 1e-6 if radiator_tol is None else radiator_tol
     inputs = [("FieldMap", field), ("rim-target file", rim)]
     output_path(output, inputs)
     if panels_csv is not None:
@@ -105,6 +110,30 @@ def invert_command(
     for line in summary(result):
         say(line)
     say(f"wrote {output}")
+
+
+def _radiator_applies(field: Path, model: str | None, refine: int) -> None:
+    """Refuse --radiator and --radiator-tol where no po or po+ptd model runs (they were
+    accepted and did nothing, where simulate refuses them): the refinement's model is the one
+    named, else the data's (its FieldMap's method). A FieldMap that cannot be read is left to
+    the inversion's own message."""
+    import xarray as xr
+
+    from solver.forward import model_for_method
+
+    try:
+        with xr.open_dataset(field) as ds:
+            method = str(ds.attrs.get("method", ""))
+    except Exception:  # the inversion says what is wrong with the file
+        return
+    name = "none (--refine 0)" if refine == 0 else (model or model_for_method(method))
+    if name not in ("po", "po+ptd"):
+        from solver.errors import SolverError
+
+        raise SolverError(f"--radiator and --radiator-tol apply to a po or po+ptd refinement model; "
+                          f"this run's model is {name}" + ("" if model or refine == 0 else
+                                                           f" (from the data's method {method!r}); "
+                                                           "choose one with --model"))
 
 
 @contextlib.contextmanager
@@ -144,8 +173,8 @@ def paper_command(
         help="--po: highest frequency (GHz) of the PO + PTD model refinement row (default 1 with "
              "--radiator fast, about a minute a row there; 0.3 with direct, whose 1 GHz row "
              "takes 35 min)."),
-    radiator: str = typer.Option(
-        "fast", "--radiator",
+    radiator: str | None = typer.Option(
+        None, "--radiator",
         help="--po: the PO + PTD sums of the data and the wave refinement: fast (the multilevel "
              "sum where cheaper) or direct (the reference sum)."),
     json_path: str | None = json_option(),
