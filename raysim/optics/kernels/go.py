@@ -284,25 +284,51 @@ def deposit_tubes(
     # azimuthal extent: all wedges when the triangle covers the pole
     j_lo = int(0)
     j_hi = n_phi - 1
+    # a partial grid: the wedges the extent meets a turn later (its part past phi_min + 2 pi)
+    w_lo = int(0)
+    w_hi = int(-1)
     if not inside:
         pa = qa[2]
         pb = pa + wrap_angle(qb[2] - pa)
         pc = pa + wrap_angle(qc[2] - pa)
         p_lo = wp.min(pa, wp.min(pb, pc))
         p_hi = wp.max(pa, wp.max(pb, pc))
+        # the extent taken into [phi_min, phi_min + 2 pi) first: atan2's (-pi, pi] put a tube
+        # a whole turn away from a grid on 90..270 deg, or one that crosses 180 deg
+        turns = wp.floor((p_lo - phi_min) / two_pi)
+        p_lo = p_lo - turns * two_pi
+        p_hi = p_hi - turns * two_pi
         j_lo = int(wp.floor((p_lo - phi_min) / dphi))
         j_hi = int(wp.floor((p_hi - phi_min) / dphi))
+        if full_circle == 1:
+            if j_hi - j_lo + 1 >= n_phi:  # every wedge, each once (n_phi = 1: the one wedge)
+                j_lo = 0
+                j_hi = n_phi - 1
+        elif p_hi >= phi_min + two_pi:
+            w_lo = 0
+            w_hi = wp.min(int(wp.floor((p_hi - two_pi - phi_min) / dphi)), n_phi - 1)
         # the radial and angular ranges are exact bounds: inside one cell, no clipping needed
         th_in = th_lo >= theta_min and th_hi <= theta_min + wp.float64(n_theta) * dtheta
-        if i_lo == i_hi and j_lo == j_hi and th_in:
+        if i_lo == i_hi and j_lo == j_hi and th_in and w_hi < w_lo:
             jj = j_lo
             if full_circle == 1:
                 jj = ((j_lo % n_phi) + n_phi) % n_phi
             if jj >= 0 and jj < n_phi:
                 wp.atomic_add(power, i_lo, jj, P)
             return
+        if full_circle == 0:  # the grid's wedges only
+            j_lo = wp.max(j_lo, 0)
+            j_hi = wp.min(j_hi, n_phi - 1)
+            if w_hi >= j_lo:  # the two passes meet: one pass over the grid (a wedge once)
+                j_lo = 0
+                j_hi = n_phi - 1
+                w_hi = -1
 
-    for j in range(j_lo, j_hi + 1):
+    n_first = wp.max(j_hi - j_lo + 1, 0)
+    for k_pass in range(n_first + wp.max(w_hi - w_lo + 1, 0)):
+        j = j_lo + k_pass
+        if k_pass >= n_first:
+            j = w_lo + k_pass - n_first
         jj = j
         if full_circle == 1:
             jj = ((j % n_phi) + n_phi) % n_phi
@@ -318,7 +344,7 @@ def deposit_tubes(
         px[2] = c[0]
         py[2] = c[1]
         n = int(3)
-        if n_phi > 1:
+        if n_phi > 1 or full_circle == 0:  # one wedge of a whole turn needs no clipping
             k_side = j - j_first
             edge = wp.vec4d()
             if k_side >= 0 and k_side < sides.shape[0]:

@@ -408,3 +408,53 @@ n_phi = 40
 """)
     field = simulate(scene, "go")
     assert field.attrs["power_balance"] == pytest.approx(0.0, abs=1e-12)
+
+
+def _small_dish_field(n_theta: int, n_phi: int, phi_deg: tuple[float, float]):
+    """GO intensity (cell means) of a small ideal dish, seen on cells of the given phi range."""
+    from raysim.scene.scene import parse_scene
+    from raysim.simulate import simulate
+
+    return simulate(parse_scene(f"""
+[dish]
+diameter_m = 10.0
+focal_length_m = 4.0
+resolution_m = 1.25
+[source]
+frequency_hz = 1e9
+[sphere]
+radius_m = 2.0
+n_theta = {n_theta}
+n_phi = {n_phi}
+phi_min_deg = {phi_deg[0]}
+phi_max_deg = {phi_deg[1]}
+"""), "go")
+
+
+@pytest.mark.parametrize("phi_deg", [(90.0, 270.0), (-150.0, 0.0), (300.0, 420.0)])
+def test_a_partial_grid_holds_the_whole_grids_cells(phi_deg):
+    """A grid over part of the turn is the whole turn's cells over that part, whichever way the
+    range is written. Tubes were not taken round the turn: on 90..270 deg those with an atan2
+    azimuth below -90 deg were dropped (29 % of the power on the grid for 50 %), and a tube
+    crossing 180 deg or next to the pole could be placed a turn away from a grid inside
+    (-180, 180]."""
+    whole = _small_dish_field(12, 24, (0.0, 360.0))
+    part = _small_dish_field(12, round((phi_deg[1] - phi_deg[0]) / 15.0), phi_deg)
+    first = round((phi_deg[0] % 360.0) / 15.0)
+    columns = [(first + j) % 24 for j in range(part.sizes["phi"])]
+    expected = whole.intensity_ideal.values[:, columns]
+    np.testing.assert_allclose(part.intensity_ideal.values, expected, rtol=1e-10, atol=1e-12 * expected.max())
+
+
+def test_one_cell_in_phi_holds_the_whole_rings_power():
+    """n_phi = 1: over the whole turn a tube crossing phi_min was deposited twice (power balance
+    +5.9e-2), and over part of the turn no tube was clipped to the cell (a 90 deg cell got 38 %
+    of the power for 25 %)."""
+    whole = _small_dish_field(12, 24, (0.0, 360.0))
+    ring = _small_dish_field(12, 1, (0.0, 360.0))
+    assert ring.attrs["power_balance_ideal"] == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_allclose(ring.intensity_ideal.values[:, 0], whole.intensity_ideal.values.mean(axis=1),
+                               rtol=1e-10)
+    quarter = _small_dish_field(12, 1, (0.0, 90.0))
+    np.testing.assert_allclose(quarter.intensity_ideal.values[:, 0],
+                               whole.intensity_ideal.values[:, :6].mean(axis=1), rtol=1e-10)
