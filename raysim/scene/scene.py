@@ -336,6 +336,8 @@ def _sphere(t: Table, dish: Dish) -> SphereGrid:
                          f"{rim:.2f} deg: the sphere would see no reflection")
     p0 = t.number("phi_min_deg", 0.0, lo=-360.0, hi=360.0, unit="deg")
     p1 = t.number("phi_max_deg", p0 + 360.0, lo=-360.0, hi=720.0, unit="deg")
+    if 360.0 < p1 - p0 <= 360.0 * (1.0 + 1e-12):  # a whole turn written from a phi_min with decimals
+        p1 = p0 + 360.0
     if not 0 < p1 - p0 <= 360.0:
         raise t.fail("'sphere.phi_max_deg' - 'phi_min_deg' must lie in (0, 360]")
     t.done()
