@@ -462,7 +462,7 @@ def test_one_cell_in_phi_holds_the_whole_rings_power():
 
 def test_a_whole_turn_from_a_phi_min_with_decimals_is_the_whole_turn():
     """phi_max_deg = phi_min_deg + 360 computed elsewhere can exceed the span by an ulp; it was
-    refused as "must lie in (0, 360]". It is the whole turn, and the same cells as from 0."""
+    refused as "must lie in (0, 360]". It is the whole turn: every tube lands on the grid."""
     p0 = -131.551
     turned = _small_dish_field(6, 24, (p0, p0 + 360.0 * (1.0 + 1e-13)))
     assert turned.attrs["power_balance_ideal"] == pytest.approx(0.0, abs=1e-12)
