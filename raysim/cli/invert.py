@@ -173,8 +173,8 @@ def paper_command(
         help="--po: highest frequency (GHz) of the PO + PTD model refinement row (default 1 with "
              "--radiator fast, about a minute a row there; 0.3 with direct, whose 1 GHz row "
              "takes 35 min)."),
-    radiator: str | None = typer.Option(
-        None, "--radiator",
+    radiator: str = typer.Option(
+        "fast", "--radiator",
         help="--po: the PO + PTD sums of the data and the wave refinement: fast (the multilevel "
              "sum where cheaper) or direct (the reference sum)."),
     json_path: str | None = json_option(),
