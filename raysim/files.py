@@ -300,6 +300,12 @@ def atomic_path(path: str | os.PathLike[str], clean: bool = True) -> Iterator[Pa
         raise
 
 
+def probe_writable(folder: str | os.PathLike[str]) -> None:
+    """OSError unless a new entry can be made in ``folder``: a real probe (a folder made and
+    removed), since permissions alone do not tell (root, read-only mounts, /proc)."""
+    tempfile.TemporaryDirectory(dir=folder, prefix=".raysim-probe-").cleanup()
+
+
 def write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
     """Write ``data`` to ``path`` through :func:`atomic_path`; return the path."""
     with atomic_path(path) as tmp:

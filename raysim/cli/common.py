@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import inspect
 import os
-import tempfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -21,7 +20,7 @@ from rich.progress import BarColumn, Progress, ProgressColumn, TextColumn, TimeE
 from rich.text import Text
 
 from raysim.errors import RaysimError
-from raysim.files import check_output
+from raysim.files import check_output, probe_writable
 
 app = typer.Typer(
     name="raysim",
@@ -169,9 +168,8 @@ def output_path(path: Path, inputs: Iterable[tuple[str, str | os.PathLike[str] |
         parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise RaysimError(f"{path}: cannot create its folder ({exc.strerror})") from exc
-    try:  # a real probe: permissions alone do not tell (root, read-only mounts, /proc)
-        with tempfile.NamedTemporaryFile(dir=parent, prefix=".raysim-probe-"):
-            pass
+    try:
+        probe_writable(parent)
     except OSError as exc:
         raise RaysimError(f"{path}: cannot write in {parent} ({exc.strerror})") from exc
     return path

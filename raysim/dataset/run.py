@@ -14,7 +14,6 @@ workers can import raysim and reach the store's path.
 from __future__ import annotations
 
 import shutil
-import tempfile
 import time
 import uuid
 from collections.abc import Callable
@@ -187,7 +186,7 @@ def check_run_options(spec: DatasetSpec, store: str | Path, *, workers: int | No
     """Refuse options :func:`generate` cannot honour, before any work (DatasetError): worker
     and thread counts, the scheduler's address, the device, and a store path that is a file
     or the spec itself. Creates the store's parent folder."""
-    from raysim.files import check_output
+    from raysim.files import check_output, probe_writable
 
     for name, value, hi in (("--threads", threads, MAX_THREADS), ("--workers", workers, MAX_WORKERS)):
         if value is not None and (isinstance(value, bool) or not isinstance(value, int)
@@ -212,8 +211,8 @@ def check_run_options(spec: DatasetSpec, store: str | Path, *, workers: int | No
     except OSError as exc:
         raise DatasetError(f"{path}: cannot create its folder ({exc.strerror})") from exc
     where = path.resolve() if path.is_dir() else path.resolve().parent  # a store resumed, or made
-    try:  # a real probe: a read-only mount failed later, naming the store's scratch folder
-        tempfile.TemporaryDirectory(dir=where, prefix=".raysim-probe-").cleanup()
+    try:  # a read-only mount failed later, naming the store's scratch folder
+        probe_writable(where)
     except OSError as exc:
         raise DatasetError(f"{path}: cannot write in {where} ({exc.strerror})") from exc
 

@@ -156,7 +156,7 @@ def _check_writable(target: Path) -> None:
     """Refuse, before any work, an output folder whose parent takes no new folder (the
     staging folder is made there; a read-only mount failed at the end of the run, naming the
     staging folder's internal name)."""
-    import tempfile
+    from raysim.files import probe_writable
 
     parent = target.resolve().parent
     blocking = next((p for p in (parent, *parent.parents) if p.exists()), None)
@@ -164,7 +164,7 @@ def _check_writable(target: Path) -> None:
         raise RenderError(f"{target}: {blocking} is a file, not a folder")
     try:
         parent.mkdir(parents=True, exist_ok=True)
-        tempfile.TemporaryDirectory(dir=parent, prefix=".raysim-probe-").cleanup()
+        probe_writable(parent)
     except OSError as exc:
         raise RenderError(f"{target}: cannot write in {parent} ({exc.strerror})") from exc
 
