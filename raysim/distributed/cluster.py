@@ -21,8 +21,10 @@ import gc
 import logging
 import os
 import re
+import signal
 import socket
 import sys
+import threading
 import time
 import warnings
 from collections.abc import Iterator
@@ -184,8 +186,6 @@ def _workers_from_a_sigint_ignoring_forkserver() -> Iterator[None]:
     is. Only the main thread can change a handler: elsewhere, the server starts as it is.
     """
     import multiprocessing.forkserver
-    import signal
-    import threading
 
     import dask
     from distributed.utils import get_mp_context
@@ -209,7 +209,7 @@ class _SignalsHeld:
     closes it. Only the main thread can change a handler: elsewhere, nothing is held.
     """
 
-    _SIGNALS = ("SIGINT", "SIGTERM")
+    _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __init__(self) -> None:
         self._previous: dict[int, Any] = {}
@@ -219,26 +219,18 @@ class _SignalsHeld:
         self._arrived.append(signum)
 
     def __enter__(self) -> _SignalsHeld:
-        import signal
-        import threading
-
         if threading.current_thread() is threading.main_thread():
-            for name in self._SIGNALS:
-                sig = getattr(signal, name)
+            for sig in self._SIGNALS:
                 self._previous[sig] = signal.signal(sig, self._record)
         return self
 
     def __exit__(self, *exc: object) -> None:
-        import signal
-
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
         self._previous.clear()
 
     def deliver(self) -> None:
         """Raise the signals that arrived while held, once each, to this process's handlers."""
-        import signal
-
         for sig in dict.fromkeys(self._arrived):
             signal.raise_signal(sig)
         self._arrived.clear()
