@@ -107,12 +107,13 @@ def correct(grid, delta: NDArray[np.float64], layout, actuators: ActuatorLayout,
     on = ids.ravel() >= 0
     d = before.ravel()[on]
     Af = A[:, free]
-    notes += _undetermined_note(Af, np.flatnonzero(free), actuators)
+    normal = (Af.T @ Af).toarray()  # the free actuators' normal matrix A^T A
+    notes += _undetermined_note(normal, np.flatnonzero(free), actuators)
     commands = np.zeros(actuators.n_actuators)
     clipped = 0
     extra = np.zeros(on.sum())
     if actuators.ranges is None:
-        commands[free], *_ = np.linalg.lstsq((Af.T @ Af).toarray(), -(Af.T @ d), rcond=None)
+        commands[free], *_ = np.linalg.lstsq(normal, -(Af.T @ d), rcond=None)
     elif free.any():
         G, names = _term_columns(grid, ids, remove)
         commands[free], coef, clipped = _bounded_fit(Af, d, actuators.ranges[free], G)
@@ -154,13 +155,15 @@ def _unlocked(actuators: ActuatorLayout, held: NDArray[np.bool_], notes: list[st
     return ~locked
 
 
-def _undetermined_note(A: sp.csr_matrix, columns: NDArray[np.int64], actuators: ActuatorLayout) -> list[str]:
+def _undetermined_note(normal: NDArray[np.float64], columns: NDArray[np.int64],
+                       actuators: ActuatorLayout) -> list[str]:
     """A note when the map does not fix every command: actuators (``columns`` of the layout)
-    with a share in the null space of A^T A (a panel with fewer map points than actuators,
-    or points on a line) get the minimum-norm choice; the panels they hold are counted."""
-    if A.shape[1] == 0:
+    with a share in the null space of the ``normal`` matrix A^T A (a panel with fewer map
+    points than actuators, or points on a line) get the minimum-norm choice; the panels they
+    hold are counted."""
+    if normal.shape[1] == 0:
         return []
-    w, V = np.linalg.eigh((A.T @ A).toarray())
+    w, V = np.linalg.eigh(normal)
     null = V[:, w <= max(w.max(), 0.0) * 1e-10]
     if null.shape[1] == 0:
         return []
