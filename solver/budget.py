@@ -18,6 +18,14 @@ ring. The RMS over the disk is sqrt(E ||delta||^2 / (pi a^2)), the inversion's R
 - With the gain estimated, delta_c (:mod:`solver.gainmode`) is removed from the map, and with it
   the noise's share along it: E ||(1 - P_c) delta||^2 = E ||delta||^2 - var(<FA / G, psi>) with
   psi = Laplacian^-1 of the unit-norm mode (a radial ODE here).
+- Terms removed after the solve (``invert --remove``: piston, tilt, focus, by least squares
+  over the disk, after delta_c) take their span's share: with u_i an orthonormal basis of it,
+  E ||(1 - P_t) y||^2 = E ||y||^2 - sum_i var(<u_i, y>), y the map after delta_c's removal,
+  and <u_i, y> = <w_i, delta> with w_i = u_i - c <c, u_i> (c the unit delta_c; w_i = u_i with
+  the gain known), so var(<FA / G, Laplacian^-1 w_i>) as for delta_c (tilt: m = 1, where
+  Laplacian^-1 r = (r^3 - a^2 r) / 8). The same holds for the references' part, and for the
+  rim targets' harmonic error, whose constant is partly removed by delta_c and by piston or
+  focus (a refocus removes 3/4 of its mean square) and whose m = 1 term is a tilt.
 - Rim targets of std sigma_t fix the harmonic part; a least-squares Fourier fit of order M to N
   targets spread round the rim leaves mean-square sigma_t^2 / N (1 + sum_m 2 / (m + 1)) over the
   disk (the harmonics (r/a)^m have mean square 1 / (m + 1) there). Without targets the harmonic
@@ -47,6 +55,7 @@ Checked against the scatter of the inversion itself over noisy scans in tests/so
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -59,6 +68,7 @@ from raysim.maps.sphere import SphereGrid
 from solver.boundary import MAX_HARMONICS
 from solver.equation import G
 from solver.errors import SolverError
+from solver.fit import parse_terms
 from solver.resample import PAD, extend_rows, usable_rows
 
 J_MAX = 80.0  # highest Bessel zero kept: the variance beyond falls as (j_01 / J_MAX)^2 ~ 1e-3
@@ -93,7 +103,8 @@ class Budget:
     ``delta_c``: the share along delta_c (removed with an estimated gain, else kept);
     ``harmonic``: the rim targets' part (None without targets: unbounded); ``modes``: the
     largest Dirichlet-mode shares, largest first; ``sigma``: relative std per cell;
-    ``reference``: the drift references' part (0 when the readings are not drift-corrected).
+    ``reference``: the drift references' part (0 when the readings are not drift-corrected);
+    ``removed``: the terms removed after the solve, whose share every part has lost.
     """
 
     noise: float
@@ -103,6 +114,7 @@ class Budget:
     modes: tuple[Mode, ...]
     sigma: float
     reference: float = 0.0
+    removed: tuple[str, ...] = ()   # the terms removed after the solve (invert --remove)
 
     @property
     def total(self) -> float:
@@ -180,11 +192,39 @@ def delta_c_shape(s: NDArray[np.float64], F: float, R: float, kind: str) -> NDAr
     raise SolverError(f"unknown delta_c shape {kind!r}: choose {' or '.join(DELTA_C)}")
 
 
-def harmonic_rms(n_targets: int, target_std: float) -> float:
-    """RMS (m) over the disk of the harmonic fit's error from N targets of std ``target_std``."""
+def harmonic_rms(n_targets: int, target_std: float, constant_kept: float = 1.0,
+                 tilt_removed: bool = False) -> float:
+    """RMS (m) over the disk of the harmonic fit's error from N targets of std ``target_std``:
+    of its constant, the share ``constant_kept`` of the mean square that the map's removals
+    leave (see :class:`Removal`), and of its m = 1 term none when tilt is removed."""
     order = min(MAX_HARMONICS, (n_targets - 1) // 2)
-    mean_square = 1.0 + sum(2.0 / (m + 1.0) for m in range(1, order + 1))
+    mean_square = constant_kept + sum(2.0 / (m + 1.0) for m in range(1, order + 1)
+                                      if not (m == 1 and tilt_removed))
     return target_std * math.sqrt(mean_square / n_targets)
+
+
+@dataclass(frozen=True)
+class Removal:
+    """What the map's removals take from the budget, per unit variance (m^2 over the disk):
+    delta_c's (with the gain estimated, already in ``along_delta_c``) and then the removed
+    ``terms`` (see the module).
+
+    ``readings``, ``references``: the mean squares the terms remove from the readings' and the
+    references' parts; ``constant_kept``: the share of a constant's mean square left (the rim
+    targets' piston error); ``modes``, ``reference_modes``: (m, n, mean square) per Dirichlet
+    mode after the removals."""
+
+    terms: tuple[str, ...]
+    readings: float
+    references: float
+    constant_kept: float
+    modes: tuple[tuple[int, int, float], ...]
+    reference_modes: tuple[tuple[int, int, float], ...]
+
+    @property
+    def tilt(self) -> bool:
+        """Whether tilt is removed (and with it the rim targets' m = 1 error)."""
+        return "tilt" in self.terms
 
 
 @dataclass(frozen=True)
@@ -199,13 +239,19 @@ class NoiseResponse:
     along_delta_c: float
     reference: tuple[tuple[int, int, float], ...] = ()
     unused_cells: int = 0   # usable cells that carry no data (blocked), counted as such
-    #: ``modes`` once delta_c is removed (an estimated gain): the m = 0 shares of the map minus
-    #: its projection on delta_c, from the m = 0 coefficients' covariance (see the module)
-    modes_without_delta_c: tuple[tuple[int, int, float], ...] = ()
+    #: what the removals take, with the gain known and with it estimated (delta_c removed
+    #: first); None: nothing but delta_c, whose per-mode shares are then not projected
+    removals: tuple[Removal, Removal] | None = None
 
     def reference_share(self, gain_known: bool) -> float:
         """Mean square (m^2) per unit reference variance; m = 0 goes with an estimated gain."""
         return sum(ms for m, _, ms in self.reference if gain_known or m > 0)
+
+    def removal(self, gain_known: bool) -> Removal:
+        """The :class:`Removal` of the gain's case (nothing removed when none was computed)."""
+        if self.removals is not None:
+            return self.removals[0 if gain_known else 1]
+        return Removal((), 0.0, 0.0, 1.0, self.modes, self.reference)
 
     def budget(self, noise_db: float, readings: int = 1, gain_known: bool = False,
                rim_targets: int = 0, target_std: float = 0.0, n_modes: int = 6,
@@ -214,23 +260,26 @@ class NoiseResponse:
         references (when the response has them) each the mean of ``reference_samples``."""
         sigma = relative_std(noise_db, readings)
         v = sigma**2
-        noise = self.total if gain_known else max(self.total - self.along_delta_c, 0.0)
-        harmonic = harmonic_rms(rim_targets, target_std) if rim_targets else None
+        removal = self.removal(gain_known)
+        noise = self.total if gain_known else self.total - self.along_delta_c
+        noise = max(noise - removal.readings, 0.0)
+        harmonic = (harmonic_rms(rim_targets, target_std, removal.constant_kept, removal.tilt)
+                    if rim_targets else None)
         reference, v_ref = 0.0, 0.0
         if self.reference and reference_samples > 0:
             v_ref = relative_std(noise_db, reference_samples) ** 2
-            reference = math.sqrt(v_ref * self.reference_share(gain_known))
-        shares = self.modes if gain_known else (self.modes_without_delta_c or self.modes)
+            left = max(self.reference_share(gain_known) - removal.references, 0.0)
+            reference = math.sqrt(v_ref * left)
         # each mode's share of the readings' and of the references' parts (m = 0 references go
         # with an estimated gain, as in reference_share)
-        own = {(m, n): v * ms for m, n, ms in shares}
-        for m, n, ms in self.reference:
+        own = {(m, n): v * ms for m, n, ms in removal.modes}
+        for m, n, ms in removal.reference_modes:
             if (m, n) in own and (gain_known or m > 0):
                 own[(m, n)] += v_ref * ms
         largest = sorted(own.items(), key=lambda item: -item[1])[:n_modes]
         return Budget(math.sqrt(v * noise), math.sqrt(v * self.along_delta_c), not gain_known,
                       harmonic, tuple(Mode(m, n, math.sqrt(ms)) for (m, n), ms in largest),
-                      sigma, reference)
+                      sigma, reference, removal.terms)
 
     def readings_for(self, target: float, noise_db: float, **options) -> int | None:
         """Readings per point for a predicted total RMS of at most ``target`` (m); None when
@@ -296,12 +345,15 @@ def row_factors(used: NDArray[np.bool_] | None, n_rows: int) -> tuple[NDArray[np
 
 def noise_response(sphere: SphereGrid, F: float, D: float, delta_c: str = "refocus",
                    reference_every: int | None = None,
-                   used: NDArray[np.bool_] | None = None) -> NoiseResponse:
+                   used: NDArray[np.bool_] | None = None,
+                   remove: Sequence[str] = ()) -> NoiseResponse:
     """The :class:`NoiseResponse` of a scan on ``sphere`` of a dish (F, D in m), with drift
     references every ``reference_every`` phi lines (None: not drift-corrected); see the module.
 
     ``used`` (n_theta, n_phi) bool: the cells that carry data (None: all of them); a scan with
-    obstacles passes the cells they leave (not ``blocked``)."""
+    obstacles passes the cells they leave (not ``blocked``). ``remove``: the terms the map has
+    removed after the solve (piston, tilt, focus: ``invert --remove``)."""
+    terms = parse_terms(remove)
     ring = rings(sphere, F, D)
     if used is not None and np.shape(used) != (sphere.n_theta, sphere.n_phi):
         raise SolverError(f"the used-cell mask {np.shape(used)} is not the scan's grid "
@@ -314,7 +366,7 @@ def noise_response(sphere: SphereGrid, F: float, D: float, delta_c: str = "refoc
     shares: list[tuple[int, int, float]] = []
     references: list[tuple[int, int, float]] = []
     kernel = _radial_kernel(ring)
-    axisymmetric = None  # the m = 0 modes' covariance and radial factors
+    orders: dict[int, _Order] = {}  # m = 0 and 1, which the removals reach
     for m, zeros, norm2, rows in _mode_rows(ring, a, kernel):
         # <FA / G, phi_k> = sum over cells of noise x (row weight) x (azimuthal weight)
         spline = (ring.dphi * spline_response(m, ring.dphi)) ** 2
@@ -323,51 +375,157 @@ def noise_response(sphere: SphereGrid, F: float, D: float, delta_c: str = "refoc
         scale = norm2 / (zeros / a) ** 4 / area
         var = phases * spline * cells * scale * np.sum(rows**2 * factors, axis=1)
         shares += [(m, n + 1, float(v)) for n, v in enumerate(var)]
-        if m == 0:  # the same sums between two modes: their coefficients' covariance
-            root = np.sqrt(scale)
-            cov = spline * cells * np.outer(root, root) * ((rows * factors) @ rows.T)
-            axisymmetric = (cov, zeros, norm2)
+        lines = (0.0, 0.0)
         if H is not None:
             # one error per line, the same in every row: the rows' weights add first
-            lines = float(np.sum((H.T @ np.cos(m * phi)) ** 2)
-                          + (np.sum((H.T @ np.sin(m * phi)) ** 2) if m else 0.0))
-            ref = spline * lines * scale * np.sum(rows * (factors > 0), axis=1) ** 2
+            lines = (float(np.sum((H.T @ np.cos(m * phi)) ** 2)),
+                     float(np.sum((H.T @ np.sin(m * phi)) ** 2)) if m else 0.0)
+            ref = spline * sum(lines) * scale * np.sum(rows * (factors > 0), axis=1) ** 2
             references += [(m, n + 1, float(v)) for n, v in enumerate(ref)]
+        if m <= 1:  # the same sums between two modes: their coefficients' covariance
+            root = np.sqrt(scale)
+            orders[m] = _Order(spline * cells * np.outer(root, root) * ((rows * factors) @ rows.T),
+                               root * np.sum(rows * (factors > 0), axis=1), spline * sum(lines),
+                               lines, np.sqrt(norm2), zeros)
     s = np.linspace(0.0, a, 4001)
     shape = delta_c_shape(s, F, sphere.radius, delta_c)
-    unit = shape / math.sqrt(float(trapezoid(2.0 * math.pi * s * shape**2, s)))
-    psi = np.interp(ring.r, s, _radial_inverse(s, unit))
-    along = float(ring.n_phi * ring.dphi**2
-                  * np.sum(((psi * kernel) @ ring.basis[0].T) ** 2 * factors))
-    return NoiseResponse(tuple(shares), sum(v for *_, v in shares), along / area,
-                         tuple(references), unused,
-                         _without_delta_c(shares, axisymmetric, s, unit, a))
+    unit = shape / math.sqrt(_disk_dot(s, shape, shape))
+    sums = _Sums(ring, kernel, factors, s, area)
+    along = sums.readings(_radial_inverse(s, unit), 0)
+    removals = tuple(_removal(terms, sums, orders, shares, references, unit if estimated else None)
+                     for estimated in (False, True))
+    return NoiseResponse(tuple(shares), sum(v for *_, v in shares), along, tuple(references),
+                         unused, removals)
 
 
-def _without_delta_c(shares: list[tuple[int, int, float]], axisymmetric, s: NDArray[np.float64],
-                     unit: NDArray[np.float64], a: float) -> tuple[tuple[int, int, float], ...]:
-    """``shares`` with the m = 0 ones of the map less its projection on the unit delta_c shape
-    ``unit`` (on the radius samples ``s``): with c the shape's coefficients on the m = 0 modes,
-    the coefficients become (1 - c c^T) x, of covariance (1 - c c^T) C (1 - c c^T). Without
-    it a mode close to delta_c (J0(j0,1 r/a) for a refocus) was listed at its share before the
-    removal, above the whole budget's total."""
-    if axisymmetric is None:
-        return tuple(shares)
-    cov, zeros, norm2 = axisymmetric
-    modes = np.sqrt(norm2)[:, None] * jv(0, np.outer(zeros, s / a))
-    c = trapezoid(2.0 * math.pi * s * unit * modes, s, axis=1)
-    P = np.eye(len(c)) - np.outer(c, c)
-    after = np.diag(P @ cov @ P)
-    return tuple((m, n, float(after[n - 1]) if m == 0 else v) for m, n, v in shares)
+@dataclass(frozen=True)
+class _Order:
+    """One azimuthal order's Dirichlet modes: the coefficients' covariance (one phase, m^2 per
+    unit variance), the references' coefficient per unit error of a line's gain and their
+    spline times lines factor (both phases) and lines per phase (cos, sin), each mode's
+    unit-norm factor and Bessel zero."""
+
+    cov: NDArray[np.float64]
+    reference: NDArray[np.float64]
+    reference_factor: float
+    lines: tuple[float, float]
+    norm: NDArray[np.float64]
+    zeros: NDArray[np.float64]
+
+    def coefficients(self, s: NDArray[np.float64], f: NDArray[np.float64], m: int
+                     ) -> NDArray[np.float64]:
+        """<f(r) cos(m phi), phi_mn> for each mode n (f on the radius samples ``s``)."""
+        a = s[-1]
+        modes = self.norm[:, None] * jv(m, np.outer(self.zeros, s / a))
+        return trapezoid((2.0 * math.pi if m == 0 else math.pi) * s * f * modes, s, axis=1)
+
+
+def _disk_dot(s: NDArray[np.float64], f: NDArray[np.float64], g: NDArray[np.float64]) -> float:
+    """The inner product over the disk of two radial functions on the radius samples ``s``."""
+    return float(trapezoid(2.0 * math.pi * s * f * g, s))
+
+
+@dataclass(frozen=True)
+class _Sums:
+    """var(<delta, u>) for a shape u = w(r) cos(m phi), from psi = Laplacian^-1 w on the radius
+    samples ``s``: the readings' (one phase) and a line error's, as mean squares over the disk."""
+
+    ring: Rings
+    kernel: NDArray[np.float64]
+    factors: NDArray[np.float64]
+    s: NDArray[np.float64]
+    area: float
+
+    def _weights(self, psi: NDArray[np.float64], m: int) -> NDArray[np.float64]:
+        """Each sphere row's weight in <FA / G, psi cos(m phi)> per unit value in the row."""
+        return (np.interp(self.ring.r, self.s, psi) * self.kernel) @ self.ring.basis[m % 2].T
+
+    def _spline(self, m: int) -> float:
+        return (self.ring.dphi * spline_response(m, self.ring.dphi)) ** 2
+
+    def readings(self, psi: NDArray[np.float64], m: int) -> float:
+        cells = self.ring.n_phi if m == 0 else self.ring.n_phi / 2.0
+        return (self._spline(m) * cells * float(np.sum(self._weights(psi, m) ** 2 * self.factors))
+                / self.area)
+
+    def references(self, psi: NDArray[np.float64], m: int, lines: float) -> float:
+        weight = float(np.sum(self._weights(psi, m) * (self.factors > 0)))
+        return self._spline(m) * lines * weight**2 / self.area
+
+
+def _term_shapes(s: NDArray[np.float64], terms: Sequence[str]) -> list[NDArray[np.float64]]:
+    """An orthonormal basis (over the disk) of the removed axisymmetric terms: piston, focus."""
+    basis: list[NDArray[np.float64]] = []
+    for name, f in (("piston", np.ones_like(s)), ("focus", s * s)):
+        if name in terms:
+            for u in basis:
+                f = f - _disk_dot(s, f, u) * u
+            basis.append(f / math.sqrt(_disk_dot(s, f, f)))
+    return basis
+
+
+def _removal(terms: tuple[str, ...], sums: _Sums, orders: dict[int, _Order],
+             shares: list[tuple[int, int, float]], references: list[tuple[int, int, float]],
+             unit: NDArray[np.float64] | None) -> Removal:
+    """The :class:`Removal` of ``terms`` after delta_c's (``unit`` on the radius samples; None
+    with the gain known): see the module. The per-mode shares come from the m = 0 and m = 1
+    coefficients' covariances projected off the removed shapes (their mode coefficients: the
+    modes' truncation at J_MAX leaves a shape's tail, which the totals, taken from the shapes
+    themselves, do not need)."""
+    s = sums.s
+    a = s[-1]
+    shapes = _term_shapes(s, terms)
+    readings = references_removed = 0.0
+    after_c = (lambda f: f) if unit is None else (lambda f: f - _disk_dot(s, f, unit) * unit)
+    for u in shapes:
+        psi = _radial_inverse(s, after_c(u))
+        readings += sums.readings(psi, 0)
+        if unit is None:  # m = 0 reference errors go with an estimated gain
+            references_removed += sums.references(psi, 0, orders[0].lines[0])
+    tilt = s / math.sqrt(0.25 * math.pi * a**4)       # r cos(phi), unit norm over the disk
+    if "tilt" in terms:
+        psi = (s**3 - a * a * s) / 8.0 / math.sqrt(0.25 * math.pi * a**4)
+        readings += 2.0 * sums.readings(psi, 1)
+        references_removed += sum(sums.references(psi, 1, lines) for lines in orders[1].lines)
+    constant = after_c(np.ones_like(s))
+    for u in shapes:
+        constant = constant - _disk_dot(s, constant, u) * u
+    kept = _disk_dot(s, constant, constant) / _disk_dot(s, np.ones_like(s), np.ones_like(s))
+    # per mode: the coefficients x become M x (M: the projections, delta_c's first)
+    projections = {}
+    for m, order in orders.items():
+        M = np.eye(order.zeros.size)
+        if m == 0 and unit is not None:
+            c = order.coefficients(s, unit, 0)
+            M = M - np.outer(c, c)
+        for u in shapes if m == 0 else [tilt] if "tilt" in terms else []:
+            t = order.coefficients(s, u, m)
+            M = (np.eye(t.size) - np.outer(t, t)) @ M
+        projections[m] = (M, order)
+    modes, reference_modes = [], []
+    for m, n, ms in shares:
+        if m in projections:
+            M, order = projections[m]
+            ms = (1 if m == 0 else 2) * float((M @ order.cov @ M.T)[n - 1, n - 1])
+        modes.append((m, n, ms))
+    for m, n, ms in references:
+        if m in projections:
+            M, order = projections[m]
+            ms = order.reference_factor * float((M @ order.reference)[n - 1]) ** 2
+        reference_modes.append((m, n, ms))
+    return Removal(terms, readings, references_removed, kept, tuple(modes),
+                   tuple(reference_modes))
 
 
 def noise_budget(sphere: SphereGrid, F: float, D: float, noise_db: float, readings: int = 1,
                  gain_known: bool = False, rim_targets: int = 0, target_std: float = 0.0,
                  delta_c: str = "refocus", n_modes: int = 6, reference_every: int | None = None,
-                 reference_samples: int = 0, used: NDArray[np.bool_] | None = None) -> Budget:
+                 reference_samples: int = 0, used: NDArray[np.bool_] | None = None,
+                 remove: Sequence[str] = ()) -> Budget:
     """The budget of a scan on ``sphere`` of a dish (F, D in m), drift references every
-    ``reference_every`` lines of ``reference_samples`` readings (None: no drift correction);
-    see the module docstring."""
-    response = noise_response(sphere, F, D, delta_c, reference_every, used)
+    ``reference_every`` lines of ``reference_samples`` readings (None: no drift correction),
+    the terms ``remove`` (piston, tilt, focus) removed from the map after the solve; see the
+    module docstring."""
+    response = noise_response(sphere, F, D, delta_c, reference_every, used, remove)
     return response.budget(noise_db, readings, gain_known, rim_targets, target_std, n_modes,
                            reference_samples)

@@ -506,6 +506,7 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["budget", "plan.toml", "--target-um", "0"], "--target-um must lie in (0, 10000] um"),
         (["budget", "plan.toml", "--gain", "maybe"], "unknown gain 'maybe'"),
         (["budget", "plan.toml", "--refine", "-2"], "--refine must be an integer in 0..50"),
+        (["budget", "plan.toml", "--remove", "astigmatism"], "unknown term 'astigmatism' to remove"),
         (["budget", "plan_obst_width.toml"], "'obstacle[0].width_m' must be > 0"),
         (["budget", "plan_obst_disk.toml"], "covers the whole dish"),
     ],

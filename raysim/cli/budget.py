@@ -24,6 +24,9 @@ def budget_command(
                                                "known."),
     refine: int = typer.Option(3, help="The inversion's refinement iterations (0: the linear "
                                        "answer, whose delta_c differs)."),
+    remove: str = typer.Option("", help="Terms the inversion removes from the map (as invert "
+                                        "--remove), e.g. tilt or piston,tilt,focus: the noise's "
+                                        "share along them goes with them."),
     target_um: float | None = typer.Option(None, "--target-um",
                                            help="An RMS to reach (um): the readings per point "
                                                 "and the scan time it needs."),
@@ -44,7 +47,7 @@ def budget_command(
     check_json_path(json_path, scan_plan.inputs())  # the rig and mesh files the plan names too
     rows = budget_rows(scan_plan, parse_levels(noise_db), readings, rim, rim_std_um * 1e-6,
                        gain == "known", refine > 0,
-                       None if target_um is None else target_um * 1e-6)
+                       None if target_um is None else target_um * 1e-6, remove)
     lines = table_rows(rows)
     title = f"error budget of {plan}"
     write_json(json_path, "budget", title, [_record(row) for row in rows], lines)
@@ -58,6 +61,9 @@ def budget_command(
             "obstacles and counted as carrying no data")
     say("predicted from the inversion's linear operator (solver.budget); delta_c is the shape an "
         "unknown gain makes, removed when the gain is estimated")
+    if rows and rows[0].budget.removed:
+        say(f"removed after the solve (as invert --remove): {', '.join(rows[0].budget.removed)}; "
+            "every part has lost its share along them")
     if any(row.budget.reference for row in rows):
         say("references: the drift references' own noise, carried into every line they correct "
             "(more reference_samples shrink it; more readings per point do not)")
@@ -76,6 +82,7 @@ def _record(row) -> dict:
     b = row.budget
     return {"noise_db": row.noise_db, "readings": row.readings, "rms_m": b.total, "noise_m": b.noise,
             "delta_c_m": b.delta_c, "delta_c_removed": b.delta_c_removed,
+            "removed_terms": list(b.removed),
             "references_m": b.reference if b.reference else None, "rim_targets_m": b.harmonic,
             "scan_hours": row.hours, "target_m": row.target, "readings_needed": row.readings_needed,
             "hours_needed": row.hours_needed, "blocked_cells": row.blocked_cells,

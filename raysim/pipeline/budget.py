@@ -25,6 +25,7 @@ from hardware.plan import ScanPlan, load_plan
 from raysim.optics.blockage import BLOCKED_SHARE
 from solver.budget import Budget, noise_response
 from solver.errors import SolverError
+from solver.fit import parse_terms
 
 MAX_READINGS = 100_000
 #: dB per reading above which the linear noise model (sigma = ln 10 / 10 s) is off by more than
@@ -66,14 +67,17 @@ def check_levels(levels: Sequence[float], shown: str) -> None:
 
 def budget_rows(plan: ScanPlan | str | Path, levels: list[float], readings: int | None = None,
                 rim: int = 0, rim_std: float = 10e-6, gain_known: bool = False,
-                refine: bool = True, target: float | None = None) -> list[BudgetRow]:
+                refine: bool = True, target: float | None = None,
+                remove: str | Sequence[str] = ()) -> list[BudgetRow]:
     """One :class:`BudgetRow` per noise level of ``plan`` (a ScanPlan or its file).
 
     ``readings``: readings per point (None: the plan's ``samples_per_point``); ``rim``: rim
     targets (0: none) of std ``rim_std`` (m); ``refine``: the map is model-refined (its
-    delta_c is the refocus), else linear; ``target`` (m): the RMS to reach.
+    delta_c is the refocus), else linear; ``target`` (m): the RMS to reach; ``remove``: the
+    terms the inversion removes from the map (``invert --remove``: piston, tilt, focus).
     """
     check_levels(levels, repr(levels))  # -0.01 dB gave the budget of +0.01, nan a nan total
+    terms = parse_terms(remove)
     plan = plan if isinstance(plan, ScanPlan) else load_plan(plan)
     k = plan.samples_per_point if readings is None else readings
     if isinstance(k, bool) or not isinstance(k, numbers.Integral) or not 1 <= k <= MAX_READINGS:
@@ -87,7 +91,8 @@ def budget_rows(plan: ScanPlan | str | Path, levels: list[float], readings: int 
     corrected = plan.drift_correction != "none"
     response = noise_response(plan.grid, plan.focal_length, plan.diameter,
                               "refocus" if refine else "linear",
-                              plan.reference_every if corrected else None, used_cells(plan))
+                              plan.reference_every if corrected else None, used_cells(plan),
+                              terms)
     options = dict(gain_known=gain_known, rim_targets=rim, target_std=rim_std,
                    reference_samples=plan.reference_samples if corrected else 0)
     rows = []
@@ -133,6 +138,6 @@ def table_rows(rows: list[BudgetRow]) -> list[list[str]]:
 
 def mode_lines(rows: list[BudgetRow]) -> list[str]:
     """The largest Dirichlet-mode shares of the readings' and the references' noise at each
-    level (um), after delta_c's removal when the gain is estimated."""
+    level (um), after delta_c's removal when the gain is estimated and the removed terms'."""
     return [f"{row.noise_db:g} dB: largest modes " + ", ".join(
         f"{m.label} {m.rms * 1e6:.2f}" for m in row.budget.modes) for row in rows]

@@ -45,3 +45,25 @@ def test_a_count_beyond_the_cap_and_a_large_noise_are_said_so(tmp_path):
     assert "more than 100000" in run.stdout or "out of reach" in run.stdout
     assert not any(len(word) > 12 and word.isdigit() for word in run.stdout.split())
     assert "linear noise model underestimates" in run.stdout
+
+
+def test_the_removed_terms_reach_the_table_and_the_json(tmp_path):
+    """``--remove tilt`` as ``invert --remove tilt``: every part loses its share along tilt (the
+    noise, the references and the rim targets' m = 1 term), the JSON names the terms."""
+    import json
+
+    from tests.cli import run_cli
+
+    (kept,) = budget_rows("scan_paper", [0.01], rim=64)
+    (removed,) = budget_rows("scan_paper", [0.01], rim=64, remove="tilt")
+    assert removed.budget.removed == ("tilt",)
+    b, k = removed.budget, kept.budget
+    assert b.noise < 0.95 * k.noise and b.reference < 0.95 * k.reference
+    assert b.harmonic < 0.95 * k.harmonic
+    run = run_cli("budget", "scan_paper", "--noise-db", "0.01", "--rim", "64", "--remove", "tilt",
+                  "--json", "b.json", cwd=tmp_path)
+    assert run.returncode == 0, run.stderr
+    assert "removed after the solve (as invert --remove): tilt" in run.stdout
+    (record,) = json.loads((tmp_path / "b.json").read_text())["records"]
+    assert record["removed_terms"] == ["tilt"]
+    assert record["rms_m"] == pytest.approx(b.total)
