@@ -150,26 +150,32 @@ def _local(workers: int | None, threads: int, device: str, tasks: int | None) ->
         n = max(1, usable_cores() // threads)
     n = max(1, min(n, tasks)) if tasks else n
     held = _SignalsHeld()
-    try:
-        with warnings.catch_warnings():  # the scheduler's HTTP port taken: it picks another
-            warnings.filterwarnings("ignore", message="Port .* is already in use")
-            with held, _workers_from_a_sigint_ignoring_forkserver():
-                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                       host="127.0.0.1", dashboard_address=None,
-                                       silence_logs=_WORKER_LOG_LEVEL, env={"RAYSIM_THREADS": str(threads)})
-    except (RuntimeError, OSError) as exc:
-        held.deliver()
-        raise ClusterError(f"could not start a local Dask cluster of {n} workers ({_reason(exc)})") from exc
-    try:
-        held.deliver()  # a Ctrl-C or SIGTERM of the start acts now, with the cluster to close
-        client = Client(cluster, set_as_default=False)
+    # the fork server's start method stays set until the cluster is closed: a nanny restarts a
+    # worker that died by the method set at that moment
+    with contextlib.ExitStack() as forkserver:
         try:
-            yield Cluster(client, n, "local")
+            with warnings.catch_warnings():  # the scheduler's HTTP port taken: it picks another
+                warnings.filterwarnings("ignore", message="Port .* is already in use")
+                with held:
+                    forkserver.enter_context(_workers_from_a_sigint_ignoring_forkserver())
+                    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                           host="127.0.0.1", dashboard_address=None,
+                                           silence_logs=_WORKER_LOG_LEVEL,
+                                           env={"RAYSIM_THREADS": str(threads)})
+        except (RuntimeError, OSError) as exc:
+            held.deliver()
+            raise ClusterError(f"could not start a local Dask cluster of {n} workers "
+                               f"({_reason(exc)})") from exc
+        try:
+            held.deliver()  # a Ctrl-C or SIGTERM of the start acts now, with the cluster to close
+            client = Client(cluster, set_as_default=False)
+            try:
+                yield Cluster(client, n, "local")
+            finally:
+                client.close()
+                _stop_workers(cluster)
         finally:
-            client.close()
-            _stop_workers(cluster)
-    finally:
-        cluster.close()
+            cluster.close()
 
 
 @contextlib.contextmanager
@@ -184,6 +190,11 @@ def _workers_from_a_sigint_ignoring_forkserver() -> Iterator[None]:
     of the cluster, as before, lost a Ctrl-C of that second, and the run went on to exit 0.
     The server is per process; one already running (started by something else) is used as it
     is. Only the main thread can change a handler: elsewhere, the server starts as it is.
+
+    Hold this for as long as the cluster lives, not only while it starts: a nanny that restarts
+    a worker which died (killed, out of memory) starts the new process by the method Dask's
+    configuration names at that moment, and by Dask's default, spawn, the new worker takes
+    Ctrl-C and prints its tracebacks.
     """
     import multiprocessing.forkserver
 
