@@ -38,6 +38,7 @@ from raysim.errors import RaysimError, SceneError
 from raysim.maps.fieldmap import fieldmap
 from raysim.methods import METHODS, WAVE_METHODS
 from raysim.optics import go
+from raysim.optics.fast import DEFAULT_TOL
 from raysim.progress import Progress
 from raysim.scene import Scene
 from raysim.surface.mesh import Reflector, mesh_departure_rms, reflectors_for
@@ -115,7 +116,7 @@ class Options:
     edges: str | None = None
     fresnel: bool = False
     radiator: str = "fast"
-    radiator_tol: float = 1e-6
+    radiator_tol: float = DEFAULT_TOL
 
 
 @dataclass
@@ -159,7 +160,7 @@ def scene_attrs(scene: Scene, deformed: Reflector, ideal: Reflector) -> dict:
 def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu",
              progress: Progress | None = None, *, total: bool = False, save_field: bool = False,
              samples_per_wavelength: float | None = None, edges: str | None = None,
-             fresnel: bool = False, radiator: str = "fast", radiator_tol: float = 1e-6) -> xr.Dataset:
+             fresnel: bool = False, radiator: str = "fast", radiator_tol: float = DEFAULT_TOL) -> xr.Dataset:
     """Simulate ``scene`` and return its FieldMap (an ``xarray.Dataset``; see raysim.maps.fieldmap).
 
     Parameters
@@ -184,7 +185,9 @@ def simulate(scene: Scene, method: str | None = None, device: str | None = "cpu"
         zone (on the paper's dish, below about 3 GHz).
     radiator : ``po``/``po+ptd`` only: ``fast`` (the multilevel sum of
         :mod:`raysim.optics.fast`, where its cost estimate beats the direct sum's) or ``direct``
-        (the reference sum); ``radiator_tol`` the fast sum's relative accuracy.
+        (the reference sum); ``radiator_tol`` the fast sum's relative accuracy. The FieldMap
+        records ``radiator``, ``radiator_ran`` (what summed each kind of element) and, with
+        ``fast``, ``radiator_tol``.
     """
     options = Options(total, save_field, samples_per_wavelength, edges, fresnel, radiator, radiator_tol)
     method = check_method(scene, method, options, device)
@@ -250,7 +253,7 @@ def check_method(scene: Scene, method: str | None, options: Options,
 def check_options(scene: Scene, *, method: str | None = None, device: str | None = "cpu",
                   total: bool = False, save_field: bool = False,
                   samples_per_wavelength: float | None = None, edges: str | None = None,
-                  fresnel: bool = False, radiator: str = "fast", radiator_tol: float = 1e-6) -> str:
+                  fresnel: bool = False, radiator: str = "fast", radiator_tol: float = DEFAULT_TOL) -> str:
     """Refuse what :func:`simulate` cannot honour, before any work (the keywords of
     :func:`simulate`); return the method that would run."""
     return check_method(scene, method, Options(total, save_field, samples_per_wavelength, edges, fresnel,
@@ -483,8 +486,10 @@ class _WaveContext:
             engine.update({"edge_points": int(deformed.n_edge_points),
                            "edge_points_lit": int(deformed.n_edge_lit), **self.edge_note})
         ran = sorted({m.split(" ")[0] for src in (ideal, deformed) for m in src.methods.values()})
-        engine.update({"radiator": self.radiator, "radiator_tol": float(self.radiator_tol),
-                       "radiator_ran": ",".join(ran) or self.radiator, **self.quadrature})
+        engine["radiator"] = self.radiator
+        if self.radiator == "fast":  # a tolerance governs the fast sum only (and its choice)
+            engine["radiator_tol"] = float(self.radiator_tol)
+        engine.update({"radiator_ran": ",".join(ran) or self.radiator, **self.quadrature})
         return {"mesh": self.mesh, "focal_length": self.F, "diameter": self.D, "engine": engine}
 
     def digest(self) -> str:

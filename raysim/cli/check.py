@@ -8,6 +8,7 @@ import typer
 
 from raysim.cli.common import app, progress_bar, say
 from raysim.cli.tables import check_json_path, json_option, json_to_stdout, print_table, write_json
+from raysim.optics.fast import DEFAULT_TOL
 
 
 @app.command()
@@ -45,7 +46,7 @@ def check(
         "fast", "--radiator",
         help="PO + PTD's sums (wave engine, wave models, and the engine rule's cost): fast (the "
              "multilevel sum where cheaper) or direct (the reference sum)."),
-    radiator_tol: float = typer.Option(1e-6, "--radiator-tol",
+    radiator_tol: float = typer.Option(DEFAULT_TOL, "--radiator-tol",
                                        help="Relative RMS accuracy of the fast radiator, in [1e-12, 1)."),
     sphere_radius: float | None = typer.Option(None, "--sphere-radius",
                                                help="Mesh only: probe-sphere radius R (m), default 0.3 F."),

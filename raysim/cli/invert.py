@@ -10,6 +10,7 @@ import typer
 
 from raysim.cli.common import app, note, output_file, output_path, progress_bar, say
 from raysim.cli.tables import check_json_path, json_option, json_to_stdout, write_json
+from raysim.optics.fast import DEFAULT_TOL
 
 
 @app.command("invert")
@@ -59,8 +60,8 @@ def invert_command(
              "or direct (the reference sum); default fast."),
     radiator_tol: float | None = typer.Option(
         None, "--radiator-tol",
-        help="po, po+ptd model: relative RMS accuracy of the fast radiator, in [1e-12, 1); "
-             "default 1e-6."),
+        help=f"po, po+ptd model: relative RMS accuracy of the fast radiator, in [1e-12, 1); "
+             f"default {DEFAULT_TOL:g}."),
     panels_csv: Path | None = typer.Option(None, help="Write the per-panel adjustment table."),
     gain: str = typer.Option(
         "auto", help="auto (known for simulated data, estimated for a measured scan), known "
@@ -90,7 +91,7 @@ def invert_command(
     if (radiator, radiator_tol) != (None, None):
         _radiator_applies(field, model, refine)
     radiator = "fast" if radiator is None else radiator
-    radiator_tol = 1e-6 if radiator_tol is None else radiator_tol
+    radiator_tol = DEFAULT_TOL if radiator_tol is None else radiator_tol
     inputs = [("FieldMap", field), ("rim-target file", rim)]
     output_path(output, inputs)
     if panels_csv is not None:
@@ -177,6 +178,10 @@ def paper_command(
         "fast", "--radiator",
         help="--po: the PO + PTD sums of the data and the wave refinement: fast (the multilevel "
              "sum where cheaper) or direct (the reference sum)."),
+    radiator_tol: float | None = typer.Option(
+        None, "--radiator-tol",
+        help=f"--po: relative RMS accuracy of the fast radiator, in [1e-12, 1) (default "
+             f"{DEFAULT_TOL:g})."),
     json_path: str | None = json_option(),
 ) -> None:
     """The paper's tables beside raysim's: the GO case (Table 2), or with --po the PO & PTD
@@ -187,12 +192,19 @@ def paper_command(
     from solver.options import check_options
 
     check_json_path(json_path)
-    check_options(radiator=radiator)
+    check_options(radiator=radiator, radiator_tol=radiator_tol)
+    if radiator_tol is not None and not po:  # the GO case sums no fields
+        from raysim.errors import RaysimError
+
+        raise RaysimError("--radiator-tol applies to --po only")
+    radiator_tol = DEFAULT_TOL if radiator_tol is None else radiator_tol
     if po:
         options = paper.sweep_options(frequencies, coarse_3ghz, N=grid, refine=refine,
-                                      wave_max_ghz=wave_max_ghz, radiator=radiator)
+                                      wave_max_ghz=wave_max_ghz, radiator=radiator,
+                                      radiator_tol=radiator_tol)
         rows = paper.po_sweep(**options, device=device, fields_dir=fields,
-                              log=lambda line: note(f"paper: {line}"), radiator=radiator)
+                              log=lambda line: note(f"paper: {line}"), radiator=radiator,
+                              radiator_tol=radiator_tol)
         lines = paper.sweep_lines(rows, N=grid, refine=refine,
                                   wave_max_ghz=options["wave_max_hz"] / 1e9)
     else:

@@ -8,6 +8,7 @@ import typer
 
 from raysim.cli.common import app, output_file, output_path, progress_bar, say
 from raysim.methods import METHODS
+from raysim.optics.fast import DEFAULT_TOL
 from raysim.scene.scene import MAX_CELLS, MAX_N_PHI, MAX_N_THETA
 
 
@@ -49,7 +50,8 @@ def simulate(
              "direct sum; the FieldMap records which ran) or direct (the reference sum)."),
     radiator_tol: float | None = typer.Option(
         None, "--radiator-tol",
-        help="po, po+ptd: relative RMS accuracy of the fast radiator, in [1e-12, 1) (default 1e-6)."),
+        help=f"po, po+ptd: relative RMS accuracy of the fast radiator, in [1e-12, 1) (default "
+             f"{DEFAULT_TOL:g})."),
     scheduler: str | None = typer.Option(
         None, "--scheduler",
         help="po, po+ptd: compute the sphere's points in blocks on the Dask scheduler at "
@@ -82,7 +84,7 @@ def simulate(
     method = method or loaded.method
     given_radiator = (radiator, radiator_tol) != (None, None)
     radiator = "fast" if radiator is None else radiator  # an empty --radiator is refused below
-    radiator_tol = 1e-6 if radiator_tol is None else radiator_tol
+    radiator_tol = DEFAULT_TOL if radiator_tol is None else radiator_tol
     check_options(loaded, method=method, device=device, total=total, save_field=save_field,
                   samples_per_wavelength=samples_per_wavelength, edges=edges, fresnel=fresnel,
                   radiator=radiator, radiator_tol=radiator_tol)

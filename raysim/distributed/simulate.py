@@ -30,6 +30,7 @@ import xarray as xr
 from raysim.distributed.blocks import block_bounds, block_size_for, run_blocks
 from raysim.distributed.cluster import ClusterError, connect
 from raysim.distributed.partial import PartialStore, partial_path
+from raysim.optics.fast import DEFAULT_TOL
 from raysim.progress import Progress
 from raysim.scene import Scene
 from raysim.scene.scene import parse_scene
@@ -123,7 +124,7 @@ def simulate(scene: Scene, output: str | Path, method: str | None = None, device
              workers: int | None = None, threads: int = 1, resume: bool = False,
              block_size: int | None = None, total: bool = False, save_field: bool = False,
              samples_per_wavelength: float | None = None, edges: str | None = None,
-             radiator: str = "fast", radiator_tol: float = 1e-6) -> xr.Dataset:
+             radiator: str = "fast", radiator_tol: float = DEFAULT_TOL) -> xr.Dataset:
     """Simulate ``scene`` on Dask and write its FieldMap to ``output``; return the FieldMap.
 
     Options as :func:`raysim.simulate.simulate`, and: ``scheduler`` (address of a running Dask

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from raysim.optics.fast import DEFAULT_TOL
 from raysim.pipeline import check_inputs as inputs
 from raysim.pipeline.check_inputs import CheckError
 from raysim.pipeline.check_measures import (
@@ -51,7 +52,7 @@ def check(source: str | os.PathLike[str], *, frequencies: list[float] | None = N
           N: int = 256, refine: int = 3, refine_model: str = "auto", device: str = "cpu",
           sphere_radius: float | None = None, focal_length: float | None = None,
           resolution: float | None = None, progress: Progress | None = None,
-          radiator: str = "fast", radiator_tol: float = 1e-6) -> xr.Dataset:
+          radiator: str = "fast", radiator_tol: float = DEFAULT_TOL) -> xr.Dataset:
     """Compare GO with a wave engine on ``source`` at each frequency; return the check dataset.
 
     Parameters
@@ -108,7 +109,7 @@ def _check_runs(dish: inputs.Dish, freqs, engines, device: str) -> None:
 
 def _one_frequency(dish: inputs.Dish, f: float, engine: tuple[str, str], truth, N: int, refine: int,
                    refine_model: str, device: str, say: Progress,
-                   radiator: tuple[str, float] = ("fast", 1e-6)) -> dict:
+                   radiator: tuple[str, float] = ("fast", DEFAULT_TOL)) -> dict:
     """GO and the wave engine at ``f``, the maps' differences, the three inversions;
     ``radiator``: (name, tolerance) of the wave engine's and the wave models' sums."""
     from raysim.simulate import simulate

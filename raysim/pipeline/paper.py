@@ -17,6 +17,7 @@ import xarray as xr
 from raysim.errors import RaysimError
 from raysim.maps.fieldmap import fieldmap
 from raysim.maps.sphere import SphereGrid
+from raysim.optics.fast import DEFAULT_TOL
 from raysim.scene.scene import check_frequency, check_sphere_cells
 from solver.invert import DEFAULT_REFINE, DEFAULT_SOLVER, invert
 from solver.options import check_options
@@ -165,7 +166,7 @@ COARSE_GRID = {"fast": (90, 360), "direct": (90, 36)}
 
 def sweep_options(frequencies: str | Sequence[float], coarse: str | tuple[int, int] | None, *,
                   N: int = 256, refine: int = DEFAULT_REFINE, wave_max_ghz: float | None = None,
-                  radiator: str = "fast") -> dict:
+                  radiator: str = "fast", radiator_tol: float = DEFAULT_TOL) -> dict:
     """The options of :func:`po_sweep` from the command line's text (``"0.1e9,0.3e9"``,
     ``"90x36"``; ``coarse`` None: :data:`COARSE_GRID` for ``radiator``; ``wave_max_ghz`` None:
     :data:`WAVE_MAX_GHZ` for it), checked before anything runs: keyword arguments for
@@ -199,7 +200,7 @@ def sweep_options(frequencies: str | Sequence[float], coarse: str | tuple[int, i
         wave_max_ghz = WAVE_MAX_GHZ.get(radiator, WAVE_MAX_GHZ["direct"])
     if not (math.isfinite(wave_max_ghz) and wave_max_ghz >= 0):
         raise RaysimError(f"--wave-max-ghz must be a finite number >= 0, got {wave_max_ghz:g}")
-    check_options(N=N, refine=refine)
+    check_options(N=N, refine=refine, radiator=radiator, radiator_tol=radiator_tol)
     return {"frequencies_hz": tuple(freqs), "coarse": (n_theta, n_phi), "N": N, "refine": refine,
             "wave_max_hz": wave_max_ghz * 1e9}
 
@@ -229,33 +230,63 @@ def sweep_lines(rows: list[SweepRow], N: int, refine: int, wave_max_ghz: float) 
 
 
 def po_fieldmap(frequency_hz: float, n_theta: int = 90, n_phi: int = 360, edges: str = "rim",
-                device: str | None = "cpu", progress=None, radiator: str = "fast") -> xr.Dataset:
+                device: str | None = "cpu", progress=None, radiator: str = "fast",
+                radiator_tol: float = DEFAULT_TOL) -> xr.Dataset:
     """PO + PTD FieldMap of the paper's case at ``frequency_hz`` on an n_theta x n_phi grid
-    (``radiator``: as :func:`raysim.simulate`)."""
+    (``radiator``, ``radiator_tol``: as :func:`raysim.simulate`)."""
     from raysim.scene.scene import parse_scene
     from raysim.simulate import simulate
 
     scene = parse_scene(PO_SCENE, source="paper Table 3").with_overrides(frequency_hz, n_theta, n_phi)
     return simulate(scene, method="po+ptd", edges=edges, device=device, progress=progress,
-                    radiator=radiator)
+                    radiator=radiator, radiator_tol=radiator_tol)
+
+
+def _summed_as(field: xr.Dataset, radiator: str, radiator_tol: float) -> bool:
+    """Whether a kept FieldMap's sums are the ones ``radiator`` at ``radiator_tol`` would make
+    (the tolerance matters to the fast radiator only)."""
+    if field.attrs.get("radiator") != radiator:
+        return False
+    return radiator != "fast" or field.attrs.get("radiator_tol") == radiator_tol
+
+
+def _kept_name(f: float, n_theta: int, n_phi: int, radiator: str, radiator_tol: float) -> str:
+    """The kept FieldMap's file name: the frequency and grid, and the sums unless they are the
+    default's (so that no run replaces a field another run's sums made)."""
+    sums = ("" if (radiator, radiator_tol) == ("fast", DEFAULT_TOL)
+            else f"_fast_tol{radiator_tol:g}" if radiator == "fast" else f"_{radiator}")
+    return f"paper_poptd_{f / 1e9:g}GHz_{n_theta}x{n_phi}{sums}.nc"
+
+
+def _sums_of(field: xr.Dataset) -> str:
+    """How a FieldMap's sums were made, in words, for the line that says it is replaced."""
+    radiator = field.attrs.get("radiator")
+    if radiator is None:
+        return "radiator not recorded"
+    tol = field.attrs.get("radiator_tol")
+    return f"radiator {radiator}" + (f", tolerance {tol:g}" if radiator == "fast" and tol is not None else "")
 
 
 def po_sweep(frequencies_hz=TABLE3_FREQUENCIES_HZ, N: int = 256,
              coarse: tuple[int, int] | None = None, coarse_from_hz: float = 2e9,
              refine: int = DEFAULT_REFINE, device: str | None = "cpu", fields_dir=None,
-             log=None, wave_max_hz: float | None = None, radiator: str = "fast") -> list[SweepRow]:
+             log=None, wave_max_hz: float | None = None, radiator: str = "fast",
+             radiator_tol: float = DEFAULT_TOL) -> list[SweepRow]:
     """The paper's Table 3 with PO + PTD (rim) data from the project's engines.
 
     Frequencies at or above ``coarse_from_hz`` use the ``coarse`` (n_theta, n_phi) sphere
     grid (None: :data:`COARSE_GRID` for ``radiator``, the full grid with the fast one): PO's
     samples grow as f^2, and the direct sum's cost with them times the points. The paper's
     deformation is axially symmetric, so fewer phi cells lose little it can show.
-    ``fields_dir`` keeps each FieldMap (``paper_poptd_<f>GHz_<grid>.nc``) and reuses it on
-    the next run. ``log(line)`` reports progress. The refinement with the PO + PTD model
-    (:mod:`solver.wave`) runs at frequencies up to ``wave_max_hz`` only (None:
-    :data:`WAVE_MAX_GHZ` for ``radiator``): each of its forwards is a PO run. ``radiator``:
-    the PO + PTD sums of the data and of that refinement (``fast`` or ``direct``, as
-    :func:`raysim.simulate`).
+    ``fields_dir`` keeps each FieldMap (``paper_poptd_<f>GHz_<grid>.nc``, with the sums in the
+    name when they are not the default's: ``_direct``, ``_fast_tol<tol>``) and reuses it on
+    the next run that sums as it did; a file of that name summed otherwise (or not saying how)
+    is left as it is and the field simulated again. ``log(line)`` reports progress. The
+    refinement with the PO + PTD model (:mod:`solver.wave`) runs at frequencies up to
+    ``wave_max_hz`` only (None: :data:`WAVE_MAX_GHZ` for ``radiator``): each of its forwards
+    is a PO run. ``radiator``: the PO + PTD sums of the data and of that refinement (``fast``
+    or ``direct``, as :func:`raysim.simulate`), ``radiator_tol`` the fast sums' relative
+    accuracy.
     """
     from pathlib import Path
 
@@ -263,7 +294,8 @@ def po_sweep(frequencies_hz=TABLE3_FREQUENCIES_HZ, N: int = 256,
     from raysim.surface.deformation import PaperDeformation
 
     checked = sweep_options(frequencies_hz, coarse, N=N, refine=refine, radiator=radiator,
-                            wave_max_ghz=None if wave_max_hz is None else wave_max_hz / 1e9)
+                            wave_max_ghz=None if wave_max_hz is None else wave_max_hz / 1e9,
+                            radiator_tol=radiator_tol)
     coarse, wave_max_hz = checked["coarse"], checked["wave_max_hz"]
     say = log or (lambda line: None)
     truth = PaperDeformation(D, F, 1.0)
@@ -272,15 +304,20 @@ def po_sweep(frequencies_hz=TABLE3_FREQUENCIES_HZ, N: int = 256,
         n_theta, n_phi = coarse if f >= coarse_from_hz else (90, 360)
         path = None
         if fields_dir is not None:
-            path = Path(fields_dir) / f"paper_poptd_{f / 1e9:g}GHz_{n_theta}x{n_phi}.nc"
+            path = Path(fields_dir) / _kept_name(f, n_theta, n_phi, radiator, radiator_tol)
         start = time.perf_counter()
-        if path is not None and path.is_file():
-            field = load(path)
+        field = load(path) if path is not None and path.is_file() else None
+        if field is not None and _summed_as(field, radiator, radiator_tol):
             say(f"{f / 1e9:g} GHz: read {path}")
         else:
+            if field is not None:
+                say(f"{f / 1e9:g} GHz: {path} was summed otherwise ({_sums_of(field)}): left as "
+                    "it is")
+            keep = field is None
             say(f"{f / 1e9:g} GHz: simulating PO + PTD on {n_theta} x {n_phi} points")
-            field = po_fieldmap(f, n_theta, n_phi, device=device, radiator=radiator)
-            if path is not None:
+            field = po_fieldmap(f, n_theta, n_phi, device=device, radiator=radiator,
+                                radiator_tol=radiator_tol)
+            if path is not None and keep:
                 path.parent.mkdir(parents=True, exist_ok=True)
                 save(field, path)
         simulated = time.perf_counter() - start
@@ -291,7 +328,7 @@ def po_sweep(frequencies_hz=TABLE3_FREQUENCIES_HZ, N: int = 256,
         wave_rms = wave_rrms = None
         if f <= wave_max_hz and refine > 0:
             wave = invert(field, N=N, truth=truth, device=device, refine_iterations=refine,
-                          radiator=radiator)
+                          radiator=radiator, radiator_tol=radiator_tol)
             wave_rms, wave_rrms = float(wave.attrs["rms_m"]), float(wave.attrs["rrms"])
         paper_rms, paper_rrms = TABLE3.get(f, (None, None))
         rows.append(SweepRow(f, n_theta, n_phi, paper_rms, paper_rrms, float(paper.attrs["rms_m"]),

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from raysim.errors import RaysimError
-from raysim.optics.fast import multilevel
+from raysim.optics.fast import DEFAULT_TOL, multilevel
 from raysim.optics.fast.chart import OVERSAMPLINGS, Domain, domain_of, stencil_for, to_angles
 from raysim.optics.radiator import Radiator, field_of
 from raysim.progress import Progress
@@ -35,8 +35,6 @@ from raysim.progress import Progress
 #: along edge segments metres long (their field is not that of a point at their position), so
 #: they always take the direct sum
 FAST_KINDS = ("electric", "magnetic", "fringe", "shift")
-#: default tolerance: fields agree with the direct sum to about this relative RMS
-DEFAULT_TOL = 1e-6
 #: the finest tolerance asked for that the sums can honour: the direct sum itself, float64 over
 #: up to ~1e8 elements, carries rounding of about this order (the error-against-tolerance curve
 #: of docs/engines.md reaches 5e-11 at 1e-8); finer ones only make the grids grow
