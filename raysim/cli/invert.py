@@ -150,8 +150,24 @@ def _model_blocks(scheduler: str | None, workers: int | None, device: str) -> It
         yield
 
 
+#: paper's options that only the PO & PTD sweep reads
+_PO_OPTIONS = ("frequencies", "coarse_3ghz", "fields", "wave_max_ghz", "radiator", "radiator_tol")
+
+
+def _only_with_po(ctx: typer.Context) -> None:
+    """Refuse the --po options given on the command line without --po."""
+    from raysim.errors import RaysimError
+
+    # by name: typer carries its own copy of click, whose ParameterSource is another enum
+    given = [f"--{name.replace('_', '-')}" for name in _PO_OPTIONS
+             if getattr(ctx.get_parameter_source(name), "name", None) == "COMMANDLINE"]
+    if given:
+        raise RaysimError(f"{', '.join(given)} appl{'ies' if len(given) == 1 else 'y'} to --po only")
+
+
 @app.command("paper")
 def paper_command(
+    ctx: typer.Context,
     scale: float = typer.Option(1.0, help="Scale of the paper's Eq. 8 deformation (1: 1.2 mm peak "
                                           "to peak), 0 to 50."),
     grid: int = typer.Option(256, help="Aperture grid points across the diameter, 16 to 4096."),
@@ -193,10 +209,8 @@ def paper_command(
 
     check_json_path(json_path)
     check_options(radiator=radiator, radiator_tol=radiator_tol)
-    if radiator_tol is not None and not po:  # the GO case sums no fields
-        from raysim.errors import RaysimError
-
-        raise RaysimError("--radiator-tol applies to --po only")
+    if not po:  # the GO case sums no fields and sweeps no frequencies: say so, not ignore them
+        _only_with_po(ctx)
     radiator_tol = DEFAULT_TOL if radiator_tol is None else radiator_tol
     if po:
         options = paper.sweep_options(frequencies, coarse_3ghz, N=grid, refine=refine,

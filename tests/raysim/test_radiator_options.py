@@ -28,11 +28,17 @@ def test_paper_refuses_a_bad_radiator_tol_in_one_line(capsys, value):
             "--radiator-tol must lie in [1e-12, 1)") in result.error()
 
 
-def test_paper_refuses_radiator_tol_without_po(capsys):
-    """The GO case sums no fields: the option would be taken and do nothing."""
-    result = run_in_process(capsys, "paper", "--radiator-tol", "1e-3")
+@pytest.mark.parametrize(("args", "says"), [
+    (("--radiator-tol", "1e-3"), "--radiator-tol applies"),
+    (("--radiator", "direct"), "--radiator applies"),
+    (("--frequencies", "1e9", "--radiator", "fast"), "--frequencies, --radiator apply"),
+])
+def test_paper_refuses_the_sweeps_options_without_po(capsys, args, says):
+    """The GO case sums no fields and sweeps no frequencies: these options were taken and did
+    nothing (all but --radiator-tol)."""
+    result = run_in_process(capsys, "paper", *args)
     assert result.code == 2
-    assert result.error().endswith("--radiator-tol applies to --po only")
+    assert result.error().endswith(f"{says} to --po only")
 
 
 @pytest.fixture
