@@ -659,10 +659,15 @@ def ideal_resolution(scene: Scene) -> float:
     return float(scene.dish.resolution) if scene.dish.mesh is None else math.nan
 
 
+STEERABLE_DISH_M = 110.0  # the largest fully steerable paraboloids (GBT, Effelsberg: 100 m)
+#: a mesh file's dish above this is more likely a file in millimetres than a reflector
+LARGEST_DISH_M = 150.0
+
+
 def summary(ds: xr.Dataset) -> str:
     """One line: points, rays, time and power balance of a simulated FieldMap (and PO's
-    quadrature warning, the panel-gap edges' warning, and a mesh file's departure from its
-    ideal, where the map has them)."""
+    quadrature warning, the panel-gap edges' warning, a mesh file's departure from its ideal,
+    and a mesh file's dish too large for a dish in metres, where the map has them)."""
     line = _engine_summary(ds)
     if "quadrature_warning" in ds.attrs:
         line += f"; WARNING: {ds.attrs['quadrature_warning']}"
@@ -670,6 +675,10 @@ def summary(ds: xr.Dataset) -> str:
         line += (f"; WARNING: the panel gaps are {ds.attrs['edge_gap_wavelengths']:.3g} wavelengths "
                  "wide, and --edges all treats each gap edge as a lone half-plane, which "
                  "overstates gaps narrower than a wavelength (docs/engines.md)")
+    if "mesh_departure_rms_m" in ds.attrs and float(ds.attrs.get("diameter", 0.0)) > LARGEST_DISH_M:
+        line += (f"; WARNING: the mesh's dish is {float(ds.attrs['diameter']):.4g} m across, larger "
+                 f"than any steerable reflector ({STEERABLE_DISH_M:g} m): if the file is in "
+                 "millimetres, set dish.mesh_unit_m = 0.001")
     if "mesh_departure_rms_m" in ds.attrs:
         line += (f"; the mesh departs {ds.attrs['mesh_departure_rms_m'] * 1e6:.3g} um RMS along z "
                  "from its ideal (its deformation; a file not in the reflector frame adds to it)")

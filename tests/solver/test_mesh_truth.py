@@ -89,3 +89,19 @@ def test_the_truth_of_a_mesh_scene_is_found_from_any_folder_and_only_for_its_own
     other = paraboloid(D, F, 0.25)
     trimesh.Trimesh(other.vertices, other.faces, process=False).export(project / "scenes" / "dish.ply")
     assert truth_on_grid("scene", Scan.from_fieldmap(field), grid) is None
+
+
+def test_a_dish_mesh_in_millimetres_read_as_metres_is_warned_of(tmp_path):
+    """A 0.8 m dish exported in millimetres loads, with the default unit of 1 m, as an 800 m
+    dish (inside the 1 000 m a file may span): the run says so and names the key to set."""
+    from raysim.scene.scene import parse_scene
+    from raysim.simulate import simulate, summary
+
+    small = paraboloid(0.8, 0.32, 0.04)
+    trimesh.Trimesh(small.vertices * 1000.0, small.faces, process=False).export(tmp_path / "mm.ply")
+    text = (f'name = "mm"\n[dish]\nmesh = "{tmp_path / "mm.ply"}"\n'
+            "[source]\nfrequency_hz = 1e9\n[sphere]\nradius_m = 100.0\nn_theta = 9\nn_phi = 18\n")
+    line = summary(simulate(parse_scene(text), method="go"))
+    assert "the mesh's dish is 800 m across" in line and "dish.mesh_unit_m = 0.001" in line
+    metres = text.replace("[source]", "mesh_unit_m = 0.001\n[source]").replace("100.0", "0.1")
+    assert "WARNING" not in summary(simulate(parse_scene(metres), method="go"))
