@@ -1,4 +1,4 @@
-"""One field on many processes: sphere points in blocks as Dask tasks (see DESIGN.md).
+"""One field on many processes: sphere points in blocks as Dask tasks (see docs/howto/dask.md).
 
 - :func:`simulate`: a scene's wave-optics FieldMap on a cluster, resumable
   (:mod:`raysim.distributed.simulate`, partial store :mod:`raysim.distributed.partial`);

@@ -1,7 +1,7 @@
 """What a probe on the rig measures besides the field: where it really is, and slow drift.
 
 Pure functions shared by the simulated rig (:mod:`hardware.sim`) and a dataset's measurement
-effects (:mod:`raysim.dataset.effects`). Frame of DESIGN.md: angles in rad from the focus
+effects (:mod:`raysim.dataset.effects`). Frame of docs/physics.md: angles in rad from the focus
 (theta from -z, phi = atan2(y, x)), lengths in m, gains in dB.
 """
 

@@ -1,6 +1,6 @@
 """Obstacles in the beam: which rays they block, and which probe-sphere cells they hide.
 
-Frame and units of DESIGN.md (reflector frame, metres; sphere of radius R about the focus).
+Frame and units of docs/physics.md (reflector frame, metres; sphere of radius R about the focus).
 The obstacles of :mod:`raysim.surface.obstacles` are opaque and absorbing. A ray is blocked
 when an obstacle crosses either leg of its path: the incident leg, from far up-beam down to its
 point on the dish, or the reflected leg, from the dish to where it enters the probe sphere.

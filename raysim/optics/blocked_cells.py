@@ -1,6 +1,6 @@
 """The probe-sphere cells that obstacles hide, from a GO trace of the ideal dish.
 
-Frame and units of DESIGN.md (reflector frame, metres; sphere of radius R about the focus). The
+Frame and units of docs/physics.md (reflector frame, metres; sphere of radius R about the focus). The
 blocked share of a cell is the power of the GO tubes that obstacles removed over the power the
 clear dish sends it (:func:`raysim.optics.blockage.blocked_share`); the FieldMaps of every engine
 record it (:func:`raysim.optics.blockage.fieldmap_variables`). These traces sit above the GO

@@ -1,6 +1,6 @@
 """The geometric (GO) reflected wave on the probe sphere as a complex field, from ray tubes.
 
-Frame and units of DESIGN.md (metres, radians; sphere of radius R about the focus); time
+Frame and units of docs/physics.md (metres, radians; sphere of radius R about the focus); time
 convention exp(+j w t), incident wave E_inc = e_hat exp(-j k k_hat . r). Used by the go+edge
 engine (:mod:`raysim.optics.goedge`); the GO engine (:mod:`raysim.optics.go`) deposits the same
 tubes' power instead.

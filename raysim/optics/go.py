@@ -1,6 +1,6 @@
 """Geometric optics: a plane wave, ray tubes off the reflector, intensity on the probe sphere.
 
-Frame and units of DESIGN.md (metres, radians; focus at (0, 0, F)). The incident wave is
+Frame and units of docs/physics.md (metres, radians; focus at (0, 0, F)). The incident wave is
 sampled by rays on a lattice of each mesh face (``subdivisions`` per edge; 1 means the rays
 pass through the vertices). For every ray:
 

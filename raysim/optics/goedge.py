@@ -1,6 +1,6 @@
 """go+edge: the geometric reflected wave plus the diffracted waves of the free edges.
 
-Frame and units of DESIGN.md (reflector frame, metres, SI fields); time convention
+Frame and units of docs/physics.md (reflector frame, metres, SI fields); time convention
 exp(+j w t), incident wave E_inc = e_hat exp(-j k k_hat . r), as in :mod:`raysim.optics.po`.
 PO's cost grows with f^2 (surface samples); at the frequencies where that hurts, the PO
 integral is, to leading order in 1/k, the geometric reflected wave plus a line integral along

@@ -1,6 +1,6 @@
 """The incident plane wave of every wave engine (constants from :mod:`raysim.constants`).
 
-Frame and units of DESIGN.md (reflector frame, metres, SI fields); time convention exp(+j w t).
+Frame and units of docs/physics.md (reflector frame, metres, SI fields); time convention exp(+j w t).
 The wave is E_inc = e_hat exp(-j k k_hat . r) (unit amplitude, V/m) and
 H_inc = (k_hat x E_inc) / eta.
 """

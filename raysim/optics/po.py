@@ -1,6 +1,6 @@
 """Physical optics: PO surface currents on the reflector radiated to the probe sphere.
 
-Frame and units of DESIGN.md (reflector frame, metres, SI fields); time convention
+Frame and units of docs/physics.md (reflector frame, metres, SI fields); time convention
 exp(+j w t). The incident plane wave is E_inc = e_hat exp(-j k k_hat . r) (unit amplitude, V/m),
 H_inc = (k_hat x E_inc) / eta. On the lit part of the reflector (samples the wave reaches:
 Warp's BVH tests each one) the PO current is J = 2 n x H_inc, n the unit normal on the side

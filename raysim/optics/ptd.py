@@ -1,6 +1,6 @@
 """Physical theory of diffraction: fringe (equivalent edge) currents on the reflector's free edges.
 
-Frame and units of DESIGN.md (reflector frame, metres, SI fields); time convention
+Frame and units of docs/physics.md (reflector frame, metres, SI fields); time convention
 exp(+j w t), incident wave E_inc = e_hat exp(-j k k_hat . r) as in :mod:`raysim.optics.po`. PO
 alone gets the current near an edge wrong: the exact current of the edge's wedge differs from
 2 n x H_inc within a wavelength or so of the edge. PTD adds the field of that difference, the
@@ -46,7 +46,7 @@ the probe sphere is in the near field of the dish. The result is finite for ever
 the one singular case Michaeli's form keeps (grazing incidence observed along the grazing
 ray, Ufimtsev's singularity) is capped (see the kernels' module).
 
-Everything above is derived here in the exp(+j w t) convention of DESIGN.md (no sign is
+Everything above is derived here in the exp(+j w t) convention of docs/physics.md (no sign is
 carried over from the references, whose conventions differ) and checked against Sommerfeld's
 exact half-plane solution at normal and skew incidence (tests/raysim/test_ptd_halfplane.py).
 Validity: each edge is an isolated half-plane. Two edges facing each other across a panel gap

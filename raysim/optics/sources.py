@@ -1,7 +1,7 @@
 """A reflector's radiating elements under one incident wave, made once and radiated onto any
 set of field points: what a block of sphere points is computed from.
 
-Frame and units of DESIGN.md (reflector frame, metres, SI fields). :class:`Sources` holds the
+Frame and units of docs/physics.md (reflector frame, metres, SI fields). :class:`Sources` holds the
 PO current elements of :func:`raysim.optics.po.po_elements` (in the quadrature's chunks, in its
 order) and, with ``edges``, the fringe elements of :mod:`raysim.optics.ptd` on those edges.
 :meth:`Sources.radiate` sums them at the points given through :class:`~raysim.optics.radiator.Radiator`

@@ -5,7 +5,7 @@ face that does not have them as a corner is a graph over the plane around its ve
 a line along z through a vertex meets that vertex's own faces only. Moving vertices along z
 (a deformed twin) keeps every (x, y), so it keeps this property; a GO trace of a wave along
 -z may then take every vertex ray as lit without asking a BVH (the faces it could meet all
-meet it at its own point). Frame and units of DESIGN.md (metres).
+meet it at its own point). Frame and units of docs/physics.md (metres).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The geometric wave of the go+edge engine (raysim.optics.geowave) against independent references.
 
-- the ideal paraboloid: the analytic GO field on the sphere, |E| = rho / R (DESIGN.md), the
+- the ideal paraboloid: the analytic GO field on the sphere, |E| = rho / R (docs/physics.md), the
   polarisation mirrored in the normal, the phase -k (F - R) (every ray's path), times the
   Green's function's near-field factor a(k s), s = rho - R;
 - a deformed dish: the intensity against the GO engine's own cell means (raysim.optics.go,
