@@ -49,6 +49,7 @@ from numpy.typing import NDArray
 from raysim.progress import Progress
 from solver.errors import SolverError
 from solver.forward import ForwardModel, WaveForward, active_runner
+from solver.resample import modelled_rows
 
 STALL = 0.995      # a step that lowers the misfit by less than 0.5 % ends the loop
 MAX_STEPS = 50     # outer Gauss-Newton steps a run may ask for
@@ -192,7 +193,7 @@ def refine_gauss_newton(delta0: NDArray[np.float64], fa_measured: NDArray[np.flo
     start = time.perf_counter()
     I0 = model(scan.sphere, scan.F, scan.D, grid.x, grid.y, None)
     rows = np.zeros(fa_measured.shape, dtype=bool)
-    rows[:n_rows] = True
+    rows[:min(n_rows, modelled_rows(scan.sphere, scan.F, scan.D, grid.h))] = True
     rows &= np.isfinite(fa_measured) & np.isfinite(weight)
     fa = np.nan_to_num(fa_measured)
     w = np.nan_to_num(weight)

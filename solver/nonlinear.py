@@ -37,7 +37,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import lru_cache
 from itertools import pairwise
 
 import numpy as np
@@ -45,10 +44,11 @@ from numpy.typing import NDArray
 
 from raysim.maps.sphere import SphereGrid
 from raysim.progress import Progress, silent, within
-from raysim.surface.gridded import HarmonicFill
 from solver.aperture import ApertureGrid
+from solver.continuation import RimContinuation, rim_continuation
 from solver.equation import intensity_ratio_fa
 from solver.forward import Forward, ForwardModel, as_model, go_forward
+from solver.resample import modelled_rows
 
 __all__ = ["Correct", "Forward", "ForwardModel", "RefineHistory", "anderson_step", "extend_outside",
            "go_forward", "outside_fill", "refine"]
@@ -67,18 +67,19 @@ class RefineHistory:
     stopped: str = ""  # why the loop ended before its iterations, "" when it ran them all
 
 
-@lru_cache(maxsize=4)
-def outside_fill(D: float, N: int) -> HarmonicFill:
-    """The Laplace continuation into the points outside the disk of the grid (D, N), factorised
-    once per grid (the refinement calls it every iteration)."""
-    return HarmonicFill(~ApertureGrid(D, N).mask)
+def outside_fill(D: float, N: int) -> RimContinuation:
+    """The continuation into the points outside the disk of the grid (D, N)
+    (:class:`solver.continuation.RimContinuation`), built once per grid."""
+    return rim_continuation(float(D), int(N))
 
 
 def extend_outside(grid: ApertureGrid, delta: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``delta`` (m) with the points outside the aperture filled by a discrete Laplace equation
-    (:class:`raysim.surface.gridded.HarmonicFill`).
+    """``delta`` (m) with the points outside the aperture holding its continuation: near the
+    rim the map's own local quadratic, beyond it a discrete Laplace fill
+    (:mod:`solver.continuation`).
 
-    Gives the forward model a continuous surface up to the corners of the square grid.
+    Gives the forward model a surface whose slope and curvature run on through the rim, up to
+    the corners of the square grid.
     """
     return outside_fill(float(grid.D), int(grid.N))(delta)
 
@@ -100,7 +101,9 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
     fa_measured : FA on the sphere grid, gain-corrected (dimensionless), NaN where missing.
     sphere, F, D : the scan's grid and the dish (m).
     grid : the aperture grid of ``delta``.
-    n_rows : usable theta rows (cells wholly inside the rim image); the rest are not compared.
+    n_rows : usable theta rows (cells wholly inside the rim image); the rest are not compared,
+        nor are the last rows whose rays come from within a grid step of the rim
+        (:func:`solver.resample.modelled_rows`).
     correct : ``correct(misfit_on_sphere, delta) -> update`` (m): the linear inversion of an FA
         misfit, with the rim handling of the caller (zero rim change, or a rim-target refit);
         with ``fit_gain`` it returns ``(update, gain_step)``, the relative change of the scale.
@@ -127,6 +130,7 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
         return model(sphere, F, D, grid.x, grid.y, surface,
                      progress=within(report, index / n_calls, (index + 1) / n_calls, label))
 
+    n_rows = min(n_rows, modelled_rows(sphere, F, D, grid.h))
     ideal = model_of(0, "ideal reflector", None)
     w = 1.0 if weight is None else weight
     delta = np.array(delta, dtype=np.float64, copy=True)
