@@ -85,7 +85,9 @@ def summary(result: xr.Dataset) -> list[str]:
     if "rms_m" in a:
         relative = (f"RRMS {a['rrms'] * 100:.3f} %" if math.isfinite(a["rrms"]) and
                     a["truth_peak_to_peak_m"] > 0 else "RRMS n/a (a flat truth has no peak-to-peak)")
-        lines.append(f"RMS error {a['rms_m'] * 1e6:.2f} um, {relative} "
+        error = a["rms_m"] * 1e6  # um; a 0.01 um map's error was printed as 0.00 um
+        shown = f"{error:.2f}" if error >= 0.01 else f"{error:.2g}"
+        lines.append(f"RMS error {shown} um, {relative} "
                      f"(truth peak-to-peak {a['truth_peak_to_peak_m'] * 1e3:.4f} mm)")
     else:
         lines.append("truth unknown: no RMS / RRMS")
@@ -95,6 +97,11 @@ def summary(result: xr.Dataset) -> list[str]:
                  f"refinement {a.get('refine_iterations', 0)} iterations, model "
                  f"{a.get('refine_model', 'go')} ({a.get('refine_model_choice', '')}), "
                  f"{a.get('refine_seconds', 0.0):.1f} s")
+    stopped = str(a.get("refine_stopped", ""))
+    if stopped and not stopped.startswith("no"):
+        lines[-1] += f"; stopped early: {stopped}"
+    if "refine_warning" in a:
+        lines.append(f"WARNING: {a['refine_warning']}")
     if a.get("gn_used"):
         misfit = str(a["gn_misfit_rms"]).split(",")
         lines.append(f"gauss-newton ({a['gn_choice']}): misfit {misfit[0]} -> {misfit[-1]} "

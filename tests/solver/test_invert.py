@@ -187,3 +187,26 @@ def test_options_object_gives_the_keywords_answer_and_checks_itself(paper_field)
                 {"solver": "fft", "rim": RimTargets(np.ones(8), np.ones(8), np.zeros(8))}):
         with pytest.raises(SolverError):
             InvertOptions(**bad)
+
+
+def _bump_scene(amplitude_um: float) -> str:
+    return ('name = "bump"\n[dish]\ndiameter_m = 60\nfocal_length_m = 24\nresolution_m = 0.25\n'
+            f'[[deformation]]\ntype = "bumps"\n[[deformation.bumps]]\nx_m = 5\ny_m = -3\n'
+            f'amplitude_um = {amplitude_um}\nsigma_m = 2.0\n[source]\nfrequency_hz = 3e8\n'
+            '[sphere]\nradius_m = 7.2\nn_theta = 45\nn_phi = 180\n')
+
+
+@pytest.mark.parametrize(("amplitude_um", "warned"), [(100.0, False), (20_000.0, True)])
+def test_a_map_whose_model_does_not_reproduce_the_scan_is_said_so(amplitude_um, warned):
+    """A 20 mm bump of 2 m is past GO's linear range: the default map came back with 34 % of
+    error, its sign wrong at the bump, the model leaving 39 % of the data's FA unexplained,
+    and the summary said nothing. A 100 um bump's model fits the data to a few per cent."""
+    from raysim.scene.scene import parse_scene
+    from raysim.simulate import simulate
+    from solver.run import summary
+
+    surface = invert(simulate(parse_scene(_bump_scene(amplitude_um)), method="go"))
+    lines = summary(surface)
+    assert any(line.startswith("WARNING: the model leaves") for line in lines) == warned
+    if not warned:
+        assert surface.attrs["refine_misfit_share"] < 0.07
