@@ -107,13 +107,17 @@ def correct(grid, delta: NDArray[np.float64], layout, actuators: ActuatorLayout,
     on = ids.ravel() >= 0
     d = before.ravel()[on]
     Af = A[:, free]
-    normal = (Af.T @ Af).toarray()  # the free actuators' normal matrix A^T A
-    notes += _undetermined_note(normal, np.flatnonzero(free), actuators)
+    # the free actuators' normal matrix A^T A, decomposed once for the note on what the map
+    # leaves undetermined and for the least-norm solve
+    w, V = np.linalg.eigh((Af.T @ Af).toarray())
+    kept = w > max(w.max(initial=0.0), 0.0) * NULL_SHARE
+    notes += _undetermined_note(V[:, ~kept], np.flatnonzero(free), actuators)
     commands = np.zeros(actuators.n_actuators)
     clipped = 0
     extra = np.zeros(on.sum())
     if actuators.ranges is None:
-        commands[free], *_ = np.linalg.lstsq(normal, -(Af.T @ d), rcond=None)
+        Vk = V[:, kept]
+        commands[free] = Vk @ ((Vk.T @ -(Af.T @ d)) / w[kept])
     elif free.any():
         G, names = _term_columns(grid, ids, remove)
         commands[free], coef, clipped = _bounded_fit(Af, d, actuators.ranges[free], G)
@@ -155,16 +159,17 @@ def _unlocked(actuators: ActuatorLayout, held: NDArray[np.bool_], notes: list[st
     return ~locked
 
 
-def _undetermined_note(normal: NDArray[np.float64], columns: NDArray[np.int64],
+#: eigenvalues of A^T A under this share of the largest are its null space: commands the map
+#: does not determine
+NULL_SHARE = 1e-10
+
+
+def _undetermined_note(null: NDArray[np.float64], columns: NDArray[np.int64],
                        actuators: ActuatorLayout) -> list[str]:
     """A note when the map does not fix every command: actuators (``columns`` of the layout)
-    with a share in the null space of the ``normal`` matrix A^T A (a panel with fewer map
-    points than actuators, or points on a line) get the minimum-norm choice; the panels they
-    hold are counted."""
-    if normal.shape[1] == 0:
-        return []
-    w, V = np.linalg.eigh(normal)
-    null = V[:, w <= max(w.max(), 0.0) * 1e-10]
+    with a share in ``null``, the null space of A^T A (a panel with fewer map points than
+    actuators, or points on a line), get the minimum-norm choice; the panels they hold are
+    counted."""
     if null.shape[1] == 0:
         return []
     loose = columns[np.linalg.norm(null, axis=1) > 1e-6]
