@@ -6,8 +6,9 @@ the incident wave.
 
 The refinement's PO model (:class:`solver.forward.WaveForward`) sees a surface estimate as
 ``GriddedMap(x, y, extend_outside(grid, delta))``: the values inside the aperture, continued
-outside by a discrete Laplace equation (:class:`raysim.surface.gridded.HarmonicFill`, whose
-:meth:`~raysim.surface.gridded.HarmonicFill.transpose` is the continuation's adjoint), then the
+outside by their local quadratic near the rim and a discrete Laplace equation beyond
+(:class:`solver.continuation.RimContinuation`, whose
+:meth:`~solver.continuation.RimContinuation.transpose` is the continuation's adjoint), then the
 bicubic interpolating spline of FITPACK (scipy's RectBivariateSpline, s = 0), which clamps
 points beyond the outer grid centres to them. Every step is linear in delta, so
 :class:`GridToSamples` writes the map from the grid values inside the aperture to (dz, dh/dx,

@@ -5,10 +5,10 @@ delta in metres along +z, arrays indexed [y, x].
 
 :class:`HarmonicFill` fills the missing cells of a grid with the discrete harmonic function
 (5-point Laplace equation, zero normal derivative at the grid's outer edge) that takes the
-known values: the smoothest continuation, with no new extremum. It is the one fill the
-project uses: for the NaN samples of a gridded map, and for the points outside the aperture
-disk that the solver's forward model needs (:func:`solver.nonlinear.extend_outside`), and
-its transpose for the model's Jacobian (:mod:`solver.jacobian`).
+known values: the smoothest continuation, with no new extremum. It fills the NaN samples of
+a gridded map, and the solver's continuation outside the aperture disk beyond the band next to
+the rim that the map's own local fit fills (:mod:`solver.continuation`), with its transpose
+for the model's Jacobian (:mod:`solver.jacobian`).
 """
 
 from __future__ import annotations
