@@ -12,6 +12,7 @@ import os
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import xarray as xr
 
 from raysim.errors import RaysimError
@@ -128,5 +129,10 @@ def summary(result: xr.Dataset) -> list[str]:
                      f"removed: coefficient {a['removed_delta_c']:.3e} (an FA offset), "
                      f"{1e6 * a['removed_delta_c_centre_m']:.2f} um at the centre")
     lines.append(f"removed terms: {a['removed_terms']}; missing samples {a['samples_missing']}")
+    if "deformation_std" in result and np.any(np.isfinite(result["deformation_std"].values)):
+        std = result["deformation_std"].values
+        lines.append(f"noise: the scan's stated intensity_std spreads the map by "
+                     f"{np.sqrt(np.nanmean(std**2)) * 1e6:.2f} um RMS (deformation_std, Monte "
+                     "Carlo of the linear inversion)")
     lines.append(f"time {a['time_s']:.2f} s")
     return lines

@@ -131,6 +131,11 @@ def test_intensity_std_gives_a_deformation_std_that_matches_the_scatter(paper_fi
     predicted = metrics.rms(grid, result["deformation_std"].values)
     observed = np.sqrt(np.mean([metrics.rms(grid, s) ** 2 for s in scatter]))
     assert 0.6 < predicted / observed < 1.6
+    # and the summary says it (it said nothing of the noise's spread)
+    from solver.run import summary
+
+    (line,) = [t for t in summary(result) if t.startswith("noise: ")]
+    assert f"{predicted * 1e6:.2f} um RMS" in line
 
 
 def test_bad_requests_raise_specific_errors(paper_field):
