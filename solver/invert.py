@@ -58,7 +58,7 @@ from solver.options import (
     WEIGHTS,
     InvertOptions,
 )
-from solver.record import Outcome, accuracy_attrs, surface_attrs
+from solver.record import Outcome, accuracy_attrs, fit_attrs, surface_attrs
 from solver.refinement import RefinementSetup, choose_model, refinement_setup
 from solver.resample import cap_rows, usable_rows
 from solver.unobservable import Unobservable, unobservable
@@ -184,6 +184,9 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
                       gn.gain_factor if gn is not None else None, delta_c, mode)
     attrs = surface_attrs(opts, outcome)
     attrs.update(report_attrs(gn, why))
+    if gn is not None and gn.misfit_rms:  # the map is Gauss-Newton's: its misfit says the fit
+        attrs.pop("refine_warning", None)
+        attrs.update(fit_attrs(data, gn.misfit_rms[-1]))
     if central is not None:
         attrs.update(central.attrs(removed["central"]))
     if unseen is not None:

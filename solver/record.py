@@ -108,12 +108,16 @@ MISFIT_SHARE_WARNING = 0.1
 def _fit_attrs(out: Outcome) -> dict[str, Any]:
     """How much of the scan the refinement's model leaves unexplained (none without a model)."""
     misfits = out.history.misfit_rms
-    if not misfits:
-        return {}
-    fa = out.data.fa[:out.data.n_rows]
+    return fit_attrs(out.data, misfits[-1]) if misfits else {}
+
+
+def fit_attrs(data: MeasuredFA, last: float) -> dict[str, Any]:
+    """The SurfaceMap attributes of the model's last misfit ``last`` (RMS of FA over the
+    compared cells) against the data's FA (see :data:`MISFIT_SHARE_WARNING`); Gauss-Newton's
+    replace the defect correction's when it ran after it."""
+    fa = data.fa[:data.n_rows]
     data_rms = float(np.sqrt(np.nanmean(fa**2))) if np.any(np.isfinite(fa)) else 0.0
-    noise = float(np.sqrt(out.data.noise_variance))
-    last = misfits[-1]
+    noise = float(np.sqrt(data.noise_variance))
     share = last / data_rms if data_rms > 0 else float("nan")
     attrs: dict[str, Any] = {"refine_data_fa_rms": data_rms, "refine_misfit_share": share}
     if data_rms > 0 and share > MISFIT_SHARE_WARNING and last > 3.0 * noise:

@@ -193,6 +193,11 @@ def test_gauss_newton_fits_the_data_and_beats_defect_correction(small_field):
     misfit = [float(v) for v in a["gn_misfit_rms"].split(",")]
     assert misfit[-1] < 0.7 * misfit[0]
     assert a["rrms"] < defect.attrs["rrms"]
+    # the share of the data the map leaves unexplained is Gauss-Newton's, not the defect
+    # correction's before it
+    assert a["refine_misfit_share"] == pytest.approx(
+        misfit[-1] / a["refine_data_fa_rms"], rel=1e-3)
+    assert a["refine_misfit_share"] < defect.attrs["refine_misfit_share"]
     assert any("misfit" in line and " s" in line for line in lines)
     # the data are absolute (scale 1); the recorded gain is the power balance's scale times
     # the factor Gauss-Newton ended with, not the defect correction's last one
