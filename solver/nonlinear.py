@@ -102,7 +102,7 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
     sphere, F, D : the scan's grid and the dish (m).
     grid : the aperture grid of ``delta``.
     n_rows : usable theta rows (cells wholly inside the rim image); the rest are not compared,
-        nor are the last rows whose rays come from within a grid step of the rim
+        nor are the last rows whose rays come from beyond the grid's outermost centres
         (:func:`solver.resample.modelled_rows`).
     correct : ``correct(misfit_on_sphere, delta) -> update`` (m): the linear inversion of an FA
         misfit, with the rim handling of the caller (zero rim change, or a rim-target refit);

@@ -59,20 +59,22 @@ def usable_rows(sphere: SphereGrid, F: float, D: float) -> int:
 
 
 def modelled_rows(sphere: SphereGrid, F: float, D: float, h: float) -> int:
-    """The usable rows (:func:`usable_rows`) whose cells' rays all meet the dish at least one
-    aperture-grid step ``h`` (m) inside the rim (the ideal GO mapping), and never fewer than
-    four: the rows a forward model of the map on that grid can be compared with.
+    """The usable rows (:func:`usable_rows`) whose cells' rays all meet the dish inside the
+    outermost centres of an aperture grid of step ``h`` (m), half a step inside the rim (the
+    ideal GO mapping), and never fewer than four: the rows a forward model of the map on that
+    grid can be compared with.
 
-    Within a step of the rim the model's spline of the grid values draws on the map's
-    continuation outside the disk, and beyond the outermost grid centres (half a step inside
-    the rim, on the axes) it holds the last one's value. A row whose outer edge meets the rim
-    image (2 deg rows on a dish of F/D = 0.4 end 0.01 deg inside it) takes rays from there: on
-    a 50 m dish the exact Z(20, 10) surface, sampled on the grid, missed that row's FA by 38 %
-    of the data's RMS, and the refinement fitted the difference into the map.
+    Beyond those centres, on the axes, the model's spline of the grid values holds the last
+    one's value. A row whose outer edge meets the rim image (2 deg rows on a dish of F/D = 0.4
+    end 0.01 deg inside it) takes rays from there: on a 50 m dish the exact Z(20, 10) surface,
+    sampled on the grid, missed that row's FA by 38 % of the data's RMS, and the refinement
+    fitted the difference into the map (37.6 um of error; 29.9 um without the row). A whole
+    step's margin dropped rows the model holds on coarse grids: the paper's case on 2 deg
+    rows at N = 64 went from 3.4 to 4.6 um.
     """
     n = usable_rows(sphere, F, D)
     outer = 2.0 * F * np.tan(0.5 * sphere.theta_edges[1:n + 1])
-    return max(int(np.count_nonzero(outer <= 0.5 * D - h)), min(n, 4))
+    return max(int(np.count_nonzero(outer <= 0.5 * (D - h))), min(n, 4))
 
 
 def check_full_circle(sphere: SphereGrid) -> None:
