@@ -482,37 +482,31 @@ def _removal(terms: tuple[str, ...], sums: _Sums, orders: dict[int, _Order],
         readings += sums.readings(psi, 0)
         if unit is None:  # m = 0 reference errors go with an estimated gain
             references_removed += sums.references(psi, 0, orders[0].lines[0])
-    tilt = s / math.sqrt(0.25 * math.pi * a**4)       # r cos(phi), unit norm over the disk
+    tilt_norm = math.sqrt(0.25 * math.pi * a**4)       # of r cos(phi) over the disk
     if "tilt" in terms:
-        psi = (s**3 - a * a * s) / 8.0 / math.sqrt(0.25 * math.pi * a**4)
+        psi = (s**3 - a * a * s) / 8.0 / tilt_norm
         readings += 2.0 * sums.readings(psi, 1)
         references_removed += sum(sums.references(psi, 1, lines) for lines in orders[1].lines)
     constant = after_c(np.ones_like(s))
     for u in shapes:
         constant = constant - _disk_dot(s, constant, u) * u
     kept = _disk_dot(s, constant, constant) / _disk_dot(s, np.ones_like(s), np.ones_like(s))
-    # per mode: the coefficients x become M x (M: the projections, delta_c's first)
-    projections = {}
+    # per mode: the coefficients x become M x (M: the projections, delta_c's first); each
+    # order's shares after them, both phases for m > 0, and its references' shares
+    after: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
     for m, order in orders.items():
         M = np.eye(order.zeros.size)
         if m == 0 and unit is not None:
             c = order.coefficients(s, unit, 0)
             M = M - np.outer(c, c)
-        for u in shapes if m == 0 else [tilt] if "tilt" in terms else []:
+        for u in shapes if m == 0 else [s / tilt_norm] if "tilt" in terms else []:
             t = order.coefficients(s, u, m)
             M = (np.eye(t.size) - np.outer(t, t)) @ M
-        projections[m] = (M, order)
-    modes, reference_modes = [], []
-    for m, n, ms in shares:
-        if m in projections:
-            M, order = projections[m]
-            ms = (1 if m == 0 else 2) * float((M @ order.cov @ M.T)[n - 1, n - 1])
-        modes.append((m, n, ms))
-    for m, n, ms in references:
-        if m in projections:
-            M, order = projections[m]
-            ms = order.reference_factor * float((M @ order.reference)[n - 1]) ** 2
-        reference_modes.append((m, n, ms))
+        after[m] = ((1 if m == 0 else 2) * np.einsum("ij,jk,ik->i", M, order.cov, M),
+                    order.reference_factor * (M @ order.reference) ** 2)
+    modes = [(m, n, float(after[m][0][n - 1]) if m in after else ms) for m, n, ms in shares]
+    reference_modes = [(m, n, float(after[m][1][n - 1]) if m in after else ms)
+                       for m, n, ms in references]
     return Removal(terms, readings, references_removed, kept, tuple(modes),
                    tuple(reference_modes))
 

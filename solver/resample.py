@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import map_coordinates
 
 from raysim.errors import FieldMapError
-from raysim.maps.sphere import SphereGrid, theta_rim
+from raysim.maps.sphere import SphereGrid, aperture_radius, theta_rim
 from solver.aperture import ApertureGrid
 
 PAD = 8             # cells of padding around the spline's array
@@ -73,7 +73,7 @@ def modelled_rows(sphere: SphereGrid, F: float, D: float, h: float) -> int:
     rows at N = 64 went from 3.4 to 4.6 um.
     """
     n = usable_rows(sphere, F, D)
-    outer = 2.0 * F * np.tan(0.5 * sphere.theta_edges[1:n + 1])
+    outer = aperture_radius(sphere.theta_edges[1:n + 1], F)
     return max(int(np.count_nonzero(outer <= 0.5 * (D - h))), min(n, 4))
 
 

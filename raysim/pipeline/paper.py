@@ -259,7 +259,7 @@ def _kept_name(f: float, n_theta: int, n_phi: int, radiator: str, radiator_tol: 
 
 
 def _sums_of(field: xr.Dataset) -> str:
-    """How a FieldMap's sums were made, in words, for the line that says it is replaced."""
+    """How a FieldMap's sums were made, in words, for the line that says it is left as it is."""
     radiator = field.attrs.get("radiator")
     if radiator is None:
         return "radiator not recorded"
