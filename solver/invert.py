@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import xarray as xr
@@ -58,9 +58,10 @@ from solver.options import (
     WEIGHTS,
     InvertOptions,
 )
-from solver.record import Outcome, accuracy_attrs, fit_attrs, surface_attrs
-from solver.refinement import RefinementSetup, choose_model, refinement_setup
+from solver.record import Outcome, accuracy_attrs, fit_attrs, rim_attrs, surface_attrs
+from solver.refinement import ModelChoice, RefinementSetup, choose_model, refinement_setup
 from solver.resample import cap_rows, usable_rows
+from solver.rimimage import rim_image_shift, rows_clear_of_rim
 from solver.unobservable import Unobservable, unobservable
 from solver.wave import amplitude_weight
 
@@ -142,7 +143,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     grid = solver_grid(scan.D, opts.N)
     if opts.rim is not None:
         boundary.check_targets(opts.rim, grid.a)
-    data = measured_fa(scan, resolve_gain(opts.gain, str(scan.attrs.get("method", ""))))
+    gain = resolve_gain(opts.gain, str(scan.attrs.get("method", "")))
     chosen = choose_model(scan.attrs, opts.refine_iterations, opts.model, opts.forward, opts.device,
                           scan.obstacles, opts.radiator, opts.radiator_tol)
     choice = choose_method(opts.refine_method, chosen.forward, scan, opts.refine_iterations,
@@ -151,14 +152,16 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     if choice.inner is not None:  # auto: the steps and LSQR iterations that fit its budget
         opts = replace(opts, gauss_newton=choice.applied(opts.gauss_newton))
     weighted = opts.weights == "amplitude" or (opts.weights == "auto" and chosen.wave)
-    weight = amplitude_weight(scan.intensity_ideal, scan.sphere, scan.F,
-                              str(scan.attrs.get("sampling", "centre"))) if weighted else None
-    inverse = LinearInverse(scan, grid, opts.solver, opts.iterations, opts.omega, opts.tol,
-                            opts.rim, opts.max_harmonics, weight)
-    linear = inverse.solve(data.fa)
-    setup = refinement_setup(inverse, chosen, opts.refine_iterations,
-                             fit_gain=data.gain.estimated, progress=progress)
-    delta, history = _refine(inverse, linear, data, setup, opts)
+    solved = _solve(scan, grid, gain, chosen, weighted, opts, progress)
+    # rows the map's rim image crosses are lit in part: solve again without them
+    shift = rim_image_shift(grid, solved.delta, scan.F, scan.D, scan.R)
+    n_all = solved.data.n_rows
+    clear = rows_clear_of_rim(scan.sphere, scan.F, scan.D, n_all, shift)
+    if clear < n_all:
+        scan = scan.first_rows(clear)
+        solved = _solve(scan, grid, gain, chosen, weighted, opts, progress)
+    data, inverse, linear, setup = solved.data, solved.inverse, solved.linear, solved.setup
+    delta, history = solved.delta, solved.history
     gn = None
     if method == "gauss-newton":
         delta, gn = _gauss_newton(inverse, delta, data, setup, history, opts, log)
@@ -183,6 +186,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     outcome = Outcome(scan, grid, inverse, linear, data, setup, history, weighted, coef,
                       gn.gain_factor if gn is not None else None, delta_c, mode)
     attrs = surface_attrs(opts, outcome)
+    attrs.update(rim_attrs(shift, n_all - clear, scan.sphere))
     attrs.update(report_attrs(gn, why))
     if gn is not None and gn.misfit_rms:  # the map is Gauss-Newton's: its misfit says the fit
         attrs.pop("refine_warning", None)
@@ -199,6 +203,33 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         attrs.update(accuracy)
     attrs["time_s"] = time.perf_counter() - start
     return surfacemap(grid, delta_out, attrs, truth=truth_map, deformation_std=std)
+
+
+@dataclass(frozen=True)
+class _Solved:
+    """The linear answer to a scan and its refinement, with what made them."""
+
+    data: MeasuredFA
+    inverse: LinearInverse
+    linear: LinearSolution
+    setup: RefinementSetup
+    delta: NDArray[np.float64]
+    history: RefineHistory
+
+
+def _solve(scan: Scan, grid: ApertureGrid, gain: GainChoice, chosen: ModelChoice, weighted: bool,
+           opts: InvertOptions, progress: Progress | None) -> _Solved:
+    """The scan's FA, its linear answer and the model-based refinement of it."""
+    data = measured_fa(scan, gain)
+    weight = amplitude_weight(scan.intensity_ideal, scan.sphere, scan.F,
+                              str(scan.attrs.get("sampling", "centre"))) if weighted else None
+    inverse = LinearInverse(scan, grid, opts.solver, opts.iterations, opts.omega, opts.tol,
+                            opts.rim, opts.max_harmonics, weight)
+    linear = inverse.solve(data.fa)
+    setup = refinement_setup(inverse, chosen, opts.refine_iterations,
+                             fit_gain=data.gain.estimated, progress=progress)
+    delta, history = _refine(inverse, linear, data, setup, opts)
+    return _Solved(data, inverse, linear, setup, delta, history)
 
 
 def _refine(inverse: LinearInverse, linear: LinearSolution, data: MeasuredFA,

@@ -14,7 +14,7 @@ changes after construction: every method returns its result.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -74,6 +74,17 @@ class Scan:
                    ds["intensity_ideal"].values.astype(np.float64),
                    None if std is None else std.astype(np.float64), dict(ds.attrs),
                    blocked, obstacles_of(ds))
+
+    def first_rows(self, n: int) -> Scan:
+        """The scan cut to its first ``n`` theta rows (the sphere grid ends at their outer edge)."""
+        sphere = replace(self.sphere, n_theta=n, theta_max=float(self.sphere.theta_edges[n]))
+
+        def cut(a):
+            return None if a is None else a[:n]
+
+        return replace(self, sphere=sphere, intensity=self.intensity[:n],
+                       intensity_ideal=self.intensity_ideal[:n],
+                       intensity_std=cut(self.intensity_std), blocked=cut(self.blocked))
 
 
 def obstacles_of(ds: xr.Dataset) -> ObstacleMesh | None:

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from raysim.maps.probe import probe_of
+from raysim.maps.sphere import SphereGrid
 from raysim.maps.surfacemap import HARMONIC_FIXED, HARMONIC_UNOBSERVABLE
 from solver import metrics
 from solver.aperture import ApertureGrid
@@ -96,6 +97,23 @@ def surface_attrs(opts: InvertOptions, out: Outcome) -> dict[str, Any]:
     probe = probe_of(scan.attrs)
     if not probe.ideal:  # the probe the scan was read with (raysim.maps.probe)
         attrs["data_probe"] = probe.describe()
+    return attrs
+
+
+def rim_attrs(shift: NDArray[np.float64], dropped: int, sphere: SphereGrid) -> dict[str, Any]:
+    """How far the map moves the rim's image (:mod:`solver.rimimage`), and the rows that left
+    out of the solve (``sphere`` is the grid of the rows kept)."""
+    attrs: dict[str, Any] = {"rim_image_shift_deg": float(np.degrees(np.max(np.abs(shift)))),
+                             "rows_dropped_at_rim": int(dropped)}
+    if dropped:
+        lo = float(np.degrees(sphere.theta_max))
+        hi = lo + dropped * float(np.degrees(sphere.dtheta))
+        rows, lit = (("the row", "it is") if dropped == 1 else
+                     (f"the {dropped} rows", "they are"))
+        attrs["rows_dropped_why"] = (
+            f"the map moves the rim's image by up to {attrs['rim_image_shift_deg']:.3f} deg, "
+            f"past the outer edge of {rows} {lo:.2f}..{hi:.2f} deg, so {lit} lit only in part: "
+            "left out, and the map solved again without them")
     return attrs
 
 

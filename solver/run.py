@@ -108,6 +108,8 @@ def summary(result: xr.Dataset) -> list[str]:
         lines.append(f"gauss-newton ({a['gn_choice']}): misfit {misfit[0]} -> {misfit[-1]} "
                      f"(noise {a['gn_noise_rms']:.2e}), LSQR {a['gn_lsqr_iterations']}, "
                      f"stopped: {a['gn_stopped']}")
+    if a.get("rows_dropped_at_rim"):
+        lines.append(f"rim: {a['rows_dropped_why']}")
     lines.append(f"boundary: {a['boundary']}")
     if a["harmonic_part"] == HARMONIC_UNOBSERVABLE:
         lines.append("harmonic part (tilt, astigmatism, any r^n cos n phi) is UNOBSERVABLE "
