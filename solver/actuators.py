@@ -31,6 +31,12 @@ from solver.errors import SolverError
 
 #: monomials in the panel frame (s, t) a panel's shape is built from, in the order they are taken
 MONOMIALS = ((0, 0), (1, 0), (0, 1), (1, 1), (2, 0), (0, 2))
+#: the most a panel point may move per unit of its actuators' largest stroke (the sum of its
+#: shape functions' magnitudes there). On the 110 m dish's 60 panels: the corner layout 1.1 to
+#: 1.3, the default screws 3 to 9, a third screw a tenth of the panel's size off the line of
+#: the other two 12; 1.2 mm off it (a typing slip on a 12 m panel) over 10^4, and that one
+#: panel's near-singular shape wiped out the commands on every other panel
+MAX_LEVER = 1000.0
 #: default screw positions (u, v) of the ``screws`` layout: three screws, a rigid body
 DEFAULT_SCREWS = ((0.2, 0.2), (0.2, 0.8), (0.8, 0.5))
 
@@ -168,8 +174,13 @@ def read_actuators(path: str | Path, layout) -> ActuatorLayout:
         if path.suffix.lower() == ".toml":
             rows = _toml_rows(tomllib.loads(text), path)
         else:
-            rows = list(csv.DictReader(line for line in text.splitlines()
-                                       if not line.lstrip().startswith("#")))
+            reader = csv.DictReader(line for line in text.splitlines()
+                                    if not line.lstrip().startswith("#"))
+            rows = list(reader)
+            names = [str(n).strip() for n in reader.fieldnames or ()]
+            twice = sorted({n for n in names if names.count(n) > 1})
+            if twice:  # DictReader keeps the last: a second, empty max_m lifted the limit
+                raise ActuatorError(f"{path}: column {', '.join(twice)} appears twice")
     except (tomllib.TOMLDecodeError, csv.Error) as exc:
         raise ActuatorError(f"{path}: unreadable actuator file ({exc})") from exc
     if not rows:
@@ -186,6 +197,9 @@ def read_actuators(path: str | Path, layout) -> ActuatorLayout:
         where = f"{path}: actuator row {k + 1}"
         try:
             ids.append(str(row["id"]))
+            if ids[-1].lstrip().startswith("#"):  # commands.csv would read back as a comment
+                raise ActuatorError(f"{where}: id {ids[-1]!r} starts with '#', which marks a "
+                                    "comment line in these files")
             xy.append((_number(row["x_m"], "x_m", where), _number(row["y_m"], "y_m", where)))
             members.append(_panel_ids(row["panels"], where))
             lo, hi = row.get("min_m"), row.get("max_m")
@@ -323,4 +337,10 @@ def shape_functions(layout, panel: int, support: tuple[tuple[int, float, float],
                             "(collinear or coincident)")
     s, t = local_st(layout, panel, x, y)
     M = np.stack([s**i * t**j for i, j in MONOMIALS[:k]], axis=-1)  # (points, k monomials)
-    return np.linalg.solve(V.T, M.T).T
+    W = np.linalg.solve(V.T, M.T).T
+    lever = float(np.abs(W).sum(axis=1).max(initial=0.0))
+    if lever > MAX_LEVER:
+        raise ActuatorError(f"panel {panel}: its {k} actuators almost fail to fix a panel shape "
+                            f"(nearly collinear or coincident): strokes of 1 um would move the "
+                            f"panel by up to {lever:.0f} um; move them apart")
+    return W

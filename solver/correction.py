@@ -2,14 +2,15 @@
 
 Frame: aperture plane (x, y) (m), the map ``delta`` along z (m) on an
 :class:`~raysim.maps.aperture.ApertureGrid`. Sign: a positive command moves the surface along +z
-(away from the vertex, toward the focus); the commands c minimise the area-weighted
-sum over the panel points of (delta' + A c)^2, where delta' is the map with the ``remove`` terms
-(piston, tilt, focus: left to pointing and subreflector focus) fitted and taken off, and A the
-influence matrix of :mod:`solver.actuators` (each panel moved as the shape its support points
-impose). The predicted surface after the correction is delta' + A c. With stroke ranges the
-problem is bounded least squares (:func:`scipy.optimize.lsq_linear`), the ``remove`` terms
-fitted jointly as free columns (the commands' bounds may leave some of them, which pointing
-takes up): after = delta' + A c + G t.
+(away from the vertex, toward the focus); the commands c and the coefficients t of the
+``remove`` terms' columns G (piston, tilt, focus: left to pointing and subreflector focus)
+minimise the area-weighted sum over the panel points of (delta' + A c + G t)^2, where delta'
+is the map with those terms fitted over the panels and taken off, and A the influence matrix
+of :mod:`solver.actuators` (each panel moved as the shape its support points impose). The
+predicted surface after the correction is delta' + A c + G t: what the commands leave of a
+removed term, pointing takes up. Without stroke ranges c is the least-norm minimiser (the
+commands the map does not fix, and those that would only make a removed term, are 0); with
+them the problem is bounded least squares (:func:`scipy.optimize.lsq_linear`).
 
 Gain: the Ruze aperture efficiency exp(-(4 pi sigma / lambda)^2), sigma the area-weighted RMS
 over the panels (m) of the half-path-length error dz / (1 + rho^2 / (4 F^2)) (Ruze 1966), the
@@ -96,8 +97,12 @@ def correct(grid, delta: NDArray[np.float64], layout, actuators: ActuatorLayout,
     """Least-squares commands for the map ``delta`` (m) and what they leave (see the module).
     ``focal_length`` (m): the dish's F, for the half-path-length RMS Ruze's law takes
     (:func:`half_path_rms`); None leaves it out."""
-    before, removed = remove_terms(grid, np.asarray(delta, dtype=np.float64), remove)
-    ids = panel_ids(grid, before, layout)
+    delta = np.asarray(delta, dtype=np.float64)
+    ids = panel_ids(grid, delta, layout)
+    if not np.any(ids >= 0):
+        raise ActuatorError("no point of the map lies on a panel: nothing the actuators reach")
+    # the terms are fitted over the panels alone: a value in a gap is no surface
+    before, removed = remove_terms(grid, np.where(ids >= 0, delta, np.nan), remove)
     A = influence_matrix(grid, ids, layout, actuators)
     held = np.asarray(abs(A).sum(axis=0)).ravel() > 0
     notes = []
@@ -107,38 +112,136 @@ def correct(grid, delta: NDArray[np.float64], layout, actuators: ActuatorLayout,
     on = ids.ravel() >= 0
     d = before.ravel()[on]
     Af = A[:, free]
-    # the free actuators' normal matrix A^T A, decomposed once for the note on what the map
-    # leaves undetermined and for the least-norm solve
-    w, V = np.linalg.eigh((Af.T @ Af).toarray())
-    kept = w > max(w.max(initial=0.0), 0.0) * NULL_SHARE
-    notes += _undetermined_note(V[:, ~kept], np.flatnonzero(free), actuators)
+    G, names = term_columns(grid, ids, remove)
+    fit = JointFit(Af, G)
+    notes += _undetermined_note(fit.undetermined(), np.flatnonzero(free), actuators)
     commands = np.zeros(actuators.n_actuators)
     clipped = 0
-    extra = np.zeros(on.sum())
     if actuators.ranges is None:
-        Vk = V[:, kept]
-        commands[free] = Vk @ ((Vk.T @ -(Af.T @ d)) / w[kept])
+        commands[free] = fit.least_norm(d)
     elif free.any():
-        G, names = _term_columns(grid, ids, remove)
-        commands[free], coef, clipped = _bounded_fit(Af, d, actuators.ranges[free], G)
-        extra = G @ coef  # the removed terms, refitted jointly with the bounded commands
-        removed = {k: v + (float(coef[names.index(k)]) if k in names else 0.0)
-                   for k, v in removed.items()}
+        commands[free], clipped = fit.bounded(d, actuators.ranges[free])
+    # the removed terms refitted with the commands: pointing (and focus) takes up what they leave
+    coef = fit.terms(commands[free], d)
+    removed = {k: v + (float(coef[names.index(k)]) if k in names else 0.0)
+               for k, v in removed.items()}
     after_flat = np.full(before.size, np.nan)
-    after_flat[on] = d + A @ commands + extra
+    after_flat[on] = d + A @ commands + G @ coef
     # points in the gaps between panels are no surface: NaN after, and left out of both RMS
     after = grid.masked(after_flat.reshape(before.shape))
     std = None
     if delta_std is not None and np.isfinite(delta_std).any():
         std = np.zeros(actuators.n_actuators)  # locked actuators do not move: exactly 0
-        std[free] = command_std(Af, np.asarray(delta_std, dtype=np.float64).ravel()[on])
-    on_panels = np.where(ids >= 0, before, np.nan)
-    result = Correction(commands, before, after, rms(on_panels), rms(after), removed,
+        std[free] = fit.command_std(np.asarray(delta_std, dtype=np.float64).ravel()[on])
+    scale = float(np.nanmax(np.abs(before))) if np.isfinite(before).any() else 0.0
+    if scale > SUSPECT_SHARE * grid.D:
+        notes.append(f"the map departs by up to {scale:.3g} m on a {grid.D:g} m dish: is it in "
+                     "metres? (commands follow it as it is)")
+    result = Correction(commands, before, after, rms(before), rms(after), removed,
                         within_panel_rms(grid, before, ids), std, clipped, notes)
     if focal_length is not None:
-        result.path_rms_before = half_path_rms(grid, on_panels, focal_length, remove)
+        result.path_rms_before = half_path_rms(grid, before, focal_length, remove)
         result.path_rms_after = half_path_rms(grid, after, focal_length, remove)
     return result
+
+
+#: a map departing by more than this share of the diameter is no surface error (a map in um
+#: labelled m): said in the notes
+SUSPECT_SHARE = 1e-3
+
+
+class JointFit:
+    """The commands c (m) and the removed terms' coefficients t that minimise
+    ||A c + G t + d|| over the panel points, for maps d (m): with Q an orthonormal basis of G's columns, c
+    minimises ||(I - Q Q^T)(A c + d)||, whose normal matrix N = A^T (I - Q Q^T) A is small
+    (actuators x actuators). N is decomposed once, with its columns scaled to unit diagonal
+    of A^T A, so that one panel of ill-conditioned supports does not set the threshold for
+    every other (its eigenvalues span many orders against a plain threshold on the largest).
+    """
+
+    def __init__(self, A: sp.csr_matrix, G: NDArray[np.float64]):
+        self.A, self.G = A, G
+        Q = np.linalg.qr(G)[0] if G.shape[1] else np.zeros((A.shape[0], 0))
+        QA = np.asarray((A.T @ Q).T)  # (k, actuators)
+        self.Q, self.QA = Q, QA
+        AtA = (A.T @ A).toarray()
+        self.AtA = AtA
+        diag = np.diag(AtA)
+        self.scale = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
+        self.w, self.V, self.kept = _scaled_eigh(AtA - QA.T @ QA, self.scale)
+
+    def _b(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
+        """A^T (I - Q Q^T) d."""
+        return self.A.T @ d - self.QA.T @ (self.Q.T @ d)
+
+    def _null(self, V: NDArray[np.float64], kept: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """An orthonormal basis (actuators, m) of the null directions, in commands."""
+        if kept.all():
+            return np.zeros((len(self.scale), 0))
+        return np.linalg.qr(self.scale[:, None] * V[:, ~kept])[0]
+
+    def undetermined(self) -> NDArray[np.float64]:
+        """The null space of A^T A: the commands the map does not fix (those that only make
+        a removed term are fixed: the terms take them)."""
+        if self.G.shape[1] == 0:
+            return self._null(self.V, self.kept)
+        _, V, kept = _scaled_eigh(self.AtA, self.scale)
+        return self._null(V, kept)
+
+    def least_norm(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The unbounded minimiser of least norm (m)."""
+        Vk, s = self.V[:, self.kept], self.scale
+        c = s * (Vk @ ((Vk.T @ (s * -self._b(d))) / self.w[self.kept]))
+        null = self._null(self.V, self.kept)
+        return c - null @ (null.T @ c)
+
+    def bounded(self, d: NDArray[np.float64], ranges: NDArray[np.float64]
+                ) -> tuple[NDArray[np.float64], int]:
+        """The minimiser within the stroke ``ranges`` (m, (actuators, 2)) and how many commands
+        sit at a limit: BVLS on the small equivalent ||diag(sqrt w) V^T u - y||, c = S u (never
+        the dense points x actuators matrix; a singular N allowed)."""
+        lo, hi = ranges[:, 0], ranges[:, 1]
+        s, keep = self.scale, self.kept
+        root = np.sqrt(self.w[keep])
+        R = root[:, None] * self.V[:, keep].T
+        y = -(self.V[:, keep].T @ (s * self._b(d))) / root
+        c = s * lsq_linear(R, y, bounds=(lo / s, hi / s), method="bvls", tol=1e-14).x
+        c = np.clip(c, lo, hi)  # the scaling's rounding must not step past a limit
+        clipped = int(np.sum((c <= lo + 1e-15) & np.isfinite(lo))
+                      + np.sum((c >= hi - 1e-15) & np.isfinite(hi)))
+        return c, clipped
+
+    def terms(self, c: NDArray[np.float64], d: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The removed terms' coefficients t for the commands ``c`` on the map ``d``: least
+        squares of the rest."""
+        if self.G.shape[1] == 0:
+            return np.zeros(0)
+        return np.linalg.lstsq(self.G, -(self.A @ c + d), rcond=None)[0]
+
+    def command_std(self, point_std: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Standard deviation (m) of each unbounded command from independent map errors of
+        standard deviation ``point_std`` (m) at the panel points, through the fit as it is
+        (the terms' removal included): c = -N^+ A^T P e with P = I - Q Q^T, so
+        Cov c = N^+ A^T P S P A N^+, S = diag(std^2). An actuator with a point of unknown
+        spread (NaN) on its panels gets NaN."""
+        known = np.isfinite(point_std)
+        v = np.where(known, point_std, 0.0) ** 2
+        A, Q, QA = self.A, self.Q, self.QA
+        ASQ = np.asarray(A.T @ (v[:, None] * Q))  # (actuators, k)
+        M = ((A.T @ sp.diags(v) @ A).toarray() - ASQ @ QA - QA.T @ ASQ.T
+             + QA.T @ ((Q.T * v) @ Q) @ QA)
+        Vk, s = self.V[:, self.kept], self.scale
+        Np = (s[:, None] * Vk / self.w[self.kept]) @ (Vk.T * s)  # N^+ on N's range
+        std = np.sqrt(np.maximum(np.einsum("ij,jk,ki->i", Np, M, Np), 0.0))
+        unknown = np.asarray(abs(A[~known]).sum(axis=0)).ravel() > 0
+        return np.where(unknown, np.nan, std)
+
+
+def _scaled_eigh(M: NDArray[np.float64], scale: NDArray[np.float64]
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """Eigenvalues and vectors of S M S (S = diag(scale)) and which lie above the null share."""
+    w, V = np.linalg.eigh(scale[:, None] * M * scale[None, :])
+    return w, V, w > max(w.max(initial=0.0), 0.0) * NULL_SHARE
 
 
 def _unlocked(actuators: ActuatorLayout, held: NDArray[np.bool_], notes: list[str]) -> NDArray[np.bool_]:
@@ -179,7 +282,7 @@ def _undetermined_note(null: NDArray[np.float64], columns: NDArray[np.int64],
             "few map points on their panels): their commands are the least-norm choice"]
 
 
-def _term_columns(grid, ids: NDArray[np.int64], terms) -> tuple[NDArray[np.float64], list[str]]:
+def term_columns(grid, ids: NDArray[np.int64], terms) -> tuple[NDArray[np.float64], list[str]]:
     """Columns (points on the panels, k) of the ``terms`` (piston, tilt, focus; see
     :mod:`solver.fit`) at the grid points with ``ids`` >= 0, and the coefficient names."""
     X, Y = grid.XY
@@ -187,48 +290,6 @@ def _term_columns(grid, ids: NDArray[np.int64], terms) -> tuple[NDArray[np.float
     if not terms:
         return np.zeros((int(on.sum()), 0)), []
     return _design(X.ravel()[on], Y.ravel()[on], terms)
-
-
-def _bounded_fit(A: sp.csr_matrix, d: NDArray[np.float64], ranges: NDArray[np.float64],
-                 G: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
-    """(commands (m), term coefficients, how many commands sit at a limit) of :func:`_bounded`
-    with the stroke ``ranges`` (m, (actuators, 2))."""
-    lo, hi = ranges[:, 0], ranges[:, 1]
-    c, t = _bounded(A, d, lo, hi, G)
-    clipped = int(np.sum((c <= lo + 1e-15) & np.isfinite(lo)) + np.sum((c >= hi - 1e-15) & np.isfinite(hi)))
-    return c, t, clipped
-
-
-def _bounded(A: sp.csr_matrix, d: NDArray[np.float64], lo, hi,
-             G: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """argmin ||A c + G t + d|| over lo <= c <= hi (m) and free coefficients t of the columns
-    ``G`` (the removed terms: pointing takes them whatever the commands leave); returns (c, t).
-    With Q an orthonormal basis of G the problem in c is ||(I - Q Q^T)(A c + d)||, whose normal
-    matrix N = V diag(w) V^T gives the small equivalent ||diag(sqrt w) V^T c - y|| (BVLS on
-    (actuators x actuators), never the dense points x actuators matrix; singular N allowed)."""
-    Q, _ = np.linalg.qr(G) if G.shape[1] else (np.zeros((len(d), 0)), None)
-    QA = np.asarray((A.T @ Q).T)  # (k, actuators)
-    N = (A.T @ A).toarray() - QA.T @ QA
-    b = A.T @ d - QA.T @ (Q.T @ d)
-    w, V = np.linalg.eigh(N)
-    keep = w > max(w.max(), 0.0) * 1e-13
-    root = np.sqrt(w[keep])
-    R = root[:, None] * V[:, keep].T
-    y = -(V[:, keep].T @ b) / root
-    c = lsq_linear(R, y, bounds=(lo, hi), method="bvls", tol=1e-14).x
-    t = np.linalg.lstsq(G, -(A @ c + d), rcond=None)[0] if G.shape[1] else np.zeros(0)
-    return c, t
-
-
-def command_std(A: sp.csr_matrix, point_std: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Standard deviation (m) of each unbounded least-squares command from independent map
-    errors of standard deviation ``point_std`` (m) at the rows of ``A`` (the free actuators'
-    columns: a locked one is no unknown): diag(P A^T diag(s^2) A P), P the pseudo-inverse of
-    A^T A."""
-    s = np.where(np.isfinite(point_std), point_std, 0.0)
-    P = np.linalg.pinv((A.T @ A).toarray())
-    G = (A.T @ sp.diags(s * s) @ A).toarray()
-    return np.sqrt(np.maximum(np.einsum("ij,jk,ki->i", P, G, P), 0.0))
 
 
 def half_path_rms(grid, axial: NDArray[np.float64], focal_length: float, remove=()) -> float:

@@ -6,7 +6,8 @@ over the disk, so a coefficient variance of mean square x area / phases) plus, w
 the harmonic fit's error: independent coefficients of (r / a)^m cos / sin (m phi) of variance
 s^2 / N (m = 0) and 2 s^2 / N (m >= 1) for N targets of std s. The commands are linear in the
 map, c = L delta (:func:`solver.correction.correct` without stroke limits: the ``remove`` terms
-taken off, then -(A^T A)^+ A^T on the panel points), so each actuator's variance is
+taken off and refitted with the commands, :class:`solver.correction.JointFit`), so each
+actuator's variance is
 sum_k var_k (L f_k)^2 over those shapes f_k. The share along delta_c, which an estimated gain
 removes from the map, is kept here: an upper bound (a radial shape, mostly focus-like).
 Frame and units: aperture plane (x, y) in m, maps and commands in m.
@@ -21,7 +22,7 @@ from numpy.typing import NDArray
 from scipy.special import jn_zeros, jv
 
 from solver.actuators import ActuatorLayout
-from solver.correction import influence_matrix, panel_ids
+from solver.correction import JointFit, influence_matrix, panel_ids, term_columns
 from solver.fit import remove_terms
 
 
@@ -62,12 +63,11 @@ def command_std_from_budget(grid, layout, actuators: ActuatorLayout, remove: tup
     """Standard deviation (m) of each actuator's command from the map error ``shapes`` ((grid
     shape, coefficient variance) pairs, :func:`budget_shapes`)."""
     ids = panel_ids(grid, np.where(grid.mask, 0.0, np.nan), layout)
-    A = influence_matrix(grid, ids, layout, actuators)
-    P = np.linalg.pinv((A.T @ A).toarray())
+    fit = JointFit(influence_matrix(grid, ids, layout, actuators), term_columns(grid, ids, remove)[0])
     on = ids.ravel() >= 0
     var = np.zeros(actuators.n_actuators)
     for shape, v in shapes:
-        kept, _ = remove_terms(grid, grid.masked(shape), remove)
-        c = P @ (A.T @ kept.ravel()[on])
+        kept, _ = remove_terms(grid, np.where(ids >= 0, shape, np.nan), remove)
+        c = fit.least_norm(kept.ravel()[on])
         var += v * c * c
     return np.sqrt(var)

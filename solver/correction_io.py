@@ -332,9 +332,15 @@ def summary_lines(run: CorrectionRun) -> list[str]:
     lines.append(f"commands: max |c| {np.max(np.abs(c.commands)) / scale:.{DECIMALS[unit] - 1}f} {unit}"
                  + (f", {c.clipped} at their range limit" if c.clipped else ""))
     if c.command_std is not None:
-        med, top = np.median(c.command_std) / scale, np.max(c.command_std) / scale
-        lines.append(f"command error from the map's std: median {med:.{DECIMALS[unit]}f} {unit}, "
-                     f"max {top:.{DECIMALS[unit]}f} {unit}")
+        known = c.command_std[np.isfinite(c.command_std)]
+        if known.size:
+            med, top = np.median(known) / scale, np.max(known) / scale
+            lines.append(f"command error from the map's std: median {med:.{DECIMALS[unit]}f} "
+                         f"{unit}, max {top:.{DECIMALS[unit]}f} {unit}")
+        if known.size < c.command_std.size:
+            lines.append(f"{c.command_std.size - known.size} actuators have points of unknown "
+                         "spread (deformation_std NaN) on their panels: their command error is "
+                         "unknown (nan)")
     lines += [line for line in header_lines(run, ()) if line.startswith("Ruze")]
     lines += c.notes
     return lines

@@ -22,6 +22,7 @@ from tests.solver.test_correction import (
     LAYOUT,
     SCENE,
     _dense_system,
+    _joint_reference,
     _locked_layout,
     _rng_map,
     _surface_file,
@@ -204,12 +205,22 @@ def test_bounded_fit_takes_the_removed_terms_jointly(one_sided):
         assert best == pytest.approx(free.rms_after, rel=1e-3)
 
 
-def test_without_bounds_the_commands_are_the_plain_least_squares():
-    acts = corners_layout(LAYOUT)
+@pytest.mark.parametrize("kind", ["corners", "screws"])
+def test_without_bounds_the_commands_are_the_joint_least_squares(kind):
+    """Commands and removed terms fitted together, the commands of least norm: no worse than
+    fitting the terms first, and as good as a free stroke range that never binds (the two
+    paths once differed: a --stroke of 10 mm shifted every command by a plane)."""
+    acts = corners_layout(LAYOUT) if kind == "corners" else screws_layout(LAYOUT)
     result = correct(GRID, _rng_map(3), LAYOUT, acts, ("piston", "tilt"))
-    M, target = _dense_system(result.before, LAYOUT, acts)
-    ref, *_ = np.linalg.lstsq(M, -target, rcond=None)
+    ref = _joint_reference(result.before, LAYOUT, acts)
     np.testing.assert_allclose(result.commands, ref, atol=1e-9 * np.max(np.abs(ref)))
+    M, target = _dense_system(result.before, LAYOUT, acts)
+    first, *_ = np.linalg.lstsq(M, -target, rcond=None)
+    assert result.rms_after <= np.sqrt(np.mean((target + M @ first) ** 2)) * (1 + 1e-9)
+    wide = build_layout(acts.ids, acts.xy, [acts.panels_of(a) for a in range(acts.n_actuators)],
+                        np.tile([-1.0, 1.0], (acts.n_actuators, 1)), LAYOUT)
+    bounded = correct(GRID, _rng_map(3), LAYOUT, wide, ("piston", "tilt"))
+    assert bounded.rms_after == pytest.approx(result.rms_after, rel=1e-6)
 
 
 # --- F7: commands the map does not determine ------------------------------------------------
