@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import fcntl
 import json
+import math
 import os
 import zlib
 from dataclasses import asdict, dataclass
@@ -95,12 +96,40 @@ def read_journal(path: str | Path) -> tuple[dict[str, Any], list[Record], int]:
                             power=tuple(body["power"]), time=body["time"])
         except (KeyError, TypeError) as exc:
             raise JournalError(f"{path}: line {number} is not a step record") from exc
+        problem = record_problem(record)
+        if problem:  # a CRC guards against damage, not against a hand-edited or foreign journal
+            raise JournalError(f"{path}: line {number} (step {record.n}) {problem}")
         if record.n != len(records):
             raise JournalError(f"{path}: line {number} holds step {record.n}, expected "
                                f"{len(records)} (records out of order or duplicated)")
         records.append(record)
         good += len(line)
     return header, records, good
+
+
+def _real(value: Any) -> bool:
+    """Whether ``value`` is a finite JSON number (not a bool, a string or null)."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def record_problem(record: Record) -> str:
+    """What makes a record's values unusable, in words ("" when none): indices that are not
+    integers, axes (rad) or a time (s) that are not finite numbers, or readings (W) that are
+    not a non-empty list of finite powers > 0 (a power meter reads no 0 W nor a negative one)."""
+    if not all(isinstance(v, int) and not isinstance(v, bool) for v in (record.n, record.i, record.j)) \
+            or not isinstance(record.kind, str):
+        return "has indices that are not integers"
+    axes = (*record.command, *record.readback)
+    if len(record.command) != 2 or len(record.readback) != 2 or not all(_real(v) for v in axes):
+        return "has commanded or read-back axes that are not two finite numbers (rad)"
+    if not _real(record.time):
+        return "has a time that is not a finite number (s)"
+    if not record.power:
+        return "holds no power reading"
+    for value in record.power:
+        if not (_real(value) and value > 0):
+            return f"holds the power reading {json.dumps(value)}, not a finite power > 0 W"
+    return ""
 
 
 class Journal:

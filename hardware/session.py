@@ -28,7 +28,7 @@ from hardware.instruments.motion import MotionController
 from hardware.instruments.power_meter import PowerMeter
 from hardware.interp import SphereField
 from hardware.journal import Journal, Record, read_journal
-from hardware.plan import ScanPlan, w_to_dbm
+from hardware.plan import REFERENCE, ScanPlan, w_to_dbm
 from hardware.rig import Rig
 from hardware.sim.rig import Faults, SimulatedRig
 from hardware.sim.settings import SimSettings
@@ -217,6 +217,12 @@ def check_journal_plan(plan: ScanPlan, header: Mapping[str, Any], records: Seque
                 abs(a - b) <= 1e-9 for a, b in zip(record.command, command, strict=True)):
             raise JournalError(f"{path}: step {record.n} of the journal is not this plan's (cell or "
                                "commanded axes differ): the journal belongs to another plan")
+        # the plan decides how many readings a step takes (acquire.scan): another count is a
+        # hand-edited journal, whose mean and spread would be of other readings
+        count = plan.reference_samples if step.kind == REFERENCE else plan.samples_per_point
+        if len(record.power) != count:
+            raise JournalError(f"{path}: line {record.n + 2} (step {record.n}) holds "
+                               f"{len(record.power)} power readings, the plan takes {count}")
 
 
 def park(rig: Rig, *, resources: Mapping[str, str] | None = None, simulate: bool = False,

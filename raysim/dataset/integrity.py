@@ -60,13 +60,26 @@ def resume_hint(path: str) -> str:
     return f"run `raysim dataset SPEC -o {path} --resume` with the store's spec to recompute it"
 
 
-def checksum(values: dict[str, np.ndarray]) -> str:
-    """SHA-256 (hex) of named arrays: each name, then its values' bytes in C order."""
-    sha = hashlib.sha256()
+def checksum(values: dict[str, np.ndarray], identity: str = "") -> str:
+    """SHA-256 (hex) of ``identity`` (which unit the values are), then of named arrays: each
+    name, then its values' bytes in C order."""
+    sha = hashlib.sha256(identity.encode())
     for name in sorted(values):
         sha.update(name.encode())
         sha.update(np.ascontiguousarray(values[name]).tobytes())
     return sha.hexdigest()
+
+
+def sample_checksum(values: dict[str, np.ndarray], index: int, seed: int) -> str:
+    """The checksum of sample ``index`` (whose seed is ``seed``) holding ``values``: its index
+    and seed are hashed with its data, so a sample's chunks moved to another sample's place
+    (a bad merge or copy of stores) fail it, as a single damaged chunk does."""
+    return checksum(values, f"sample {int(index)} seed {int(seed)}\n")
+
+
+def ideal_checksum(values: np.ndarray, f_index: int) -> str:
+    """The checksum of the ideal intensity of frequency ``f_index`` (its index hashed too)."""
+    return checksum({"intensity_ideal": values}, f"frequency {int(f_index)}\n")
 
 
 def is_data(array: ArraySpec | Any, name: str) -> bool:
@@ -105,23 +118,35 @@ class Repairs:
 
     arrays: dict[str, np.ndarray] = field(default_factory=dict)
     attributes: dict[str, Any] = field(default_factory=dict)
+    array_attributes: dict[str, dict[str, Any]] = field(default_factory=dict)  # name -> its attributes
 
     @property
     def names(self) -> tuple[str, ...]:
-        """What is rewritten, for the run's summary (attributes as ``attribute NAME``)."""
+        """What is rewritten, for the run's summary (attributes as ``attribute NAME``, an
+        array's own as ``NAME attributes``)."""
         attrs = [k for k in self.attributes if k not in ("spec_source", "spec_base")]
-        return (*sorted(self.arrays), *(f"attribute {k}" for k in attrs))
+        return (*sorted(self.arrays), *(f"{k} attributes" for k in sorted(self.array_attributes)),
+                *(f"attribute {k}" for k in attrs))
 
 
-def check_store(group: zarr.Group, path: str, spec: DatasetSpec) -> Repairs:
+def check_store(group: zarr.Group, path: str, spec: DatasetSpec,
+                static: dict[str, np.ndarray] | None = None) -> Repairs:
     """Refuse (DatasetError, one line naming the store and the array, nothing touched) a store
     an array of the spec's layout is missing from, or whose metadata cannot be read or do not
-    match the layout; return the creation-time arrays and attributes to rewrite."""
+    match the layout; return the creation-time arrays and attributes to rewrite. ``static``:
+    :func:`static_arrays` of the spec, when the caller has them already."""
     for name, array in layout(spec).items():
         _check_array(group, path, name, array)
-    arrays = {name: values for name, values in static_arrays(spec).items()
-              if not _holds(group[name], values)}
-    return Repairs(arrays, _attribute_repairs(dict(group.attrs), spec))
+    static = static_arrays(spec) if static is None else static
+    arrays = {name: values for name, values in static.items() if not _holds(group[name], values)}
+    return Repairs(arrays, _attribute_repairs(dict(group.attrs), spec), _array_attribute_repairs(group, spec))
+
+
+def _array_attribute_repairs(group: zarr.Group, spec: DatasetSpec) -> dict[str, dict[str, Any]]:
+    """The arrays whose own attributes are not the layout's (an ``add_offset`` or
+    ``scale_factor`` added, which xarray would apply on reading): name -> the layout's."""
+    return {name: array.attrs for name, array in layout(spec).items()
+            if _json(dict(group[name].attrs)) != _json(array.attrs)}
 
 
 def _check_array(group: zarr.Group, path: str, name: str, array: ArraySpec) -> None:
@@ -155,9 +180,13 @@ def _attribute_repairs(stored: dict[str, Any], spec: DatasetSpec) -> dict[str, A
 
     want = spec_attributes(spec)
     out = {k: want[k] for k in CHECKED_ATTRS if _json(stored.get(k)) != _json(want[k])}
-    if not _same_toml(stored.get("spec"), spec.text):
-        out.update(spec=spec.text, spec_source=spec.source, spec_base=str(spec.base))
-    if not _same_toml(stored.get("scene"), spec.scene_text):
+    if not same_toml(stored.get("spec"), spec.text):
+        out["spec"] = spec.text
+    # workers resolve the files the scene names against spec_base: after the project folder
+    # was moved or copied it must be the spec given to this resume, never the old folder's
+    where = {"spec_source": spec.source, "spec_base": str(spec.base)}
+    out.update({k: v for k, v in where.items() if stored.get(k) != v})
+    if not same_toml(stored.get("scene"), spec.scene_text):
         out["scene"] = spec.scene_text
     return out
 
@@ -166,7 +195,7 @@ def _json(value: Any) -> str:
     return json.dumps(value, sort_keys=True)
 
 
-def _same_toml(stored: Any, text: str) -> bool:
+def same_toml(stored: Any, text: str) -> bool:
     """Whether ``stored`` is TOML text with the content of ``text`` (comments aside)."""
     if not isinstance(stored, str):
         return False
@@ -181,6 +210,8 @@ def repair(group: zarr.Group, repairs: Repairs, spec: DatasetSpec) -> None:
     checksums (what readers compare with) as they now are."""
     for name, values in repairs.arrays.items():
         group[name][...] = values
+    for name, attrs in repairs.array_attributes.items():
+        group[name].attrs.put(attrs)
     if repairs.attributes:
         group.attrs.update(repairs.attributes)
     record_static(group, spec)
@@ -188,12 +219,20 @@ def repair(group: zarr.Group, repairs: Repairs, spec: DatasetSpec) -> None:
 
 def record_static(group: zarr.Group, spec: DatasetSpec) -> None:
     """Write :data:`STATIC_ATTR`: the checksums of the creation-time arrays and of the checked
-    attributes as stored now, and the names of the per-sample data arrays."""
+    root attributes as stored now, of every array's own attributes, and the names of the
+    per-sample data arrays."""
     arrays = {name: checksum({name: np.asarray(group[name][...])}) for name in static_names(spec)}
     current = {"arrays": arrays, "attributes": _attributes_checksum(dict(group.attrs)),
+               "array_attributes": {name: _own_attributes_checksum(group[name]) for name in layout(spec)},
                "data": spec_data_names(spec)}
     if group.attrs.get(STATIC_ATTR) != current:
         group.attrs[STATIC_ATTR] = current
+
+
+def _own_attributes_checksum(arr: Any) -> str:
+    """SHA-256 of an array's own attributes: the CF ones (``add_offset``, ``scale_factor``,
+    ``_FillValue``, ``units``) change what xarray returns for the same stored values."""
+    return hashlib.sha256(_json(dict(arr.attrs)).encode()).hexdigest()
 
 
 def _attributes_checksum(attrs: dict[str, Any]) -> str:
@@ -203,16 +242,22 @@ def _attributes_checksum(attrs: dict[str, Any]) -> str:
 
 # --- readers: no spec, the checksums recorded in the store ------------------------------------------
 def check_static(group: zarr.Group, path: str) -> None:
-    """Refuse (CorruptStoreError) a store whose creation-time arrays or checked attributes no
-    longer match the checksums it recorded; a store that recorded none is not checked."""
+    """Refuse (CorruptStoreError) a store whose creation-time arrays, their attributes, the
+    arrays' own attributes or the checked root attributes no longer match the checksums it
+    recorded, or that records none (every store of this format records them when made: their
+    absence is damage, which would switch every check here off)."""
     sums = group.attrs.get(STATIC_ATTR)
-    if not isinstance(sums, dict):
-        return
+    if not isinstance(sums, dict) or not all(isinstance(sums.get(k), dict)
+                                             for k in ("arrays", "array_attributes")):
+        raise CorruptStoreError(f"{path}: its attribute {STATIC_ATTR!r} (what its coordinates, split "
+                                f"and attributes are checked against) is missing or damaged; "
+                                f"{resume_hint(path)}")
     if _attributes_checksum(dict(group.attrs)) != sums.get("attributes"):
         raise CorruptStoreError(f"{path}: its attributes (diameter, sphere, spec, ...) were changed "
                                 f"since it was made; run `raysim dataset SPEC -o {path} --resume` "
                                 "with the store's spec to rewrite them")
-    for name, expected in dict(sums.get("arrays", {})).items():
+    _check_array_attributes(group, path, sums["array_attributes"])
+    for name, expected in sums["arrays"].items():
         try:
             actual = checksum({name: np.asarray(group[name][...])})
         except Exception:
@@ -223,24 +268,43 @@ def check_static(group: zarr.Group, path: str) -> None:
                                     "store's spec to rewrite it")
 
 
-def listed_data_names(group: zarr.Group) -> list[str]:
-    """The per-sample data arrays present in a store (:func:`is_data`), sorted."""
-    return sorted(name for name, arr in group.arrays() if is_data(arr, name))
+def _check_array_attributes(group: zarr.Group, path: str, expected: dict[str, Any]) -> None:
+    """Refuse a store an array of which has other own attributes (``add_offset``, ``units``,
+    ...) than when it was made, or whose metadata cannot be read, naming the array."""
+    for name, digest in expected.items():
+        try:
+            actual = _own_attributes_checksum(group[name])
+        except Exception:
+            actual = None
+        if actual != digest:
+            raise CorruptStoreError(f"{path}: its array {name!r} is missing, its metadata cannot be read "
+                                    f"or its attributes (units, add_offset, ...) were changed since "
+                                    f"it was made; {resume_hint(path)}")
 
 
-def data_names(group: zarr.Group) -> list[str]:
+def listed_data_names(group: zarr.Group, path: str = "the store") -> list[str]:
+    """The per-sample data arrays present in a store (:func:`is_data`), sorted; a listing that
+    fails (an array's ``zarr.json`` garbled) raises CorruptStoreError."""
+    try:
+        return sorted(name for name, arr in group.arrays() if is_data(arr, name))
+    except Exception as exc:
+        raise CorruptStoreError(f"{path}: the metadata of one of its arrays cannot be read "
+                                f"({type(exc).__name__}); {resume_hint(path)}") from exc
+
+
+def data_names(group: zarr.Group, path: str = "the store") -> list[str]:
     """The per-sample data arrays of a store: as recorded at creation, else as listed."""
     sums = group.attrs.get(STATIC_ATTR)
     if isinstance(sums, dict) and isinstance(sums.get("data"), list):
         return [str(n) for n in sums["data"]]
-    return listed_data_names(group)
+    return listed_data_names(group, path)
 
 
 def open_arrays(group: zarr.Group, path: str, names: Sequence[str]) -> dict[str, Any]:
-    """The arrays ``names`` of a store and its ``status`` and ``checksum``, opened once
+    """The arrays ``names`` of a store and its ``status``, ``checksum`` and ``seed``, opened once
     (CorruptStoreError, naming the array, where one is missing or its metadata unreadable)."""
     out = {}
-    for name in (*names, "status", "checksum"):
+    for name in (*names, "status", "checksum", "seed"):
         try:
             out[name] = group[name]
         except Exception as exc:
@@ -266,8 +330,9 @@ def read_verified(arrays: dict[str, Any], path: str, indices: Sequence[int] | np
         if status is None or int(status) != _DONE:
             raise CorruptSampleError(f"{path}: sample {index} is not done; {resume_hint(path)}")
         sample = {name: read[name][k] for name in names}
-        stored = read["checksum"][k]
-        if stored is None or any(v is None for v in sample.values()) or str(stored) != checksum(sample):
+        stored, seed = read["checksum"][k], read["seed"][k]
+        if stored is None or seed is None or any(v is None for v in sample.values()) \
+                or str(stored) != sample_checksum(sample, index, int(seed)):
             raise CorruptSampleError(f"{path}: sample {index}'s stored data do not match its checksum "
                                      f"(a chunk was removed or damaged); {resume_hint(path)}")
     return {name: np.stack(read[name]) for name in names}
@@ -315,9 +380,9 @@ def read_ideals(group: zarr.Group, path: str) -> tuple[np.ndarray, np.ndarray, n
                                 f"({type(exc).__name__}); {resume_hint(path)}") from exc
     read = _read_all(arrays, np.arange(arrays["intensity_ideal"].shape[0]))
     ok = np.array([s is not None and int(s) == _DONE and v is not None and c is not None
-                   and str(c) == checksum({"intensity_ideal": v})
-                   for s, c, v in zip(read["ideal_status"], read["ideal_checksum"], read["intensity_ideal"],
-                                      strict=True)], dtype=bool)
+                   and str(c) == ideal_checksum(v, f)
+                   for f, (s, c, v) in enumerate(zip(read["ideal_status"], read["ideal_checksum"],
+                                                     read["intensity_ideal"], strict=True))], dtype=bool)
     shape = tuple(arrays["intensity_ideal"].shape[1:])
     ideals = [v if v is not None else np.full(shape, np.nan) for v in read["intensity_ideal"]]
     return frequencies, np.stack(ideals) if ideals else np.empty((0, *shape)), ok

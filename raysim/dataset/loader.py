@@ -23,8 +23,10 @@ With ``normalise`` (default) both are standardised, (x - mean) / std, by the sta
 the *training* split (:class:`Statistics`: the mean and standard deviation over every finite
 value of every done training sample), computed once per representation and source and kept
 in the store's attributes (``normalisation``) when the store is writable, recomputed when the
-training samples done change. NaN (outside the aperture, beyond the rim image, a missing
-point) becomes ``fill`` after normalisation; :attr:`Loader.target_mask` marks the aperture.
+training samples done or their checksums change, or the kept entry is malformed or edited (its
+digest covers the samples' indices and checksums and its own values). NaN (outside the
+aperture, beyond the rim image, a missing point) becomes ``fill`` after normalisation;
+:attr:`Loader.target_mask` marks the aperture.
 
 Nothing is returned unverified: opening checks the store's coordinates, split and attributes
 against the checksums it recorded (:func:`raysim.dataset.integrity.check_static`), and every
@@ -37,11 +39,13 @@ the ideal intensities against ``ideal_checksum``. A sample that fails raises
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 import numbers
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 import zarr
@@ -138,8 +142,12 @@ class Loader:
         self.store = str(store)
         self.group = open_readonly(self.store)
         integrity.check_static(self.group, self.store)
-        if SOURCES[source] not in self.group:
+        if source == "measured" and self.group.attrs.get("measurement", "none") == "none":
             raise DatasetError(f"{self.store}: no {SOURCES[source]} (its spec has no [measurement] table)")
+        self._arrays  # noqa: B018  (opened now: a missing or garbled array is one line, here)
+        if SOURCES[source] not in self._arrays:
+            raise integrity.CorruptStoreError(f"{self.store}: its array {SOURCES[source]!r} is not "
+                                              f"listed; {integrity.resume_hint(self.store)}")
         self.representation, self.source, self.split = representation, source, split
         self.batch_size, self.shuffle, self.seed, self.drop_last = int(batch_size), shuffle, seed, drop_last
         self.normalise, self.fill, self.dtype = normalise, float(fill), np.dtype(dtype)
@@ -163,7 +171,7 @@ class Loader:
     @cached_property
     def _names(self) -> list[str]:
         """The per-sample data arrays a sample's checksum covers."""
-        return integrity.data_names(self.group)
+        return integrity.data_names(self.group, self.store)
 
     @cached_property
     def _arrays(self) -> dict:
@@ -217,13 +225,15 @@ class Loader:
 
     @cached_property
     def statistics(self) -> Statistics:
-        """The training split's statistics: from the store's attributes when they are current,
-        else computed (once) and written there (when the store is writable)."""
+        """The training split's statistics: from the store's attributes when the entry is
+        whole and its digest matches the training samples done now (their indices and
+        checksums) and its own values, else computed (once) and written there (when the store
+        is writable)."""
         train = samples(self.group, "train")
-        digest = hashlib.sha256(train.astype(np.int64).tobytes()).hexdigest()[:16]
-        kept = dict(self.group.attrs.get(ATTRIBUTE, {}))
-        if self.key in kept and kept[self.key].get("digest") == digest:
-            return Statistics(**kept[self.key])
+        sums = self._checksums(train)
+        kept = _kept_statistics(self.group.attrs.get(ATTRIBUTE), self.key, train, sums)
+        if kept is not None:
+            return kept
         if not len(train):
             raise DatasetError(f"{self.store}: no training sample is done: no statistics to normalise by")
         inputs, targets = _Moments(), _Moments()
@@ -231,7 +241,8 @@ class Loader:
             x, y = self.raw(train[start:start + 64])
             inputs.add(x)
             targets.add(y)
-        stats = Statistics(inputs.mean, inputs.std, targets.mean, targets.std, len(train), digest)
+        values = (inputs.mean, inputs.std, targets.mean, targets.std, len(train))
+        stats = Statistics(*values, _statistics_digest(train, sums, values))
         try:
             writable = zarr.open_group(self.store, mode="r+")
             current = dict(writable.attrs.get(ATTRIBUTE, {}))
@@ -240,6 +251,17 @@ class Loader:
         except Exception:  # a read-only store: the statistics live in this loader only
             pass
         return stats
+
+    def _checksums(self, indices: NDArray[np.int64]) -> list[str]:
+        """The stored checksums of the samples ``indices`` (what their statistics are keyed on:
+        other data under the same indices give other statistics)."""
+        try:
+            stored = np.asarray(self.group["checksum"][...])
+        except Exception as exc:
+            raise integrity.CorruptStoreError(f"{self.store}: its array 'checksum' cannot be read "
+                                              f"({type(exc).__name__}); {integrity.resume_hint(self.store)}"
+                                              ) from exc
+        return [str(stored[i]) for i in indices.tolist()]
 
     # --- batches -------------------------------------------------------------------------------
     def _finish(self, x: NDArray, y: NDArray) -> tuple[NDArray, NDArray]:
@@ -273,6 +295,34 @@ class Loader:
         self.epoch += 1
         for k in range(len(self)):
             yield self._finish(*self.raw(order[k * self.batch_size:(k + 1) * self.batch_size]))
+
+
+_FIELDS = ("input_mean", "input_std", "target_mean", "target_std", "samples", "digest")
+
+
+def _statistics_digest(train: NDArray[np.int64], sums: list[str], values: tuple) -> str:
+    """SHA-256 (hex, 16 digits) of the training samples (indices and checksums) and of the
+    statistics' values: an entry edited, or left from other samples or data, no longer matches."""
+    text = json.dumps({"samples": train.astype(np.int64).tolist(), "checksums": sums,
+                       "values": [float(v) for v in values[:4]] + [int(values[4])]})
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _kept_statistics(attribute: Any, key: str, train: NDArray[np.int64],
+                     sums: list[str]) -> Statistics | None:
+    """The statistics kept under ``key`` in the ``normalisation`` attribute when they are
+    current; None (compute them again) when absent, malformed or not current."""
+    entry = attribute.get(key) if isinstance(attribute, dict) else None
+    if not isinstance(entry, dict) or set(entry) != set(_FIELDS):
+        return None
+    numbers_ok = all(isinstance(entry[k], numbers.Real) and not isinstance(entry[k], bool)
+                     for k in _FIELDS[:4])
+    if not numbers_ok or not isinstance(entry["samples"], int) or not isinstance(entry["digest"], str):
+        return None
+    values = tuple(entry[k] for k in _FIELDS[:5])
+    if entry["digest"] != _statistics_digest(train, sums, values):
+        return None
+    return Statistics(*(float(v) for v in values[:4]), int(values[4]), entry["digest"])
 
 
 def samples(group: zarr.Group, split: str) -> NDArray[np.int64]:

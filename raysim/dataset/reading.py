@@ -30,8 +30,17 @@ def open_dataset(store: str | Path) -> xr.Dataset:
     store recorded (CorruptStoreError); the per-sample arrays are read unverified (use
     :func:`sample_fieldmap` or :class:`~raysim.dataset.loader.Loader`, which verify them).
     """
-    integrity.check_static(open_readonly(str(store)), str(store))  # one clear line if not trusted
-    ds = xr.open_zarr(str(store), consolidated=False)
+    path = str(store)
+    group = open_readonly(path)
+    integrity.check_static(group, path)  # one clear line if not trusted
+    # the sample arrays opened first: a missing or garbled one is named (xarray would raise a
+    # raw JSONDecodeError, or silently leave a variable out)
+    integrity.open_arrays(group, path, integrity.data_names(group, path))
+    try:
+        ds = xr.open_zarr(path, consolidated=False)
+    except Exception as exc:
+        raise integrity.CorruptStoreError(f"{path}: the metadata of one of its arrays cannot be read "
+                                          f"({type(exc).__name__}); {integrity.resume_hint(path)}") from exc
     names = [v for v in ds.data_vars if v.endswith(("_term_n", "_term_m"))]
     return ds.set_coords(names)
 
@@ -51,7 +60,7 @@ def sample_fieldmap(ds: xr.Dataset, index: int, source: str = "clean") -> xr.Dat
     path, group = _store_of(ds)
     sample = ds.isel(sample=index)
     number = int(sample["sample"].values)  # the sample's index in the store
-    names = integrity.data_names(group)
+    names = integrity.data_names(group, path)
     values = integrity.read_verified(integrity.open_arrays(group, path, names), path, [number], names)
     frequency = float(values["frequency_hz"][0])
     ideal = integrity.ideal_of(path, *integrity.read_ideals(group, path), frequency)

@@ -10,7 +10,9 @@ of measurement effects (see :mod:`raysim.dataset.effects`). Units are in key nam
 :class:`DatasetError` with one line naming the file and key.
 
 The fingerprint is a SHA-256 of the spec's content (the scene's too), blind to comments and
-layout: a store records it, and a store made by a different spec is refused on resume.
+layout, and of the bytes of every file the scene names (``inputs``: maps, panel tables): a
+store records it, and a store made by a different spec, or from another version of one of
+those files, is refused on resume.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from raysim.dataset.models import (
     RandomBumps,
     ZernikeSpectrum,
 )
+from raysim.distributed.inputs import input_digests
 from raysim.errors import RaysimError
 from raysim.files import find_input
 from raysim.methods import METHODS
@@ -83,6 +86,8 @@ class DatasetSpec:
     measurement: Measurement | None = None  # the [measurement] effects (raysim.dataset.effects)
     radiator: str = "fast"  # po, po+ptd: the sum of the elements' fields (fast or direct)
     radiator_tol: float = 1e-6  # the fast sum's relative accuracy
+    # (file the scene names, relative to base; its SHA-256), sorted: a tuple keeps the spec hashable
+    inputs: tuple[tuple[str, str], ...] = ()
 
     @cached_property
     def grid(self) -> ApertureGrid:
@@ -156,14 +161,24 @@ def _build(top: Table, text: str, source: str, base: Path) -> DatasetSpec:
     effects = top.raw("measurement", None)
     measurement = parse_measurement(effects) if effects is not None else None
     top.done()
-    canonical = {**top.data, "scene": scene_table}
-    fingerprint = hashlib.sha256(json.dumps(canonical, sort_keys=True).encode()).hexdigest()
+    inputs = input_digests(scene.files, base)
+    fingerprint = _fingerprint(top.data, scene_table, inputs)
     return DatasetSpec(
         name=str(name), description=str(description), samples=samples, seed=seed,
         method=method, frequencies=tuple(float(f) for f in freqs), validation_fraction=fraction,
         grid_n=grid_n, dtype=dtype, scene=scene, scene_text=scene_text,
         models=models, text=text, source=source, base=base, fingerprint=fingerprint,
-        measurement=measurement, radiator=radiator, radiator_tol=radiator_tol)
+        measurement=measurement, radiator=radiator, radiator_tol=radiator_tol,
+        inputs=tuple(inputs.items()))
+
+
+def _fingerprint(data: dict, scene_table: dict, inputs: dict[str, str]) -> str:
+    """SHA-256 of the spec's content, its scene's and the digests of the files the scene names
+    (left out when it names none: such a spec's fingerprint is the one it always had)."""
+    canonical = {**data, "scene": scene_table}
+    if inputs:
+        canonical["inputs"] = inputs
+    return hashlib.sha256(json.dumps(canonical, sort_keys=True).encode()).hexdigest()
 
 
 def _scene_source(top: Table, base: Path) -> tuple[str, dict]:

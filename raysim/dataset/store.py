@@ -17,11 +17,12 @@ Layout (Zarr format 3, every array with ``dimension_names`` and a ``units`` attr
   time) per sample.
 
 Every array a worker writes is chunked one sample per chunk, so workers never share a chunk.
-A sample's ``status`` is written after all its data and its ``checksum`` (SHA-256 of every
-per-sample data array, :func:`sample_checksum`): it is the completion marker, and ``resume``
-verifies every done sample against its checksum first (:func:`verify`; a chunk that does not
-decode, or was removed and reads as the fill value, fails), making the ones that fail
-pending again (:func:`reset`). ``intensity_ideal`` has ``ideal_checksum`` likewise. The
+A sample's ``status`` is written after all its data and its ``checksum`` (SHA-256 of its
+index and seed and of every per-sample data array, :func:`sample_checksum`): it is the
+completion marker, and ``resume`` verifies every done sample against its checksum first
+(:func:`verify`; a chunk that does not decode, or was removed and reads as the fill value,
+or a sample's chunks moved to another's place, fails), making the ones that fail pending
+again (:func:`reset`). ``intensity_ideal`` has ``ideal_checksum`` likewise. The
 arrays written at creation and the attributes are checked against the spec on resume, and
 against the ``static_checksums`` attribute by readers (:mod:`raysim.dataset.integrity`).
 Attributes hold the spec and scene text, the spec's fingerprint, the FieldMap
@@ -51,12 +52,17 @@ from raysim.dataset.integrity import (
     BOOKKEEPING,
     CHECKED_ATTRS,
     checksum,
+    ideal_checksum,
     listed_data_names,
     record_static,
+    same_toml,
     static_arrays,
 )
+from raysim.dataset.integrity import sample_checksum as integrity_sample_checksum
+from raysim.dataset.sampling import sample_seed
 from raysim.dataset.spec import DatasetError, DatasetSpec
 from raysim.dataset.store_layout import FORMAT, ArraySpec, layout
+from raysim.distributed.inputs import changed_inputs
 from raysim.version import VERSION_ATTR, __version__
 
 PENDING, DONE, FAILED = 0, 1, 2
@@ -139,13 +145,30 @@ def open_checked(path: str, spec: DatasetSpec) -> zarr.Group:
     except (FileNotFoundError, ValueError, KeyError) as exc:
         raise DatasetError(f"{path}: not a Zarr store ({exc.__class__.__name__})") from exc
     attrs = group.attrs
-    if attrs.get("raysim_dataset_format") != FORMAT:
-        raise DatasetError(f"{path}: not a raysim dataset store (format {FORMAT})")
+    check_format(path, attrs)
     if attrs.get("fingerprint") != spec.fingerprint:
+        _refuse_changed_inputs(path, attrs, spec)
         raise DatasetError(f"{path} was made by a different spec (dataset "
                            f"{attrs.get('name')!r}, fingerprint {str(attrs.get('fingerprint'))[:12]}, "
                            f"this spec {spec.fingerprint[:12]}): use a new store path")
     return group
+
+
+def _refuse_changed_inputs(path: str, attrs: Any, spec: DatasetSpec) -> None:
+    """Name the file when what differs from the store's fingerprint is a file the scene names
+    (its results would mix the file's two versions); return when the spec itself differs."""
+    if not same_toml(attrs.get("spec"), spec.text) or not same_toml(attrs.get("scene"), spec.scene_text):
+        return
+    recorded, current = attrs.get("inputs"), dict(spec.inputs)
+    if recorded is None and current:
+        raise DatasetError(f"{path}: made by an older raysim that did not record the contents of the "
+                           f"files its scene names ({', '.join(current)}), so a resume could mix "
+                           "two versions of them: make the dataset again at a new store path")
+    changed = changed_inputs(recorded, current)
+    if changed:
+        raise DatasetError(f"{path}: {changed[0]}, a file its scene names, is not the one the store "
+                           "was made from (its SHA-256 differs): restore that file, or make the "
+                           "dataset again at a new store path")
 
 
 def open_readonly(path: str) -> zarr.Group:
@@ -154,9 +177,22 @@ def open_readonly(path: str) -> zarr.Group:
         group = zarr.open_group(path, mode="r")
     except (FileNotFoundError, ValueError, KeyError) as exc:
         raise DatasetError(f"{path}: not a Zarr store ({exc.__class__.__name__})") from exc
-    if group.attrs.get("raysim_dataset_format") != FORMAT:
-        raise DatasetError(f"{path}: not a raysim dataset store")
+    check_format(path, group.attrs)
     return group
+
+
+def check_format(path: str, attrs: Any) -> None:
+    """Refuse (DatasetError, one line) a store that is not of this raysim's format: another
+    raysim's (older: its checksums do not record which sample they are, so they cannot be
+    verified as this one does) or none."""
+    made = attrs.get("raysim_dataset_format")
+    if made == FORMAT:
+        return
+    if isinstance(made, int) and not isinstance(made, bool) and made >= 1:
+        which = "an older" if made < FORMAT else "a newer"
+        raise DatasetError(f"{path}: made by {which} raysim (dataset store format {made}, this raysim "
+                           f"reads format {FORMAT}): make the dataset again at a new store path")
+    raise DatasetError(f"{path}: not a raysim dataset store (format {FORMAT})")
 
 
 def status(group: zarr.Group) -> np.ndarray:
@@ -186,9 +222,10 @@ def data_names(group: zarr.Group) -> list[str]:
 
 
 def sample_checksum(group: zarr.Group, index: int, names: list[str] | None = None) -> str:
-    """The checksum of sample ``index`` as stored (its data arrays read back)."""
+    """The checksum of sample ``index`` as stored (its data arrays and seed read back)."""
     names = data_names(group) if names is None else names
-    return checksum({name: np.asarray(group[name][index]) for name in names})
+    values = {name: np.asarray(group[name][index]) for name in names}
+    return integrity_sample_checksum(values, index, int(group["seed"][index]))
 
 
 def require_checksums(group: zarr.Group, path: str) -> None:
@@ -198,15 +235,18 @@ def require_checksums(group: zarr.Group, path: str) -> None:
                            "cannot be verified: make it again at a new store path")
 
 
-def verify(group: zarr.Group, path: str, names: list[str]) -> tuple[list[int], list[int]]:
+def verify(group: zarr.Group, path: str, names: list[str],
+           seeds: np.ndarray | None = None) -> tuple[list[int], list[int]]:
     """The done samples, and the done ideal intensities, whose stored data do not match
     their checksums (or do not decode); ``names``: the per-sample data arrays, as the spec's
-    layout gives them. A store that records no checksums, or whose bookkeeping cannot be
-    read, is refused (DatasetError, one line naming it)."""
+    layout gives them; ``seeds``: every sample's seed, as the spec gives them (default: the
+    store's). A store that records no checksums, or whose bookkeeping cannot be read, is
+    refused (DatasetError, one line naming it)."""
     try:
         require_checksums(group, path)
         done = np.flatnonzero(status(group) == DONE)
         sums = _read_each(group["checksum"], done)
+        seeds = np.asarray(group["seed"][...]) if seeds is None else seeds
         arrays = {name: group[name] for name in names}
         ideal_done = np.flatnonzero(ideal_status(group) == DONE)
         ideal_sums = _read_each(group["ideal_checksum"], ideal_done)
@@ -222,10 +262,11 @@ def verify(group: zarr.Group, path: str, names: list[str]) -> tuple[list[int], l
         read = {name: _read_each(arr, batch) for name, arr in arrays.items()}
         for k, index in enumerate(batch.tolist()):
             values = {name: read[name][k] for name in names}
-            if any(v is None for v in values.values()) or sums[lo + k] != checksum(values):
+            if any(v is None for v in values.values()) or \
+                    sums[lo + k] != integrity_sample_checksum(values, index, int(seeds[index])):
                 bad.append(index)
     ideal_bad = [int(f) for f, v, s in zip(ideal_done, ideal_values, ideal_sums, strict=True)
-                 if v is None or s != checksum({"intensity_ideal": v})]
+                 if v is None or s != ideal_checksum(v, int(f))]
     return bad, ideal_bad
 
 
@@ -271,6 +312,7 @@ class Writer:
 
     group: zarr.Group
     names: list[str] | None = None  # the per-sample data arrays (default: those in the store)
+    spec_seed: int | None = None  # the spec's seed, whence each sample's (default: the store's)
 
     def __post_init__(self) -> None:
         self._arrays: dict[str, Any] = {}
@@ -316,8 +358,15 @@ class Writer:
         self._put(index, items)
         if self.names is None:  # the same for every sample of the store
             self.names = data_names(self.group)
-        self["checksum"][index] = checksum({name: np.asarray(self[name][index]) for name in self.names})
+        values = {name: np.asarray(self[name][index]) for name in self.names}
+        self["checksum"][index] = integrity_sample_checksum(values, index, self._seed(index))
         self["status"][index] = DONE
+
+    def _seed(self, index: int) -> int:
+        """Sample ``index``'s seed: from the spec's when known (no read of the store's array)."""
+        if self.spec_seed is not None:
+            return sample_seed(self.spec_seed, index)
+        return int(self["seed"][index])
 
     def failed(self, index: int, reason: str, seconds: float = math.nan) -> None:
         """Mark the sample failed with a one-line ``reason``."""
@@ -331,7 +380,7 @@ class Writer:
         if intensity is not None:
             self["intensity_ideal"][f_index] = intensity
             stored = np.asarray(self["intensity_ideal"][f_index])
-            self["ideal_checksum"][f_index] = checksum({"intensity_ideal": stored})
+            self["ideal_checksum"][f_index] = ideal_checksum(stored, f_index)
             self["ideal_status"][f_index] = DONE
         else:
             self["ideal_error"][f_index] = " ".join(reason.split())[:500]
@@ -349,6 +398,7 @@ def _attributes(spec: DatasetSpec) -> dict[str, Any]:
         "spec_source": spec.source,
         "spec_base": str(spec.base),
         "scene": spec.scene_text,
+        "inputs": dict(spec.inputs),
         "samples": spec.samples,
         "seed": spec.seed,
         "method": spec.method,

@@ -14,7 +14,9 @@ import numpy as np
 from raysim.dataset.effects import PREFIX, VARIABLES
 from raysim.dataset.spec import DatasetSpec
 
-FORMAT = 1
+#: the store's format (attribute ``raysim_dataset_format``); 2: a sample's checksum hashes its
+#: index and seed with its data, an ideal intensity's its frequency's index (1 did not)
+FORMAT = 2
 _COORD_CHUNK = 65536
 
 
@@ -69,7 +71,9 @@ def layout(spec: DatasetSpec) -> dict[str, ArraySpec]:
         "ideal_status": ArraySpec(("frequency",), (nf,), (1,), "int8", 0,
                                   {"units": "1", "long_name": "status of intensity_ideal", **flags}),
         "ideal_checksum": ArraySpec(("frequency",), (nf,), (1,), "str", "",
-                                    {"units": "1", "long_name": "SHA-256 of intensity_ideal (hex)"}),
+                                    {"units": "1",
+                                     "long_name": "SHA-256 of the frequency's index and intensity_ideal "
+                                                  "(hex, raysim.dataset.integrity.ideal_checksum)"}),
         "ideal_error": ArraySpec(("frequency",), (nf,), (1,), "str", "",
                                  {"units": "1", "long_name": "why the ideal intensity failed"}),
         "deformation": _per_sample(n, ("y", "x"), (grid.N, grid.N), spec.dtype, np.nan, "m",
@@ -86,7 +90,8 @@ def layout(spec: DatasetSpec) -> dict[str, ArraySpec]:
         "status": _per_sample(n, (), (), "int8", 0, "1", "sample status (completion marker)", **flags),
         "error": _per_sample(n, (), (), "str", "", "1", "why the sample failed"),
         "checksum": _per_sample(n, (), (), "str", "", "1",
-                                "SHA-256 of the sample's data arrays (hex, raysim.dataset.store.checksum)"),
+                                "SHA-256 of the sample's index, seed and data arrays "
+                                "(hex, raysim.dataset.integrity.sample_checksum)"),
         "seconds": _per_sample(n, (), (), "float64", np.nan, "s", "wall-clock time of the sample's task"),
         "cpu_seconds": _per_sample(n, (), (), "float64", np.nan, "s",
                                    "CPU time of the sample's task (all threads of its worker process)"),

@@ -63,7 +63,7 @@ def context(store: str, fingerprint: str) -> Context:
         raise DatasetError(f"{store}: the store's spec changed under a running dataset")
     import zarr
 
-    return Context(spec, Writer(zarr.open_group(store, mode="r+"), spec_data_names(spec)))
+    return Context(spec, Writer(zarr.open_group(store, mode="r+"), spec_data_names(spec), spec.seed))
 
 
 def run_ideal(store: str, fingerprint: str, f_index: int, device: str = "cpu") -> dict[str, Any]:

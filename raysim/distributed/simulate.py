@@ -29,6 +29,7 @@ import xarray as xr
 
 from raysim.distributed.blocks import block_bounds, block_size_for, run_blocks
 from raysim.distributed.cluster import ClusterError, connect
+from raysim.distributed.inputs import changed_inputs, input_digests
 from raysim.distributed.partial import PartialStore, partial_path
 from raysim.optics.fast import DEFAULT_TOL
 from raysim.progress import Progress
@@ -63,6 +64,7 @@ class SceneJob:
     device: str
     threads: int
     block_size: int
+    inputs: tuple[tuple[str, str], ...] = ()  # (file the scene names, its SHA-256) at submission
 
     @property
     def n_points(self) -> int:
@@ -78,6 +80,11 @@ class SceneJob:
 
     def build(self, device: str, keep: bool) -> BlockContext:
         scene = self.scene()
+        # a file edited after the run began would give blocks of another version of it
+        changed = changed_inputs(dict(self.inputs), input_digests(scene.files, self.base))
+        if changed:
+            raise ClusterError(f"{changed[0]}, a file the scene names, changed after the run began "
+                               "(its SHA-256 differs): restore it, then resume")
         ideal, deformed = reflectors_for(scene)
         return BLOCK_ENGINES[self.method].prepare(scene, ideal, deformed, self.options, device, keep)
 
@@ -95,11 +102,17 @@ def scene_job(scene: Scene, method: str, options: Options, device: str, threads:
             "method": method,
             "options": json.dumps(asdict(options), sort_keys=True), "device": device,
             "block_size": str(block_size), "versions": f"raysim {__version__}, warp {warp.__version__}"}
+    # the text names its maps, panel tables and meshes; their bytes decide the blocks too, so a
+    # resume after one was edited is refused (naming it) instead of merging blocks of both
+    inputs = input_digests(scene.files, base)
+    made.update({f"file {name}": digest for name, digest in inputs.items()})
     key = hashlib.sha256(json.dumps(made, sort_keys=True).encode()).hexdigest()
-    description = {k: (hashlib.sha256(v.encode()).hexdigest()[:12] if k == "scene" else str(v))
+    description = {k: (hashlib.sha256(v.encode()).hexdigest()[:12] if k == "scene"
+                       else v[:12] if k.startswith("file ") else str(v))
                    for k, v in made.items()}
     job = SceneJob(key, scene.text, source, base, float(scene.source.frequency_hz), sphere.n_theta,
-                   sphere.n_phi, method, options, device, int(threads), int(block_size))
+                   sphere.n_phi, method, options, device, int(threads), int(block_size),
+                   tuple(inputs.items()))
     _check_rebuilds(scene, job)
     return job, description
 

@@ -101,7 +101,9 @@ def run_campaign(scene_path: str | os.PathLike[str], plan_path: str | os.PathLik
                           f"is not the scene's dish (F {scene.dish.focal_length:g} m, "
                           f"D {scene.dish.diameter:g} m)")
     check_obstacles(scene, plan)
-    folder = output_folder(out_dir, [("scene", scene_path), *plan.inputs()], FILES,
+    # the files the scene names (a map an earlier campaign measured) are inputs too: a
+    # folder holding one would be replaced with the input inside it
+    folder = output_folder(out_dir, [("scene", scene_path), *scene.inputs(), *plan.inputs()], FILES,
                            "a raysim campaign")
     noise = plan.simulator.noise_db
     if not noise > 0:

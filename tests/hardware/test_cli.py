@@ -164,3 +164,49 @@ def test_rig_park(tmp_path: Path, raysim_main) -> None:
                                f"--resource=motion=TCPIP::127.0.0.1::{closed_port()}::SOCKET")
     assert code == 2
     assert "motion controller at" in error_line(err) and "unreachable" in err
+
+
+def _edit_journal(journal: Path, line: int, power: object) -> None:
+    """Line ``line`` (1: the header) given the readings ``power``, with a valid CRC, as a
+    hand-edited or foreign journal would hold them."""
+    import json
+
+    from hardware.journal import _with_crc
+
+    lines = journal.read_bytes().splitlines(keepends=True)
+    body = json.loads(lines[line - 1])
+    del body["crc"]
+    body["power"] = power
+    lines[line - 1] = _with_crc(body)
+    journal.write_bytes(b"".join(lines))
+
+
+@pytest.mark.parametrize(("line", "power", "message"), [
+    (2, [0.0, 0.0], "holds the power reading 0.0, not a finite power > 0 W"),  # the first reference
+    (4, [], "holds no power reading"),
+    (4, [1e-6, "abc"], 'holds the power reading "abc", not a finite power > 0 W'),
+    (4, [1e-6, -1e-6], "holds the power reading -1e-06"),
+    (4, [1e-6], "holds 1 power readings, the plan takes 2"),
+])
+def test_from_journal_refuses_readings_no_meter_gives(tmp_path: Path, raysim_main, line, power, message):
+    """A journal's readings are checked by --from-journal: one line naming the journal line,
+    exit 2, no FieldMap (a 0 W reference made every intensity 0, an empty list a NaN cell
+    counted as measured, a string a traceback)."""
+    import math
+
+    from hardware.session import scan
+    from raysim.maps.sphere import SphereGrid
+
+    from .conftest import R, write_field
+
+    plan = write_plan(tmp_path)  # 3 x 6 cells of 20 x 60 deg, 2 readings a step
+    field = write_field(tmp_path / "field.nc", SphereGrid(R, 3, 6, 0.0, math.radians(60.0), 0.0, 2 * math.pi))
+    scan(load_plan(plan), tmp_path / "scan.nc", simulate=field)
+    journal = tmp_path / "scan.nc.journal"
+    _edit_journal(journal, line, power)
+    out = tmp_path / "again.nc"
+    code, _, err = raysim_main("scan", str(plan), "-o", str(out), "--journal", str(journal), "--from-journal")
+    assert code == 2
+    said = error_line(err)
+    assert f"{journal}: line {line} (step {line - 2})" in said and message in said
+    assert not out.exists()

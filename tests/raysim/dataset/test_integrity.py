@@ -7,6 +7,7 @@ a repaired store must be that store again, a refused one byte-identical to what 
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -181,17 +182,109 @@ def test_readers_refuse_a_sample_that_fails_its_checksum_and_a_resume_recomputes
     assert len(list(Loader(str(copy), split="all", batch_size=4))) == 1
 
 
+def _swap_samples(path: Path, a: int, b: int) -> None:
+    """Every per-sample chunk (data, checksum, status) of samples ``a`` and ``b`` exchanged, as
+    a bad merge or copy of stores would leave them."""
+    group = zarr.open_group(str(path), mode="r")
+    for name, arr in group.arrays():
+        if tuple(arr.metadata.dimension_names or ())[:1] != ("sample",) or arr.chunks[0] != 1:
+            continue
+        folder = path / name / "c"  # a chunk that holds the fill value is not written at all
+        first, second, aside = folder / str(a), folder / str(b), folder / "swap"
+        if first.exists():
+            first.rename(aside)
+        if second.exists():
+            second.rename(first)
+        if aside.exists():
+            aside.rename(second)
+
+
+def test_a_sample_moved_to_another_sample_s_place_fails_its_checksum(clean, copy, spec, inproc):
+    """A validation sample's chunks swapped with a training sample's: each chunk is intact and
+    matches the checksum it moved with, but not the sample it now stands for, so the training
+    split never serves the validation sample, and a resume recomputes both."""
+    split = np.asarray(zarr.open_group(str(clean), mode="r")["split"][...])
+    validation, train = int(np.flatnonzero(split == 1)[0]), int(np.flatnonzero(split == 0)[0])
+    _swap_samples(copy, validation, train)
+    with pytest.raises(CorruptSampleError, match=f"sample {train}'s stored data"):
+        list(Loader(str(copy), split="train", normalise=False))
+    with pytest.raises(CorruptSampleError, match=f"sample {validation}'s stored data"):
+        sample_fieldmap(open_dataset(copy), validation)
+    report = generate(spec, copy, resume=True, scheduler=inproc)
+    assert (report.repaired, report.computed) == (2, 2)
+    assert_same_store(clean, copy)
+
+
+def test_a_store_of_the_previous_format_is_refused_in_one_line(copy, spec, inproc):
+    """A store of format 1 (its checksums do not record which sample they are): readers and a
+    resume refuse it in one line saying it comes from an older raysim, and touch nothing."""
+    group = zarr.open_group(str(copy), mode="r+")
+    group.attrs["raysim_dataset_format"] = 1
+    before = _files(copy)
+    for read in (lambda: Loader(str(copy), split="all"), lambda: open_dataset(copy),
+                 lambda: generate(spec, copy, resume=True, scheduler=inproc)):
+        with pytest.raises(DatasetError, match="made by an older raysim .dataset store format 1") as info:
+            read()
+        assert str(copy) in str(info.value) and "\n" not in str(info.value)
+    assert _files(copy) == before
+
+
+@pytest.mark.parametrize("array", ["intensity", "deformation", "checksum"])
+def test_readers_refuse_a_garbled_array_metadata_in_one_line_naming_it(copy, array):
+    """Not a raw json.JSONDecodeError: the project's CorruptStoreError, naming the array."""
+    (copy / array / "zarr.json").write_text('{"zarr_format": 3, "node_ty')
+    for read in (lambda: Loader(str(copy), split="all"), lambda: open_dataset(copy)):
+        with pytest.raises(CorruptStoreError) as info:
+            read()
+        message = str(info.value)
+        assert str(copy) in message and f"'{array}'" in message and "\n" not in message
+
+
 def test_a_failed_ideal_and_a_lost_frequency_are_one_line_errors(copy):
     (copy / "intensity_ideal" / "c" / "0" / "0" / "0").unlink()
     with pytest.raises(CorruptSampleError, match="ideal intensity of 3e\\+08 Hz"):
         Loader(str(copy), representation="fa_sphere", split="all").raw([0])
-    # a store of an older raysim (no recorded checksums to refuse it at opening) that lost its
-    # frequencies: the sample's frequency is no longer one of the store's
-    group = zarr.open_group(str(copy), mode="r+")
-    del group.attrs[STATIC_ATTR]
+    # a store that lost its frequencies: refused when opened, naming the array
     (copy / "frequency" / "c" / "0").unlink()
-    with pytest.raises(CorruptStoreError, match="frequency"):
+    with pytest.raises(CorruptStoreError, match="'frequency'"):
         sample_fieldmap(open_dataset(copy), 0)
+
+
+def _cf_offset(path: Path) -> None:
+    """``add_offset`` added to ``split`` and ``sample``: the stored values are unchanged, but
+    xarray would return split + 1 and samples 1..n."""
+    for name in ("split", "sample"):
+        meta = path / name / "zarr.json"
+        data = json.loads(meta.read_text())
+        data["attributes"]["add_offset"] = 1
+        meta.write_text(json.dumps(data))
+
+
+def _no_static_checksums(path: Path) -> None:
+    """``static_checksums`` removed and ``diameter`` edited: without the first, nothing would
+    catch the second."""
+    group = zarr.open_group(str(path), mode="r+")
+    del group.attrs[STATIC_ATTR]
+    group.attrs["diameter"] = 10.0
+
+
+@pytest.mark.parametrize(("damage", "named", "rewritten"), [
+    (_cf_offset, "its array 'sample'", ("sample attributes", "split attributes")),
+    (_no_static_checksums, f"its attribute '{STATIC_ATTR}'", ("attribute diameter",))])
+def test_readers_refuse_edited_metadata_and_a_resume_rewrites_it(clean, copy, spec, inproc, damage, named,
+                                                                  rewritten):
+    damage(copy)
+    for read in (lambda: Loader(str(copy), split="all"), lambda: open_dataset(copy)):
+        with pytest.raises(CorruptStoreError, match="--resume") as info:
+            read()
+        assert named in str(info.value) and "\n" not in str(info.value)
+    report = generate(spec, copy, resume=True, scheduler=inproc)
+    assert report.rewritten == rewritten and report.computed == 0
+    assert_same_store(clean, copy)
+    ds = open_dataset(copy)
+    reference = zarr.open_group(str(clean), mode="r")
+    assert np.array_equal(ds["split"].values, reference["split"][...])
+    assert np.array_equal(ds["sample"].values, np.arange(spec.samples))
 
 
 # --- D: what a run killed while creating its store left -----------------------------------------------

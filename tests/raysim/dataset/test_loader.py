@@ -196,3 +196,57 @@ def test_a_torn_status_chunk_counts_its_samples_as_not_done(store):
     loader = Loader(path, split="all")
     kept = set(loader.indices.tolist())
     assert pending not in kept and 0 < len(kept) < every.size
+
+
+def _edit_mean(entry, path):
+    entry["input_mean"] = 1000.0  # a hand edit: the digest alone still matches the old key
+
+
+def _malformed(entry, path):
+    for key in ("input_std", "target_mean", "target_std"):
+        del entry[key]  # partly written
+
+
+def _other_data(entry, path):
+    """A training sample's data changed (and its checksum with it, as a rerun would): the kept
+    entry was made from the old data under the same indices."""
+    from raysim.dataset import store as zstore
+
+    group = zarr.open_group(str(path), mode="r+")
+    done = np.asarray(group["status"][...]) == 1
+    index = int(np.flatnonzero(done & (np.asarray(group["split"][...]) == 0))[0])
+    group["intensity_measured"][index] = np.asarray(group["intensity_measured"][index]) * 3.0
+    group["checksum"][index] = zstore.sample_checksum(group, index)
+
+
+@pytest.mark.parametrize("change", [_edit_mean, _malformed, _other_data])
+def test_a_kept_normalisation_that_is_not_current_is_computed_again(store, change):
+    path, _ = store
+    assert Loader(str(path), source="measured").statistics.samples > 0  # kept in the store
+    group = zarr.open_group(str(path), mode="r+")
+    kept = dict(group.attrs["normalisation"])
+    entry = dict(kept["intensity/measured"])
+    change(entry, path)
+    kept["intensity/measured"] = entry
+    group.attrs["normalisation"] = kept
+    train = Loader(str(path), source="measured", normalise=False)
+    x, y = train.raw(train.indices)
+    s = Loader(str(path), source="measured").statistics
+    assert s.input_mean == pytest.approx(np.nanmean(x), rel=1e-10)
+    assert s.input_std == pytest.approx(np.nanstd(x), rel=1e-10)
+    assert s.target_std == pytest.approx(np.nanstd(y), rel=1e-10)
+    assert s.samples == len(train.indices)
+
+
+def test_a_lost_measured_intensity_is_named_not_blamed_on_the_spec(store):
+    """The store was made with [measurement]: its intensity_measured losing its metadata is
+    damage to repair, not a spec without measurement effects."""
+    from raysim.dataset import open_dataset
+    from raysim.dataset.integrity import CorruptStoreError
+
+    path, _ = store
+    (path / "intensity_measured" / "zarr.json").unlink()
+    for read in (lambda: Loader(str(path), source="measured"), lambda: open_dataset(path)):
+        with pytest.raises(CorruptStoreError, match="'intensity_measured' is missing") as info:
+            read()
+        assert "[measurement]" not in str(info.value) and "--resume" in str(info.value)

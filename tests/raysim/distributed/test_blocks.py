@@ -237,3 +237,56 @@ def test_a_resume_brings_back_a_torn_context(scene, single, inproc, tmp_path):
     ds = simulate_blocks(scene, out, "po", scheduler=inproc, block_size=40, resume=True)
     assert_same_fieldmap(single["po"], ds)
     assert (ds.attrs["blocks_repaired"], ds.attrs["blocks_computed"]) == (1, 1)
+
+
+def _write_bump(path: Path, amplitude_m: float, x0_m: float) -> None:
+    """A map CSV (x, y, dz in m) of one Gaussian bump on a 1 m grid covering the 10 m dish."""
+    x = np.arange(-6.0, 6.5, 1.0)
+    X, Y = np.meshgrid(x, x)
+    dz = amplitude_m * np.exp(-((X - x0_m) ** 2 + Y**2) / 4.0)
+    rows = "\n".join(f"{a:.17g},{b:.17g},{c:.17g}" for a, b, c in zip(X.ravel(), Y.ravel(), dz.ravel(), strict=True))
+    path.write_text("x,y,dz\n" + rows + "\n")
+
+
+def _map_scene(tmp_path: Path):
+    from raysim.scene.scene import load_scene
+
+    text = SMALL.replace('type = "paper"\nscale = 1.0', 'type = "map"\nfile = "bump.csv"')
+    (tmp_path / "scene.toml").write_text(text)
+    return load_scene(tmp_path / "scene.toml")
+
+
+def test_a_resume_after_a_file_the_scene_names_changed_is_refused_naming_it(inproc, tmp_path):
+    """Blocks 0 and 3 computed with map A, then the map file is edited: the resume would
+    merge blocks of the two maps, so it is refused naming the file. With map A back, the
+    resume completes to the single-process FieldMap of map A."""
+    _write_bump(tmp_path / "bump.csv", 1e-3, 2.0)
+    scene = _map_scene(tmp_path)
+    expected = simulate(scene, "po")
+    out = tmp_path / "field.nc"
+    job, description = scene_job(scene, "po", Options(), "cpu", 1, 40)
+    store = PartialStore.create(partial_path(out), job.key, description, job.parts(), job.n_points, 40)
+    with connect(inproc) as cluster:
+        run_blocks(cluster.client, job, [0, 3], block_bounds(job.n_points, 40), store)
+    original = (tmp_path / "bump.csv").read_bytes()
+    _write_bump(tmp_path / "bump.csv", 1e-3, -2.0)
+    with pytest.raises(ClusterError, match=r"differs in: file bump\.csv\)"):
+        simulate_blocks(_map_scene(tmp_path), out, "po", scheduler=inproc, block_size=40, resume=True)
+    assert sorted(store.markers()) == [0, 3]  # nothing touched
+    (tmp_path / "bump.csv").write_bytes(original)
+    ds = simulate_blocks(_map_scene(tmp_path), out, "po", scheduler=inproc, block_size=40, resume=True)
+    assert_same_fieldmap(expected, ds)
+    assert ds.attrs["blocks_reused"] == 2
+
+
+def test_a_worker_refuses_a_file_the_scene_names_changed_after_the_run_began(inproc, tmp_path):
+    """The workers rebuild the scene from its files: one edited after the job was made would
+    give blocks of its other version, so the block fails naming the file."""
+    _write_bump(tmp_path / "bump.csv", 1e-3, 2.0)
+    job, description = scene_job(_map_scene(tmp_path), "po", Options(), "cpu", 1, 40)
+    _write_bump(tmp_path / "bump.csv", 2e-3, 2.0)
+    store = PartialStore.create(tmp_path / "p.partial.zarr", job.key, description, job.parts(),
+                                job.n_points, 40)
+    with connect(inproc) as cluster, pytest.raises(ClusterError, match=r"bump\.csv, a file the scene names, changed"):
+        run_blocks(cluster.client, job, [1], block_bounds(job.n_points, 40), store)
+    assert store.markers() == {}

@@ -93,3 +93,28 @@ def test_a_campaign_with_a_cabin_and_a_quadripod_masks_their_cells(inputs, tmp_p
     plan.write_text(plan.read_text().replace(OBSTACLES, ""))
     with pytest.raises(SolverError, match="the plan's obstacles none are not the scene's"):
         run_campaign(scene, plan, tmp_path / "d", rim=32, N=64, refine=1)
+
+
+def test_a_campaign_refuses_an_output_folder_holding_a_file_the_scene_names(inputs, tmp_path):
+    """The scene's deformation map lies in the output folder (the surface an earlier campaign
+    measured): replacing the folder would destroy it, so the command stops first."""
+    import xarray as xr
+
+    scene, plan = inputs
+    prev = tmp_path / "prev"
+    prev.mkdir()
+    x = np.linspace(-56.0, 56.0, 57)
+    X, Y = np.meshgrid(x, x)
+    xr.Dataset({"deformation": (("y", "x"), 200e-6 * np.exp(-((X - 20) ** 2 + Y**2) / 50), {"units": "m"})},
+               coords={"x": x, "y": x}).to_netcdf(prev / "surface.nc")
+    before = (prev / "surface.nc").read_bytes()
+    text = scene.read_text().replace('type = "zernike"\nterms = [[2, 2, 100.0]]',
+                                     'type = "map"\nfile = "prev/surface.nc"')
+    scene.write_text(text)
+    out = run_cli("campaign", str(scene), str(plan), "-o", str(prev), "--rim", "0", "--grid", "32",
+                  "--refine", "0", cwd=tmp_path)
+    assert out.code == 2
+    line = out.error()
+    assert "surface.nc" in line and "destroy the input" in line
+    assert (prev / "surface.nc").read_bytes() == before
+    assert sorted(p.name for p in prev.iterdir()) == ["surface.nc"]
