@@ -664,6 +664,15 @@ STEERABLE_DISH_M = 110.0  # the largest fully steerable paraboloids (GBT, Effels
 LARGEST_DISH_M = 150.0
 
 
+def mesh_size_warning(D: float, fix: str = "set dish.mesh_unit_m = 0.001") -> str:
+    """What to say of a mesh file's dish of diameter ``D`` (m) above :data:`LARGEST_DISH_M`
+    (more likely a file in millimetres than a reflector), with the ``fix``; "" below it."""
+    if not D > LARGEST_DISH_M:
+        return ""
+    return (f"the mesh's dish is {D:.4g} m across, larger than any steerable reflector "
+            f"({STEERABLE_DISH_M:g} m): if the file is in millimetres, {fix}")
+
+
 def summary(ds: xr.Dataset) -> str:
     """One line: points, rays, time and power balance of a simulated FieldMap (and PO's
     quadrature warning, the panel-gap edges' warning, a mesh file's departure from its ideal,
@@ -675,10 +684,9 @@ def summary(ds: xr.Dataset) -> str:
         line += (f"; WARNING: the panel gaps are {ds.attrs['edge_gap_wavelengths']:.3g} wavelengths "
                  "wide, and --edges all treats each gap edge as a lone half-plane, which "
                  "overstates gaps narrower than a wavelength (docs/engines.md)")
-    if "mesh_departure_rms_m" in ds.attrs and float(ds.attrs.get("diameter", 0.0)) > LARGEST_DISH_M:
-        line += (f"; WARNING: the mesh's dish is {float(ds.attrs['diameter']):.4g} m across, larger "
-                 f"than any steerable reflector ({STEERABLE_DISH_M:g} m): if the file is in "
-                 "millimetres, set dish.mesh_unit_m = 0.001")
+    size = mesh_size_warning(float(ds.attrs.get("diameter", 0.0)))
+    if "mesh_departure_rms_m" in ds.attrs and size:
+        line += f"; WARNING: {size}"
     if "mesh_departure_rms_m" in ds.attrs:
         line += (f"; the mesh departs {ds.attrs['mesh_departure_rms_m'] * 1e6:.3g} um RMS along z "
                  "from its ideal (its deformation; a file not in the reflector frame adds to it)")

@@ -59,6 +59,14 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
     if panels_csv is not None:
         check_output(panels_csv, [*inputs, ("SurfaceMap output", output)])
     field = load_fieldmap(field_path)
+    from raysim.scene.scene import scene_of
+
+    scene = scene_of(field.attrs)  # the inversion reads its files for the truth: inputs too
+    if scene is not None and scene.files:
+        inputs += [("file the FieldMap's scene names", f) for f in scene.files]
+        check_output(output, inputs)
+        if panels_csv is not None:
+            check_output(panels_csv, [*inputs, ("SurfaceMap output", output)])
     rim = boundary.read_rim_csv(rim_csv) if rim_csv is not None else None
     layout = None
     if panels_csv is not None:
@@ -108,6 +116,8 @@ def summary(result: xr.Dataset) -> list[str]:
         lines.append(f"gauss-newton ({a['gn_choice']}): misfit {misfit[0]} -> {misfit[-1]} "
                      f"(noise {a['gn_noise_rms']:.2e}), LSQR {a['gn_lsqr_iterations']}, "
                      f"stopped: {a['gn_stopped']}")
+    if "hole_warning" in a:
+        lines.append(f"WARNING: {a['hole_warning']}")
     if a.get("rows_dropped_at_rim"):
         lines.append(f"rim: {a['rows_dropped_why']}")
     lines.append(f"boundary: {a['boundary']}")

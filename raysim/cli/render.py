@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from raysim.cli.common import app, note, output_path, say
+from raysim.cli.invert import scene_inputs
 
 
 @app.command()
@@ -29,7 +30,7 @@ def render(
 
     # an input named as the output first (the message says what would be lost), then the name
     # as typed (a Path drops the trailing slash of "x.png/")
-    output_path(Path(output), [("file to draw", file)])
+    output_path(Path(output), [("file to draw", file), *scene_inputs(file)])
     written = run(file, check_output_name(output), kind=kind, size=size, quantity=quantity)
     say(f"{written}")
 
@@ -60,8 +61,13 @@ def report(
     FieldMap) when the source is a scene, and surface.nc (the SurfaceMap) unless --no-invert.
     Given a FieldMap instead of a scene, the simulation is skipped and no field.nc is written.
     """
+    from raysim.files import check_output_folder
     from raysim.pipeline.report import report as run
+    from raysim.render.backend import RenderError
 
+    # a FieldMap's scene names files (its mesh, maps, tables) the report reads for the truth:
+    # the folder it replaces must not hold them (a scene is checked with its files by the run)
+    check_output_folder(output, scene_inputs(source), RenderError)
     page = run(source, output, method=method, device=device, solver=solver, grid=grid, refine=refine,
                invert=invert,
                progress=lambda stage, fraction: note(f"report: {stage}"))

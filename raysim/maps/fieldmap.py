@@ -166,6 +166,7 @@ def validate(ds: xr.Dataset, source: str = "FieldMap") -> xr.Dataset:
             if not np.all(np.isin(np.asarray(ds[name].values), (0, 1))):
                 raise FieldMapError(f"{source}: variable 'blocked' must hold 0 or 1 per cell")
             continue
+        _check_units(ds[name].attrs, name, source)
         _check_intensity(ds[name].values, name, source)
     ideal = np.asarray(ds["intensity_ideal"].values, dtype=np.float64)
     if not np.any(ideal > 0.0):  # single zero cells are missing samples to the solver; all is none
@@ -227,6 +228,29 @@ def _check_edges(ds: xr.Dataset, source: str) -> None:
             raise FieldMapError(f"{source}: coordinate '{coord}' is not the {n} cell centres between "
                                 f"the attributes {lo} = {a:g} and {hi} = {b:g} rad (a map cut "
                                 f"or moved after it was written: set {lo} and {hi} to its new edges)")
+
+
+#: the ``units`` an intensity may carry: "1" (dimensionless, what every producer writes) or
+#: none; anything else (dB, W, mW) is a scale the solver would take for a relative power
+INTENSITY_UNITS = ("1", "")
+
+
+def _check_units(attrs: Mapping[str, Any], name: str, source: str) -> None:
+    """An intensity's ``units``: absent, "1" or "" (a linear power relative to the incident
+    plane wave, or a measured scan's linear reading whose gain the inversion estimates)."""
+    if "units" not in attrs:
+        return
+    units = attrs["units"]
+    if isinstance(units, bytes):
+        units = units.decode("utf-8", "replace")
+    if isinstance(units, int | float | np.number) and not isinstance(units, bool) and units == 1:
+        return
+    if isinstance(units, str) and units.strip() in INTENSITY_UNITS:
+        return
+    raise FieldMapError(f"{source}: variable '{name}' has units {units!r}, expected '1' or none: "
+                        "a FieldMap's intensities are linear powers relative to the incident "
+                        "plane wave (convert dB with 10**(dB/10); divide a power in W by the "
+                        "incident power)")
 
 
 def _check_intensity(values: np.ndarray, name: str, source: str) -> None:

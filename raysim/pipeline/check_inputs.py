@@ -69,10 +69,11 @@ class Dish:
 
     go: Scene
     wave: Scene
-    source: str
+    source: str  # the scene (also one whose [dish] names a mesh) or the bare mesh file given
     is_mesh: bool
     fit_rms: float = 0.0  # m, the mesh's RMS departure from its best-fit paraboloid
     notes: tuple[str, ...] = ()
+    warning: str = ""  # what the user should know before trusting the check (a mesh in mm)
 
     @property
     def D(self) -> float:
@@ -105,8 +106,9 @@ def load_dish(source: str | Path, *, sphere_radius: float | None = None,
 
     scene = load_scene(find_input(source))
     if scene.dish.mesh is not None:
+        # the dish comes from the scene (its frequency, sphere and deformation), on its mesh
         return _mesh_dish(scene.dish.mesh, scene.sphere.radius, scene.dish.focal_length,
-                          scene=scene)
+                          scene=scene, source=source)
     if resolution is not None:
         if not (math.isfinite(resolution) and 0 < resolution <= scene.D / 8):
             raise CheckError(f"--resolution must lie in (0, D/8 = {scene.D / 8:g}] m, got {resolution:g}")
@@ -118,7 +120,10 @@ def load_dish(source: str | Path, *, sphere_radius: float | None = None,
                        f"{scene.dish.resolution:g} m triangles x {scene.subdivisions} rays per edge",))
 
 
-def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None = None) -> Dish:
+def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None = None,
+               source: str | Path | None = None) -> Dish:
+    """The dish of the mesh file ``path``: a bare mesh, or the mesh a ``scene`` (read from
+    ``source``, the dish's recorded source) names."""
     from raysim.surface.mesh import check_stated_dish, load_reflector
 
     if not path.is_file():
@@ -148,7 +153,18 @@ def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None
     note = (f"mesh {path.name}: {len(ideal.faces):,} faces, {int(ideal.n_panels)} pieces, best-fit "
             f"paraboloid F = {fit.F:.4g} m, D = {D:.4g} m, fit RMS {fit.rms * 1e6:.3g} um; every "
             "engine on the file's facets")
-    return Dish(scene, scene, str(path), True, fit.rms, (note,))
+    return Dish(scene, scene, str(path if source is None else source), True, fit.rms, (note,),
+                _size_warning(D, scene=source is not None))
+
+
+def _size_warning(D: float, scene: bool) -> str:
+    """:func:`raysim.simulate.mesh_size_warning` (the same line as ``simulate``'s), with the fix
+    ``check`` offers: a scene's ``mesh_unit_m``; "" below the size."""
+    from raysim.simulate import mesh_size_warning
+
+    size = mesh_size_warning(D, "set dish.mesh_unit_m = 0.001" if scene else
+                             "check a scene whose [dish] names the mesh with mesh_unit_m = 0.001")
+    return f"WARNING: {size}" if size else ""
 
 
 def frequencies_of(dish: Dish, frequencies: list[float] | tuple[float, ...] | None) -> tuple[float, ...]:

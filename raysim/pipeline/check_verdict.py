@@ -23,8 +23,10 @@ def verdict_word(fa_difference: float) -> str:
 
 def verdict_lines(ds: xr.Dataset) -> list[str]:
     """One sentence per frequency: FA, the surface error GO costs, what the wave refinement
-    recovers, the gaps; each ending with the verdict word."""
-    lines = []
+    recovers, the gaps; each ending with the verdict word. First the dish's warning, where it
+    has one (a mesh file's dish too large for a file in metres)."""
+    # the dish's own warning first (a mesh in millimetres read as metres: simulate's warning)
+    lines = [str(ds.attrs["dish_warning"])] if ds.attrs.get("dish_warning") else []
     limit = math.degrees(float(ds.attrs["usable_theta_max"]))
     truth_rms = float(ds.attrs.get("truth_rms", math.nan))
     for i, f in enumerate(ds["frequency"].values):

@@ -86,6 +86,37 @@ def test_broken_maps_are_refused_with_one_line(tmp_path: Path, damage, message):
     assert message in str(info.value) and "\n" not in str(info.value)
 
 
+@pytest.mark.parametrize(("name", "units"), [("intensity", "dB"), ("intensity", "W"),
+                                            ("intensity_ideal", "mW"), ("intensity_std", "dBm")])
+def test_intensities_not_in_relative_linear_power_are_refused(tmp_path: Path, name, units):
+    """The units attribute was never read: a map in dB inverted to nonsense with exit 0, and a
+    scan in W was refused for "missing samples". A FieldMap's intensities are |E|^2 relative to
+    the incident wave (docs/data.md): units "1", and the message names the unit found."""
+    _, ds = small_map(intensity_std=np.full((9, 36), 1e-3))
+    ds[name].attrs["units"] = units
+    path = tmp_path / "bad.nc"
+    ds.to_netcdf(path)
+    with pytest.raises(FieldMapError) as info:
+        load(path)
+    text = str(info.value)
+    assert f"'{name}'" in text and repr(units) in text and "'1'" in text and "\n" not in text
+
+
+@pytest.mark.parametrize("units", ["1", "", None, 1])
+def test_dimensionless_intensities_are_read(tmp_path: Path, units):
+    """What raysim writes ("1", on every engine's and the rig's maps), an empty unit and none."""
+    _, ds = small_map(intensity_std=np.full((9, 36), 1e-3))
+    assert ds["intensity"].attrs["units"] == "1" == ds["intensity_ideal"].attrs["units"]
+    for name in ("intensity", "intensity_ideal", "intensity_std"):
+        if units is None:
+            del ds[name].attrs["units"]
+        else:
+            ds[name].attrs["units"] = units
+    path = tmp_path / "ok.nc"
+    ds.to_netcdf(path)
+    assert np.array_equal(load(path)["intensity"].values, ds["intensity"].values)
+
+
 def test_unreadable_files_are_field_map_errors(tmp_path: Path):
     junk = tmp_path / "junk.nc"
     junk.write_text("not netcdf")
