@@ -58,7 +58,14 @@ from solver.options import (
     WEIGHTS,
     InvertOptions,
 )
-from solver.record import Outcome, accuracy_attrs, fit_attrs, rim_attrs, surface_attrs
+from solver.record import (
+    Outcome,
+    accuracy_attrs,
+    fit_attrs,
+    hole_attrs,
+    rim_attrs,
+    surface_attrs,
+)
 from solver.refinement import ModelChoice, RefinementSetup, choose_model, refinement_setup
 from solver.resample import cap_rows, usable_rows
 from solver.rimimage import rim_image_shift, rows_clear_of_rim
@@ -140,6 +147,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         raise FieldMapError(f"invert takes a FieldMap, an xarray.Dataset (raysim.load_fieldmap("
                             f"path) reads one), not {type(field).__name__}")
     scan = Scan.from_fieldmap(field)
+    hole = scan.largest_hole()
     grid = solver_grid(scan.D, opts.N)
     if opts.rim is not None:
         boundary.check_targets(opts.rim, grid.a)
@@ -187,6 +195,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
                       gn.gain_factor if gn is not None else None, delta_c, mode)
     attrs = surface_attrs(opts, outcome)
     attrs.update(rim_attrs(shift, n_all - clear, scan.sphere))
+    attrs.update(hole_attrs(hole))
     attrs.update(report_attrs(gn, why))
     if gn is not None and gn.misfit_rms:  # the map is Gauss-Newton's: its misfit says the fit
         attrs.pop("refine_warning", None)
@@ -312,16 +321,16 @@ def measured_fa(scan: Scan, gain: GainChoice) -> MeasuredFA:
 def _truth_from_scene(attrs: dict) -> Callable | None:
     """The deformation of the scene a FieldMap carries (None without one, or if it no longer
     parses: :func:`raysim.scene.scene.scene_of`); for a mesh scene, the mesh's own departure
-    from its ideal (:func:`_mesh_truth`)."""
+    from its ideal (:func:`mesh_truth`)."""
     from raysim.scene.scene import scene_of
 
     scene = scene_of(attrs)
     if scene is None:
         return None
-    return scene.deformation if scene.dish.mesh is None else _mesh_truth(scene, attrs)
+    return scene.deformation if scene.dish.mesh is None else mesh_truth(scene, attrs)
 
 
-def _mesh_truth(scene, attrs: dict) -> Callable | None:
+def mesh_truth(scene, attrs: dict | None = None) -> Callable | None:
     """delta(x, y) (m, along z) of a mesh scene: the deformed mesh's z minus its ideal's (the
     ``ideal_mesh``, else the fitted paraboloid), vertex by vertex, linear over the ideal's
     (x, y) and the nearest vertex's beyond its hull. The scene's own deformation, if any, is
@@ -338,7 +347,7 @@ def _mesh_truth(scene, attrs: dict) -> Callable | None:
         ideal, deformed = reflectors_for(scene)
     except (RaysimError, OSError):
         return None
-    recorded = attrs.get("mesh_departure_rms_m")
+    recorded = (attrs or {}).get("mesh_departure_rms_m")
     if recorded is not None and not np.isclose(mesh_departure_rms(ideal, deformed), float(recorded),
                                                rtol=1e-6, atol=1e-12):
         return None  # another file now has the name the scene gives: not the mesh simulated

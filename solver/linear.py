@@ -21,17 +21,26 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
+from raysim.errors import FieldMapError
 from raysim.maps.fieldmap import grid_of
 from raysim.maps.fieldmap import validate as validate_fieldmap
-from raysim.maps.sphere import SphereGrid
+from raysim.maps.sphere import SphereGrid, ideal_go_intensity, theta_rim
 from raysim.surface.obstacles import ObstacleMesh
 from solver import boundary
 from solver.aperture import ApertureGrid
-from solver.equation import G
+from solver.equation import G, intensity_ratio_fa
 from solver.errors import SolverError
 from solver.nonlinear import extend_outside
 from solver.poisson import SolveInfo, solve_poisson
-from solver.resample import Coverage, fill_along_phi, sphere_to_aperture, usable_rows
+from solver.resample import (
+    MAX_HOLE_SHARE,
+    Coverage,
+    Hole,
+    fill_along_phi,
+    largest_hole,
+    sphere_to_aperture,
+    usable_rows,
+)
 
 MAX_INCIDENCE = 1e-3  # rad: the equation and the GO model assume an on-axis plane wave
 
@@ -66,14 +75,82 @@ class Scan:
         std = ds["intensity_std"].values if "intensity_std" in ds.data_vars else None
         intensity = ds["intensity"].values.astype(np.float64)
         blocked = ds["blocked"].values.astype(bool) if "blocked" in ds.data_vars else None
+        ideal = ds["intensity_ideal"].values.astype(np.float64)
+        sphere = grid_of(ds)
+        dark = dark_centre(ideal, blocked, sphere)
+        if dark:  # a dish with a central hole: its centre is hidden like a cabin's shadow
+            blocked = np.zeros(ideal.shape, dtype=bool) if blocked is None else blocked.copy()
+            blocked[:dark] = True
         if blocked is not None:
             # hidden cells are missing samples: filled like any other hole (solver.resample)
             intensity = np.where(blocked, np.nan, intensity)
-        return cls(grid_of(ds), float(ds.attrs["focal_length"]), float(ds.attrs["diameter"]),
-                   float(ds.attrs["sphere_radius"]), intensity,
-                   ds["intensity_ideal"].values.astype(np.float64),
+        return cls(sphere, float(ds.attrs["focal_length"]), float(ds.attrs["diameter"]),
+                   float(ds.attrs["sphere_radius"]), intensity, ideal,
                    None if std is None else std.astype(np.float64), dict(ds.attrs),
                    blocked, obstacles_of(ds))
+
+    def largest_hole(self) -> Hole | None:
+        """The largest hole of missing readings inside the rim image (cells an obstacle hides
+        are not missing: their handling is the obstacles'). Raises when the ideal reflector
+        leaves most cells dark (a dish that does not surround its axis, an offset dish: the
+        inversion's mapping needs the axis), and when the hole is over MAX_HOLE_SHARE of the
+        cells: the fill would invent the surface there."""
+        n = usable_rows(self.sphere, self.F, self.D)
+        hidden = (np.zeros((n, self.sphere.n_phi), dtype=bool) if self.blocked is None
+                  else self.blocked[:n])
+        dark = ~(self.intensity_ideal[:n] > 0) & ~hidden
+        if dark.mean() > 0.5:
+            raise FieldMapError(
+                f"the ideal reflector lights only {100 * (1 - dark.mean()):.0f} % of the cells "
+                "inside the rim image: the inversion needs a dish around its axis that fills "
+                "the rim image (an offset dish, or a mesh whose axis is elsewhere, is not "
+                "supported)")
+        self._check_rim_image()
+        hole = largest_hole(~np.isfinite(intensity_ratio_fa(self.intensity[:n],
+                                                            self.intensity_ideal[:n])) & ~hidden,
+                            replace(self.sphere, n_theta=n,
+                                    theta_max=float(self.sphere.theta_edges[n])))
+        if hole is not None and hole.share > MAX_HOLE_SHARE:
+            raise FieldMapError(f"the scan misses a whole region ({hole.describe()}): the "
+                                "inversion would fill it with a smooth guess; measure it")
+        return hole
+
+    def _check_rim_image(self) -> None:
+        """Raise when the ideal intensity ends far from the rim image the ``focal_length`` and
+        ``diameter`` attributes put at 2 atan(D / 4F): a wrong F or D shifts the mapping and
+        the rows used (F = 30 m on the paper's 33 m map: 22 % RRMS, D = 100 m cut its outer
+        ring, without a word). The ideal's edge is the first row, after the lit ones, whose
+        lit share (:func:`lit_share`) is under a quarter of the lit rows' median (a sharp
+        edge's part-lit row, or edge diffraction's quarter power at the shadow boundary). The
+        rim image must lie within two rows of it, plus the edge's own width beyond its one
+        part-lit row (from the last row at 3/4 of the median to the first under a tenth: a
+        faceted mesh's rim spills light a row further, a small dish diffracts over several).
+        """
+        share = lit_share(self.intensity_ideal, self.blocked, self.sphere)
+        lit = np.flatnonzero(share > 0.5 * share.max(initial=0.0))
+        if lit.size == 0:
+            return
+        ref = float(np.median(share[lit]))
+        edges, step = self.sphere.theta_edges, self.sphere.dtheta
+        rows = range(int(lit[0]) + 1, share.size)
+        edge = next((i for i in rows if share[i] < 0.25 * ref), None)
+        rim = theta_rim(self.D, self.F)
+        if edge is None:  # lit to the scan's end: the rim image is not before its last rows
+            if rim < edges[-1] - 2.0 * step:
+                self._wrong_rim(f"is lit up to theta = {np.degrees(edges[-1]):.1f} deg", rim)
+            return
+        bright = next((i for i in range(edge - 1, int(lit[0]) - 1, -1) if share[i] >= 0.75 * ref),
+                      int(lit[0]))
+        dark = next((i for i in range(edge, share.size) if share[i] < 0.1 * ref), share.size - 1)
+        width = max(0.0, float(edges[dark] - edges[bright + 1]) - step)
+        if abs(rim - edges[edge]) > 2.0 * step + width + 1e-9:
+            self._wrong_rim(f"ends at theta = {np.degrees(edges[edge]):.1f} deg", rim)
+
+    def _wrong_rim(self, where: str, rim: float) -> None:
+        raise FieldMapError(
+            f"the ideal intensity {where}, but focal_length = {self.F:g} m and diameter = "
+            f"{self.D:g} m put the rim image at {np.degrees(rim):.1f} deg: one of them is not "
+            "the dish's")
 
     def first_rows(self, n: int) -> Scan:
         """The scan cut to its first ``n`` theta rows (the sphere grid ends at their outer edge)."""
@@ -85,6 +162,41 @@ class Scan:
         return replace(self, sphere=sphere, intensity=self.intensity[:n],
                        intensity_ideal=self.intensity_ideal[:n],
                        intensity_std=cut(self.intensity_std), blocked=cut(self.blocked))
+
+
+def lit_share(ideal: NDArray[np.float64], blocked: NDArray[np.bool_] | None,
+              sphere: SphereGrid) -> NDArray[np.float64]:
+    """Each theta row's azimuthal mean of ``ideal`` (cells not ``blocked``, dark ones as 0)
+    over the ideal paraboloid's GO law (rho / R)^2 at the row's centre, which alone grows 3
+    times from the pole to a rim image at 80 deg: about constant where the dish lights the
+    row, 0 where it does not, a share between at an edge."""
+    seen = ideal if blocked is None else np.where(blocked, np.nan, ideal)
+    with np.errstate(invalid="ignore"):
+        mean = np.nanmean(np.where(seen > 0, seen, 0.0), axis=1)
+    law = ideal_go_intensity(sphere.theta, 1.0, 1.0)  # the shape: 1 / cos^4(theta / 2)
+    return np.nan_to_num(mean, nan=0.0) / law
+
+
+def dark_centre(ideal: NDArray[np.float64], blocked: NDArray[np.bool_] | None,
+                sphere: SphereGrid) -> int:
+    """How many leading theta rows to hide when the ideal reflector leaves the centre dark (a
+    dish with a central hole, a Cassegrain's): when the first row's lit share
+    (:func:`lit_share`) is under a tenth of the lit rows' median, the rows up to the first
+    over half of it, and that one, which the hole's edge may light in
+    part (its image moves with the surface, as the rim's does: :mod:`solver.rimimage`). None
+    (0) when the first row is lit, or when an obstacle already hides the dark rows (its
+    ``blocked`` cells: the obstacles' own handling)."""
+    share = lit_share(ideal, blocked, sphere)
+    bright = share > 0.5 * share.max(initial=0.0)
+    if not bright.any():
+        return 0
+    ref = float(np.median(share[bright]))
+    if share[0] >= 0.1 * ref:  # a lit pole (PO's interference leaves 0.46 of the peak there)
+        return 0
+    first = int(np.argmax(share > 0.5 * ref))
+    if blocked is not None and blocked[:first].all():
+        return 0
+    return first + 1
 
 
 def obstacles_of(ds: xr.Dataset) -> ObstacleMesh | None:

@@ -25,6 +25,7 @@ from solver.linear import LinearInverse, LinearSolution, Scan
 from solver.nonlinear import RefineHistory
 from solver.options import InvertOptions
 from solver.refinement import RefinementSetup
+from solver.resample import HOLE_SHARE_WARNING, Hole
 from solver.unobservable import Unobservable
 
 
@@ -97,6 +98,18 @@ def surface_attrs(opts: InvertOptions, out: Outcome) -> dict[str, Any]:
     probe = probe_of(scan.attrs)
     if not probe.ideal:  # the probe the scan was read with (raysim.maps.probe)
         attrs["data_probe"] = probe.describe()
+    return attrs
+
+
+def hole_attrs(hole: Hole | None) -> dict[str, Any]:
+    """The scan's largest hole of missing readings (:meth:`solver.linear.Scan.largest_hole`),
+    with a warning above :data:`solver.resample.HOLE_SHARE_WARNING` of the cells."""
+    if hole is None:
+        return {"largest_hole_share": 0.0}
+    attrs: dict[str, Any] = {"largest_hole_share": hole.share, "largest_hole": hole.describe()}
+    if hole.share > HOLE_SHARE_WARNING:
+        attrs["hole_warning"] = (f"the scan misses a region ({hole.describe()}), filled by "
+                                 "a smooth guess: the map there is not measured")
     return attrs
 
 

@@ -83,6 +83,55 @@ def check_full_circle(sphere: SphereGrid) -> None:
         raise FieldMapError("the scan must cover the full circle in phi (0..360 deg)")
 
 
+#: the largest hole (connected missing cells, not hidden by an obstacle) the inversion fills,
+#: as a share of the usable cells: beyond it the scan is refused (half the azimuths missing
+#: came back 108 % off, with exit 0); above HOLE_SHARE_WARNING the SurfaceMap says so
+MAX_HOLE_SHARE = 0.1
+HOLE_SHARE_WARNING = 0.01
+
+
+@dataclass(frozen=True)
+class Hole:
+    """The largest connected set of missing cells in the usable rows: its share of them and its
+    extent in theta and phi (deg, cell edges; phi may wrap through 360)."""
+
+    share: float
+    theta_deg: tuple[float, float]
+    phi_deg: tuple[float, float]
+
+    def describe(self) -> str:
+        return (f"{self.share * 100:.1f} % of the cells inside the rim image, theta "
+                f"{self.theta_deg[0]:.1f}..{self.theta_deg[1]:.1f} deg, phi "
+                f"{self.phi_deg[0]:.1f}..{self.phi_deg[1]:.1f} deg")
+
+
+def largest_hole(missing: NDArray[np.bool_], sphere: SphereGrid) -> Hole | None:
+    """The largest hole of the ``missing`` cells (n_rows, n_phi; neighbours along theta and phi,
+    periodic in phi on a full circle), or None without any."""
+    from scipy.ndimage import label
+
+    labels, n = label(missing)
+    if n == 0:
+        return None
+    if sphere.full_circle:  # a hole across phi = 0 is one hole
+        for a, b in zip(labels[:, 0], labels[:, -1], strict=True):
+            if a and b and a != b:
+                labels[labels == b] = a
+    sizes = np.bincount(labels.ravel())
+    sizes[0] = 0
+    rows, cols = np.nonzero(labels == int(np.argmax(sizes)))
+    edges_t, edges_p = np.degrees(sphere.theta_edges), np.degrees(sphere.phi_edges)
+    used = np.unique(cols)
+    gaps = np.diff(np.concatenate([used, [used[0] + sphere.n_phi]]))
+    start = (int(used[(int(np.argmax(gaps)) + 1) % used.size])
+             if sphere.full_circle and used.size < sphere.n_phi else int(used[0]))
+    span = sphere.n_phi - int(gaps.max()) + 1 if sphere.full_circle else int(used[-1] - used[0]) + 1
+    phi_lo = float(edges_p[start])
+    return Hole(float(rows.size / missing.size), (float(edges_t[rows.min()]),
+                                                   float(edges_t[rows.max() + 1])),
+                (phi_lo, phi_lo + span * float(np.degrees(sphere.dphi))))
+
+
 def fill_missing(values: NDArray[np.float64], n_rows: int,
                  pole: bool = True) -> tuple[NDArray[np.float64], int]:
     """Fill NaN samples of the first ``n_rows`` rows so the field's Laplacian is least there.

@@ -87,6 +87,12 @@ def check(source: str | os.PathLike[str], *, frequencies: list[float] | None = N
     freqs = inputs.frequencies_of(dish, frequencies)
     dish = inputs.with_gap(inputs.with_grid(dish, grid), gap_m)
     dish, truth, described = inputs.choose_deformation(dish, deformation, rms, seed)
+    if dish.is_mesh:  # the data hold the mesh's own departure from its paraboloid too
+        from solver.invert import mesh_truth
+
+        truth = mesh_truth(dish.go) or truth
+        described += (f", on the mesh's own departure from its paraboloid "
+                      f"({dish.fit_rms * 1e6:.3g} um RMS)")
     engines = [inputs.choose_wave(dish, f, wave, device, radiator) for f in freqs]
     _check_runs(dish, freqs, engines, device)
     results = []
@@ -206,7 +212,8 @@ def _dataset(dish: inputs.Dish, freqs, results: list[dict], described: str, sour
     ds = xr.Dataset(data, coords=coords)
     ds = _with_surfaces(ds, results)
     ds.attrs.update({
-        "source": str(source), "dish_notes": " | ".join(dish.notes), "diameter": dish.D,
+        "source": str(source), "dish_notes": " | ".join(dish.notes), "dish_warning": dish.warning,
+        "diameter": dish.D,
         "focal_length": dish.F, "sphere_radius": sphere.radius, "deformation": described,
         "gap": inputs.gap_width(dish), "is_mesh": int(dish.is_mesh), "mesh_fit_rms": dish.fit_rms,
         "scene": dish.go.text or "", "usable_theta_max": float(b0.hi[-1]) if len(b0.hi) else math.nan,
