@@ -107,18 +107,17 @@ def test_a_map_in_micrometres_labelled_metres_is_noted():
                    for note in correct(GRID, _rng_map(), LAYOUT, corners_layout(LAYOUT), TERMS).notes)
 
 
-def test_a_repeated_column_is_refused(tmp_path):
-    """DictReader keeps the last of two max_m columns: an empty one lifted the limit."""
-    path = tmp_path / "acts.csv"
+@pytest.mark.parametrize(("name", "text", "why"), [
+    # DictReader keeps the last of two max_m columns: an empty one lifted the limit
+    ("acts.csv", "id,x_m,y_m,panels,min_m,max_m,max_m\na,{x},{y},0,-5e-6,5e-6,\n",
+     "column max_m appears twice"),
+    # commands.csv would read the id back as a comment line
+    ("acts.toml", '[[actuator]]\nid = "#4-3"\nx_m = {x}\ny_m = {y}\npanels = [0]\n',
+     "starts with '#'"),
+])
+def test_actuator_files_that_would_read_otherwise_than_meant_are_refused(tmp_path, name, text, why):
     x, y = _xy(LAYOUT, 0, 0.5, 0.5)
-    path.write_text(f"id,x_m,y_m,panels,min_m,max_m,max_m\na,{x},{y},0,-5e-6,5e-6,\n")
-    with pytest.raises(ActuatorError, match="column max_m appears twice"):
-        read_actuators(path, LAYOUT)
-
-
-def test_an_id_that_would_read_back_as_a_comment_is_refused(tmp_path):
-    path = tmp_path / "acts.toml"
-    x, y = _xy(LAYOUT, 0, 0.5, 0.5)
-    path.write_text(f'[[actuator]]\nid = "#4-3"\nx_m = {x}\ny_m = {y}\npanels = [0]\n')
-    with pytest.raises(ActuatorError, match="starts with '#'"):
+    path = tmp_path / name
+    path.write_text(text.format(x=x, y=y))
+    with pytest.raises(ActuatorError, match=why):
         read_actuators(path, LAYOUT)
