@@ -147,7 +147,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         raise FieldMapError(f"invert takes a FieldMap, an xarray.Dataset (raysim.load_fieldmap("
                             f"path) reads one), not {type(field).__name__}")
     scan = Scan.from_fieldmap(field)
-    hole = scan.largest_hole()
+    hole = scan.check_coverage()
     grid = solver_grid(scan.D, opts.N)
     if opts.rim is not None:
         boundary.check_targets(opts.rim, grid.a)

@@ -89,9 +89,10 @@ class Scan:
                    None if std is None else std.astype(np.float64), dict(ds.attrs),
                    blocked, obstacles_of(ds))
 
-    def largest_hole(self) -> Hole | None:
-        """The largest hole of missing readings inside the rim image (cells an obstacle hides
-        are not missing: their handling is the obstacles'). Raises when the ideal reflector
+    def check_coverage(self) -> Hole | None:
+        """What the scan covers inside the rim image: returns its largest hole of missing
+        readings (cells an obstacle hides are not missing: their handling is the obstacles'),
+        None without one. Raises when the ideal reflector
         leaves most cells dark (a dish that does not surround its axis, an offset dish: the
         inversion's mapping needs the axis), and when the hole is over MAX_HOLE_SHARE of the
         cells: the fill would invent the surface there."""

@@ -102,7 +102,7 @@ def surface_attrs(opts: InvertOptions, out: Outcome) -> dict[str, Any]:
 
 
 def hole_attrs(hole: Hole | None) -> dict[str, Any]:
-    """The scan's largest hole of missing readings (:meth:`solver.linear.Scan.largest_hole`),
+    """The scan's largest hole of missing readings (:meth:`solver.linear.Scan.check_coverage`),
     with a warning above :data:`solver.resample.HOLE_SHARE_WARNING` of the cells."""
     if hole is None:
         return {"largest_hole_share": 0.0}
