@@ -59,11 +59,11 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
     if panels_csv is not None:
         check_output(panels_csv, [*inputs, ("SurfaceMap output", output)])
     field = load_fieldmap(field_path)
-    from raysim.scene.scene import scene_of
+    from raysim.scene.scene import recorded_files
 
-    scene = scene_of(field.attrs)  # the inversion reads its files for the truth: inputs too
-    if scene is not None and scene.files:
-        inputs += [("file the FieldMap's scene names", f) for f in scene.files]
+    scene_files = recorded_files(field)  # the inversion reads them for the truth: inputs too
+    if scene_files:
+        inputs += scene_files
         check_output(output, inputs)
         if panels_csv is not None:
             check_output(panels_csv, [*inputs, ("SurfaceMap output", output)])

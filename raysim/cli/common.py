@@ -173,3 +173,18 @@ def output_path(path: Path, inputs: Iterable[tuple[str, str | os.PathLike[str] |
     except OSError as exc:
         raise RaysimError(f"{path}: cannot write in {parent} ({exc.strerror})") from exc
     return path
+
+
+def scene_inputs(field: Path) -> list[tuple[str, Path]]:
+    """(what, path) of the files the scene recorded in the FieldMap ``field`` names
+    (:func:`raysim.scene.scene.recorded_files`), for a command's output checks; nothing for a
+    file that cannot be read as one (the command's own reading says what is wrong with it)."""
+    import xarray as xr
+
+    from raysim.scene.scene import recorded_files
+
+    try:
+        with xr.open_dataset(field) as ds:
+            return recorded_files(ds.attrs)
+    except Exception:  # not a FieldMap: its reader says so, in one line
+        return []

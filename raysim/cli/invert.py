@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from raysim.cli.common import app, note, output_file, output_path, progress_bar, say
+from raysim.cli.common import app, note, output_file, output_path, progress_bar, say, scene_inputs
 from raysim.cli.tables import check_json_path, json_option, json_to_stdout, write_json
 from raysim.optics.fast import DEFAULT_TOL
 
@@ -111,25 +111,6 @@ def invert_command(
     for line in summary(result):
         say(line)
     say(f"wrote {output}")
-
-
-def scene_inputs(field: Path) -> list[tuple[str, Path]]:
-    """(what, path) of the files the scene a FieldMap records names (its mesh, maps, panel
-    tables), resolved as every reader of the FieldMap resolves them
-    (:func:`raysim.scene.scene.scene_of`: beside the scene file it came from), for the output
-    checks: the inversion reads them for the truth, and an output there would replace them.
-    Nothing for a measured scan, a scene whose files are gone here, or a file that cannot be read
-    (the command's own reading says what is wrong with it)."""
-    import xarray as xr
-
-    from raysim.scene.scene import scene_of
-
-    try:
-        with xr.open_dataset(field) as ds:
-            scene = scene_of(ds.attrs)
-    except Exception:  # not a FieldMap: its reader says so, in one line
-        return []
-    return [] if scene is None else [("file the FieldMap's scene names", f) for f in scene.files]
 
 
 def _radiator_applies(field: Path, model: str | None, refine: int) -> None:

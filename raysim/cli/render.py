@@ -6,8 +6,7 @@ from pathlib import Path
 
 import typer
 
-from raysim.cli.common import app, note, output_path, say
-from raysim.cli.invert import scene_inputs
+from raysim.cli.common import app, note, output_path, say, scene_inputs
 
 
 @app.command()

@@ -196,6 +196,15 @@ def scene_of(field: Any) -> Scene | None:
         return None
 
 
+def recorded_files(field: Any) -> list[tuple[str, Path]]:
+    """(what, path) of the files the scene a FieldMap records names (its mesh, maps, panel
+    tables; :func:`scene_of`), for output checks: readers of the FieldMap read them (the
+    inversion for the truth), and an output there would replace them. None for a measured
+    scan or a scene whose files are gone here."""
+    scene = scene_of(field)
+    return [] if scene is None else [("file the FieldMap's scene names", f) for f in scene.files]
+
+
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene TOML file (relative file names resolve beside it). A name
     that is not an existing path may name a shipped example (``paper_go``)."""
