@@ -96,10 +96,10 @@ class Scan:
         leaves most cells dark (a dish that does not surround its axis, an offset dish: the
         inversion's mapping needs the axis), and when the hole is over MAX_HOLE_SHARE of the
         cells: the fill would invent the surface there."""
-        n = usable_rows(self.sphere, self.F, self.D)
-        hidden = (np.zeros((n, self.sphere.n_phi), dtype=bool) if self.blocked is None
-                  else self.blocked[:n])
-        dark = ~(self.intensity_ideal[:n] > 0) & ~hidden
+        used = self.first_rows(usable_rows(self.sphere, self.F, self.D))
+        hidden = (np.zeros(used.intensity.shape, dtype=bool) if used.blocked is None
+                  else used.blocked)
+        dark = ~(used.intensity_ideal > 0) & ~hidden
         if dark.mean() > 0.5:
             raise FieldMapError(
                 f"the ideal reflector lights only {100 * (1 - dark.mean()):.0f} % of the cells "
@@ -107,10 +107,8 @@ class Scan:
                 "the rim image (an offset dish, or a mesh whose axis is elsewhere, is not "
                 "supported)")
         self._check_rim_image()
-        hole = largest_hole(~np.isfinite(intensity_ratio_fa(self.intensity[:n],
-                                                            self.intensity_ideal[:n])) & ~hidden,
-                            replace(self.sphere, n_theta=n,
-                                    theta_max=float(self.sphere.theta_edges[n])))
+        missing = ~np.isfinite(intensity_ratio_fa(used.intensity, used.intensity_ideal))
+        hole = largest_hole(missing & ~hidden, used.sphere)
         if hole is not None and hole.share > MAX_HOLE_SHARE:
             raise FieldMapError(f"the scan misses a whole region ({hole.describe()}): the "
                                 "inversion would fill it with a smooth guess; measure it")
