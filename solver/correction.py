@@ -169,6 +169,7 @@ class JointFit:
         diag = np.diag(AtA)
         self.scale = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
         self.w, self.V, self.kept = _scaled_eigh(AtA - QA.T @ QA, self.scale)
+        self.null = self._null(self.V, self.kept)  # N's null space, in commands
 
     def _b(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
         """A^T (I - Q Q^T) d."""
@@ -184,16 +185,16 @@ class JointFit:
         """The null space of A^T A: the commands the map does not fix (those that only make
         a removed term are fixed: the terms take them)."""
         if self.G.shape[1] == 0:
-            return self._null(self.V, self.kept)
+            return self.null
         _, V, kept = _scaled_eigh(self.AtA, self.scale)
         return self._null(V, kept)
 
     def least_norm(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The unbounded minimiser of least norm (m)."""
+        """The unbounded minimiser of least norm (m): a minimiser from the scaled
+        decomposition, its part along N's null space taken off."""
         Vk, s = self.V[:, self.kept], self.scale
         c = s * (Vk @ ((Vk.T @ (s * -self._b(d))) / self.w[self.kept]))
-        null = self._null(self.V, self.kept)
-        return c - null @ (null.T @ c)
+        return c - self.null @ (self.null.T @ c)
 
     def bounded(self, d: NDArray[np.float64], ranges: NDArray[np.float64]
                 ) -> tuple[NDArray[np.float64], int]:
@@ -223,7 +224,8 @@ class JointFit:
         standard deviation ``point_std`` (m) at the panel points, through the fit as it is
         (the terms' removal included): c = -N^+ A^T P e with P = I - Q Q^T, so
         Cov c = N^+ A^T P S P A N^+, S = diag(std^2). An actuator with a point of unknown
-        spread (NaN) on its panels gets NaN."""
+        spread (NaN) on its panels gets NaN. N^+ is the operator :meth:`least_norm` applies:
+        the scaled inverse on N's range, its null part taken off."""
         known = np.isfinite(point_std)
         v = np.where(known, point_std, 0.0) ** 2
         A, Q, QA = self.A, self.Q, self.QA
@@ -231,8 +233,9 @@ class JointFit:
         M = ((A.T @ sp.diags(v) @ A).toarray() - ASQ @ QA - QA.T @ ASQ.T
              + QA.T @ ((Q.T * v) @ Q) @ QA)
         Vk, s = self.V[:, self.kept], self.scale
-        Np = (s[:, None] * Vk / self.w[self.kept]) @ (Vk.T * s)  # N^+ on N's range
-        std = np.sqrt(np.maximum(np.einsum("ij,jk,ki->i", Np, M, Np), 0.0))
+        Np = (s[:, None] * Vk / self.w[self.kept]) @ (Vk.T * s)
+        Np -= self.null @ (self.null.T @ Np)
+        std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Np, M, Np), 0.0))
         unknown = np.asarray(abs(A[~known]).sum(axis=0)).ravel() > 0
         return np.where(unknown, np.nan, std)
 
