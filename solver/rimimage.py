@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from raysim.maps.sphere import SphereGrid, theta_rim
 from raysim.surface.gridded import GriddedMap
 from solver.aperture import ApertureGrid
-from solver.continuation import rim_continuation
+from solver.nonlinear import extend_outside
 from solver.resample import MAX_GAP_CELLS
 
 #: azimuths at which the rim's rays are traced (0.25 deg apart)
@@ -63,15 +63,12 @@ def rim_image_shift(grid: ApertureGrid, delta: NDArray[np.float64], F: float, D:
     continuation the forward models use (beyond the outermost grid centres, on the axes, the
     spline holds their values and has no slope).
     """
-    continued = rim_continuation(float(grid.D), int(grid.N))(delta)
-    spline = GriddedMap(grid.x, grid.y, continued)
+    spline = GriddedMap(grid.x, grid.y, extend_outside(grid, delta))
     phi = np.linspace(0.0, 2.0 * np.pi, N_AZIMUTHS, endpoint=False)
     r = grid.a - grid.h
     x, y = r * np.cos(phi), r * np.sin(phi)
     slope_x, slope_y = spline.gradient(x, y)
-    zero = np.zeros_like(phi)
-    return (rim_ray_theta(F, D, R, phi, spline(x, y), slope_x, slope_y)
-            - rim_ray_theta(F, D, R, phi, zero, zero, zero))
+    return rim_ray_theta(F, D, R, phi, spline(x, y), slope_x, slope_y) - theta_rim(D, F)
 
 
 def rows_clear_of_rim(sphere: SphereGrid, F: float, D: float, n_rows: int,
