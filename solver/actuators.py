@@ -19,6 +19,7 @@ four panels) moves every panel it holds, with the same stroke.
 from __future__ import annotations
 
 import csv
+import functools
 import math
 import tomllib
 from dataclasses import dataclass
@@ -330,17 +331,30 @@ def shape_functions(layout, panel: int, support: tuple[tuple[int, float, float],
     interpolant in the first k monomials of :data:`MONOMIALS` of the panel frame (s, t).
     Raises when the points do not fix such a shape."""
     k = len(support)
-    ps, pt = local_st(layout, panel, [p[1] for p in support], [p[2] for p in support])
-    V = np.stack([ps**i * pt**j for i, j in MONOMIALS[:k]], axis=-1)  # (k points, k monomials)
-    if np.linalg.matrix_rank(V) < k:
-        raise ActuatorError(f"panel {panel}: its {k} actuators do not fix a panel shape "
-                            "(collinear or coincident)")
+    V_inv = _support_inverse(layout, panel, tuple((float(p[1]), float(p[2])) for p in support))
     s, t = local_st(layout, panel, x, y)
     M = np.stack([s**i * t**j for i, j in MONOMIALS[:k]], axis=-1)  # (points, k monomials)
-    W = np.linalg.solve(V.T, M.T).T
+    W = M @ V_inv
     lever = float(np.abs(W).sum(axis=1).max(initial=0.0))
     if lever > MAX_LEVER:
         raise ActuatorError(f"panel {panel}: its {k} actuators almost fail to fix a panel shape "
                             f"(nearly collinear or coincident): strokes of 1 um would move the "
                             f"panel by up to {lever:.0f} um; move them apart")
     return W
+
+
+@functools.lru_cache(maxsize=4096)
+def _support_inverse(layout, panel: int, points: tuple[tuple[float, float], ...]) -> NDArray[np.float64]:
+    """The inverse of the monomials' values at a panel's support points (x, y) (m): the shape
+    functions at any points are their monomials times it. Kept per support, because a
+    deformation made of strokes (:func:`solver.correction.displacement`) is evaluated a few
+    points at a time by a ray trace."""
+    k = len(points)
+    ps, pt = local_st(layout, panel, [p[0] for p in points], [p[1] for p in points])
+    V = np.stack([ps**i * pt**j for i, j in MONOMIALS[:k]], axis=-1)  # (k points, k monomials)
+    if np.linalg.matrix_rank(V) < k:
+        raise ActuatorError(f"panel {panel}: its {k} actuators do not fix a panel shape "
+                            "(collinear or coincident)")
+    V_inv = np.linalg.inv(V)
+    V_inv.flags.writeable = False
+    return V_inv

@@ -26,16 +26,36 @@ from solver.correction import JointFit, influence_matrix, panel_ids, term_column
 from solver.fit import remove_terms
 
 
+class DiskModes:
+    """The disk's Dirichlet modes on one aperture grid, sharing the grid's radii.
+
+    J_m of high order costs tens of microseconds per point, and a budget asks for thousands of
+    modes; a square grid centred on the axis holds each radius about eight times (its
+    symmetries), so the Bessel function is taken once per distinct radius inside the disk."""
+
+    def __init__(self, grid) -> None:
+        X, Y = grid.XY
+        r = np.hypot(X, Y)
+        self.a = float(grid.a)
+        self.inside = r <= self.a
+        self.radii, self.index = np.unique(r[self.inside], return_inverse=True)
+        self.phi = np.arctan2(Y, X)[self.inside]
+
+    def mode(self, m: int, n: int, phase: int) -> NDArray[np.float64]:
+        """The unit-norm (over the disk r <= a, m^2) Dirichlet mode J_m(j_mn r / a) cos(m phi)
+        (phase 0) or sin (phase 1) on the grid (1/m), 0 outside the disk."""
+        a = self.a
+        j = float(jn_zeros(m, n)[n - 1])
+        norm = np.sqrt(0.5 * a * a * jv(m + 1, j) ** 2 * (2.0 * np.pi if m == 0 else np.pi))
+        ang = np.cos(m * self.phi) if phase == 0 else np.sin(m * self.phi)
+        out = np.zeros(self.inside.shape)
+        out[self.inside] = jv(m, j * self.radii / a)[self.index] * ang / norm
+        return out
+
+
 def dirichlet_mode(grid, m: int, n: int, phase: int) -> NDArray[np.float64]:
-    """The unit-norm (over the disk r <= a, m^2) Dirichlet mode J_m(j_mn r / a) cos(m phi)
-    (phase 0) or sin (phase 1) on the grid (1/m), 0 outside the disk."""
-    a = grid.a
-    j = float(jn_zeros(m, n)[n - 1])
-    X, Y = grid.XY
-    r, phi = np.hypot(X, Y), np.arctan2(Y, X)
-    norm = np.sqrt(0.5 * a * a * jv(m + 1, j) ** 2 * (2.0 * np.pi if m == 0 else np.pi))
-    ang = np.cos(m * phi) if phase == 0 else np.sin(m * phi)
-    return np.where(r <= a, jv(m, j * r / a) * ang / norm, 0.0)
+    """One Dirichlet mode on ``grid`` (see :meth:`DiskModes.mode`)."""
+    return DiskModes(grid).mode(m, n, phase)
 
 
 def budget_shapes(grid, modes: Iterable[tuple[int, int, float]],
@@ -43,10 +63,11 @@ def budget_shapes(grid, modes: Iterable[tuple[int, int, float]],
     """(shape on the grid, coefficient variance) pairs of the map error: ``modes`` as (m, n,
     mean square over the disk in m^2, both phases), the rim fit's harmonics (see the module)."""
     area = np.pi * grid.a**2
+    disk = DiskModes(grid)
     for m, n, ms in modes:
         phases = 1 if m == 0 else 2
         for phase in range(phases):
-            yield dirichlet_mode(grid, m, n, phase), ms * area / phases
+            yield disk.mode(m, n, phase), ms * area / phases
     if rim_targets:
         X, Y = grid.XY
         rho, phi = np.hypot(X, Y) / grid.a, np.arctan2(Y, X)

@@ -3,7 +3,8 @@
 Monte Carlo is the test, not the method: each case inverts 32 noisy GO scans of the ideal
 dish (exact cell means from tests/reference_go.py, noise in dB per reading like a power
 meter's) with the whole linear pipeline, gain estimated, and compares the RMS scatter of the
-maps with the budget's prediction, for two scan plans and three noise levels; and the drift
+maps with the budget's prediction, for two scan plans and two noise levels (one deep in
+the pipeline's linear regime, one where a reading's error reaches 1 %); and the drift
 references' part against scans whose every reading is divided by the gain interpolated in
 time between noisy references, in the rig's order of steps.
 """
@@ -29,7 +30,7 @@ SEEDS = 32
 def test_the_budget_predicts_the_inversions_scatter(cells):
     sphere = SphereGrid(R, *cells)
     ideal = cell_mean_intensity(sphere, F, D)
-    for k, noise_db in enumerate((0.001, 0.01, 0.05)):
+    for k, noise_db in enumerate((0.001, 0.05)):
         rng = np.random.default_rng(100 * k + cells[0])
         squares = []
         for _ in range(SEEDS):
