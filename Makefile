@@ -56,8 +56,14 @@ demo: $(STAMP)
 	$(BIN)/raysim report out/paper_go.nc -o out/report
 	@echo "demo outputs are in $(CURDIR)/out/; the paper's figures: $(CURDIR)/out/report/report.html"
 
+# The suite on TEST_JOBS processes (pytest-xdist), 2 by default as the CI machine has two
+# cores: a third less wall time, as much of it waits on subprocesses, Dask and sockets. A
+# file's tests stay on one process, so a module's fixtures are made once. TEST_JOBS=0 runs
+# the suite in this process.
+TEST_JOBS ?= 2
+
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(TEST_JOBS) --dist loadfile
 
 # The documentation site: Markdown pages, the API reference from the docstrings and the
 # tutorials in examples/ run on small grids; warnings are errors. Output: docs/_build/html.

@@ -76,11 +76,11 @@ def test_a_memo_keeps_panel_ids_apart_only_where_they_matter():
     assert np.array_equal(found, deformation(x, y)) and not np.array_equal(found, with_ids)
 
 
-@pytest.mark.slow  # go+edge and PO of a 110 m dish at 0.3 GHz
-def test_go_edge_samples_are_what_simulate_gives_and_not_po():
+@pytest.mark.slow  # go+edge of a 110 m dish at 0.3 GHz, twice
+def test_go_edge_samples_are_what_simulate_gives():
     """A spec with method go+edge gets the go+edge engine (it once fell through to PO): the
-    deformed intensity equals raysim.simulate's go+edge run of the same reflector and differs
-    from PO's by the engines' known gap, not by round-off."""
+    deformed intensity equals raysim.simulate's go+edge run of the same reflector to round-off,
+    where PO's differ by the engines' gap (a few per cent at 0.3 GHz on this 1 m mesh)."""
     from raysim.dataset import engine
     from raysim.simulate import ENGINES, Options
 
@@ -95,9 +95,6 @@ def test_go_edge_samples_are_what_simulate_gives_and_not_po():
                              lambda stage, fraction: None)
     lit = run.intensity > 1e-3 * run.intensity.max()
     assert np.allclose(values[lit], run.intensity[lit], rtol=1e-6)
-    po_values = engine.wave_intensity(scene, ideal.deformed(deformation), "po")
-    gap = np.sqrt(np.mean((po_values[lit] - values[lit]) ** 2)) / np.sqrt(np.mean(values[lit] ** 2))
-    assert 1e-4 < gap < 0.2  # wave engines a few per cent apart at 0.3 GHz on a 1 m mesh
 
 
 def test_an_unknown_wave_method_is_refused():
