@@ -34,9 +34,15 @@ from numpy.typing import NDArray
 from raysim.maps.sphere import SphereGrid
 from solver.aperture import ApertureGrid
 from solver.equation import power_gain
+from solver.errors import SolverError
 from solver.resample import fill_missing
 
 MEASURED = "measured"  # the FieldMap method of a scan read by a rig
+#: a trusted scale is refused when the scan holds less than 1/this or more than this times the
+#: ideal's total power: a surface error redistributes the power on the sphere, it does not
+#: halve or double it (the paper's 3 mm deformation moves the balance by under 1 %); such a
+#: scan's readings are on another scale (watts, another reference)
+MAX_TRUSTED_POWER_RATIO = 2.0
 
 
 @dataclass(frozen=True)
@@ -97,6 +103,19 @@ class MeasuredFA:
     def scale(self) -> float:
         """The scale divided out of the readings (1 when the gain is trusted)."""
         return self.estimate.scale
+
+
+def check_trusted_scale(intensity: NDArray[np.float64], intensity_ideal: NDArray[np.float64],
+                        sphere: SphereGrid, choice: GainChoice) -> None:
+    """Refuse (SolverError) a trusted gain whose scan's total power is not the ideal's within
+    :data:`MAX_TRUSTED_POWER_RATIO`: its FA would be a huge constant, read as a huge surface."""
+    c = power_gain(intensity, intensity_ideal, sphere.cell_area())
+    if 1.0 / MAX_TRUSTED_POWER_RATIO <= c <= MAX_TRUSTED_POWER_RATIO:
+        return
+    raise SolverError(f"the gain is trusted (gain {choice.mode!r}), but the scan holds "
+                      f"{c:.3g} times the ideal's total power: its intensity is not on the ideal's "
+                      "scale (readings in W, or against another reference?); estimate the scale "
+                      "with gain 'power' (raysim invert --gain power)")
 
 
 def estimate_gain(intensity: NDArray[np.float64], intensity_ideal: NDArray[np.float64],

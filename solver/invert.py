@@ -30,7 +30,13 @@ from raysim.progress import Progress
 from solver import boundary
 from solver.aperture import ApertureGrid, solver_grid
 from solver.central import CentralMode, central_mode_of, hole_radius
-from solver.equation import debias, intensity_ratio_fa, noise_variance, stated_noise_variance
+from solver.equation import (
+    debias,
+    intensity_ratio_fa,
+    noise_variance,
+    power_gain,
+    stated_noise_variance,
+)
 from solver.errors import SolverError
 from solver.fit import remove_terms
 from solver.forward import Forward
@@ -38,6 +44,7 @@ from solver.gainmode import (
     GainChoice,
     GainEstimate,
     MeasuredFA,
+    check_trusted_scale,
     estimate_gain,
     refocus_mode,
     resolve_gain,
@@ -306,8 +313,15 @@ def measured_fa(scan: Scan, gain: GainChoice) -> MeasuredFA:
         v = stated_noise_variance(scan.intensity, stated, n_rows)
         source = "intensity_std"
     else:
-        v = noise_variance(intensity_ratio_fa(scan.intensity, scan.intensity_ideal), n_rows)
+        # FA's differences grow as 1 / the readings' scale: with the gain estimated they are
+        # taken on the readings brought to the ideal's scale by their power balance, else a
+        # scan read in W (1e-9 of the ideal) had a noise variance 1e17 times its own
+        c0 = (power_gain(scan.intensity, scan.intensity_ideal, scan.sphere.cell_area())
+              if gain.estimated else 1.0)
+        v = noise_variance(intensity_ratio_fa(scan.intensity / c0, scan.intensity_ideal), n_rows)
         source = "estimated from second differences along phi"
+    if not gain.estimated:
+        check_trusted_scale(scan.intensity, scan.intensity_ideal, scan.sphere, gain)
     estimate = (estimate_gain(scan.intensity, scan.intensity_ideal, scan.sphere, n_rows, v,
                               stated) if gain.estimated
                 else GainEstimate(1.0, 0.0, 1.0))

@@ -244,6 +244,7 @@ def workspace(tmp_path_factory):
     _write_mesh_in_mm(ws / "dish_mm.stl")
     save(_fieldmap(), ws / "f.nc")
     _fieldmap(lambda ideal: ideal * 1.001 - 0.01).to_netcdf(ws / "negative.nc")  # save() refuses it
+    save(_fieldmap(lambda ideal: ideal * 3.7e-9), ws / "watts.nc")  # method go: the gain is trusted
     bad = _fieldmap()
     bad["intensity"].values[3, 4] = np.inf
     bad.to_netcdf(ws / "inf.nc")
@@ -371,6 +372,7 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["invert", "corrupt.nc", "-o", "o.nc"], "not a readable NetCDF file"),
         (["invert", "negative.nc", "-o", "o.nc"], "holds negative values"),
         (["invert", "inf.nc", "-o", "o.nc"], "holds infinite values"),
+        (["invert", "watts.nc", "-o", "o.nc"], "holds 3.7e-09 times the ideal's total power"),
         (["invert", "f.nc", "-o", "o.nc", "--rim", "rim_centre.csv"], "must lie near the rim"),
         (["invert", "f.nc", "-o", "o.nc", "--rim", "rim_header.csv"], "header x,y,dz"),
         (["invert", "f.nc", "-o", "o.nc", "--rim", "rim_text.csv"], "row 2 is not three numbers"),

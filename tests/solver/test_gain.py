@@ -139,3 +139,26 @@ def test_one_reading_per_point_still_states_the_spread_of_the_noise(paper_field,
     assert min(stds) > 0
     assert np.std(scales, ddof=1) == pytest.approx(np.mean(stds), rel=0.35)
     assert np.isnan(estimate_gain(noisy, ideal, sphere, 79, np.nan, unstated).std)  # noise unknown: none
+
+
+@pytest.mark.parametrize("c", [3.7e-9, 0.4, 2.6])
+def test_a_trusted_gain_on_another_scale_is_refused_and_an_estimated_one_inverts_it(paper_field, c):
+    """Readings in W (3.7e-9 of the ideal's scale) with the gain trusted gave a map of 3e8 m
+    RMS and no word: the trusted scale is refused beyond a power balance of 1/2 .. 2, the
+    estimated one recovers the scale and the map."""
+    from solver.errors import SolverError
+
+    with pytest.raises(SolverError, match=f"holds {c:.3g} times the ideal's total power"):
+        invert(scaled(paper_field, c), gain="known", N=64, refine_iterations=0)
+    est = invert(scaled(paper_field, c), gain="power", N=64, refine_iterations=0, truth=paper_delta)
+    same = invert(paper_field, gain="power", N=64, refine_iterations=0, truth=paper_delta)
+    assert est.attrs["gain"] == pytest.approx(c * same.attrs["gain"], rel=1e-9)
+    assert est.attrs["rms_m"] == pytest.approx(same.attrs["rms_m"], rel=1e-6)
+
+
+def test_a_trusted_gain_within_the_balance_is_taken_as_it_is(paper_field):
+    """A scale of 1.5 is an error a trusted gain leaves in the map, not refused: the map's RMS
+    against the truth grows by the delta_c it puts in."""
+    good = invert(paper_field, gain="known", N=64, refine_iterations=0, truth=paper_delta)
+    off = invert(scaled(paper_field, 1.5), gain="known", N=64, refine_iterations=0, truth=paper_delta)
+    assert off.attrs["gain"] == 1.0 and off.attrs["rms_m"] > 10 * good.attrs["rms_m"]
