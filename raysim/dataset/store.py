@@ -67,7 +67,11 @@ from raysim.version import VERSION_ATTR, __version__
 
 PENDING, DONE, FAILED = 0, 1, 2
 _BATCH = 256  # samples read at once while verifying
-_PACKAGES = ("numpy", "warp-lang", "dask", "distributed", "zarr", "xarray")
+_PACKAGES = ("numpy", "scipy", "warp-lang", "dask", "distributed", "zarr", "xarray")
+#: the versions a sample's values depend on (its kernels, splines and random draws): a store is
+#: resumed, and a worker writes into it, only with these as the store recorded them, so that
+#: no store holds samples of two of them (a store that did not record one is not held to it)
+_VALUES_DEPEND_ON = (VERSION_ATTR, "version_numpy", "version_scipy", "version_warp")
 
 
 def versions() -> dict[str, str]:
@@ -80,6 +84,26 @@ def versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:  # pragma: no cover - all are dependencies
             out[f"version_{name.split('-')[0]}"] = "absent"
     return out
+
+
+def version_changes(attrs: Any) -> list[str]:
+    """What of :data:`_VALUES_DEPEND_ON` differs between a store's attributes and this process,
+    as "numpy 2.3.1 -> 2.4.0" (raysim's as "raysim ..."); empty when nothing does."""
+    now = versions()
+    return [f"{'raysim' if key == VERSION_ATTR else key.removeprefix('version_')} "
+            f"{attrs[key]} -> {now[key]}"
+            for key in _VALUES_DEPEND_ON if key in attrs and str(attrs[key]) != now[key]]
+
+
+def refuse_other_versions(path: str, attrs: Any) -> None:
+    """Refuse (DatasetError) to add samples to a store made with other versions of what they
+    depend on: its samples would differ from the others in their last bits, or more."""
+    changes = version_changes(attrs)
+    if changes:
+        raise DatasetError(f"{path}: made with other versions of what its samples depend on "
+                           f"({', '.join(changes)}), so a resume here would mix samples of both: "
+                           "finish it where it was made, or make the dataset again at a new "
+                           "store path")
 
 
 def create(path: str, spec: DatasetSpec) -> zarr.Group:
@@ -151,6 +175,7 @@ def open_checked(path: str, spec: DatasetSpec) -> zarr.Group:
         raise DatasetError(f"{path} was made by a different spec (dataset "
                            f"{attrs.get('name')!r}, fingerprint {str(attrs.get('fingerprint'))[:12]}, "
                            f"this spec {spec.fingerprint[:12]}): use a new store path")
+    refuse_other_versions(path, attrs)
     return group
 
 

@@ -25,7 +25,7 @@ from raysim.dataset.engine import ideal_intensity, simulate_sample
 from raysim.dataset.integrity import spec_data_names
 from raysim.dataset.sampling import draw_sample
 from raysim.dataset.spec import DatasetError, DatasetSpec, parse_spec
-from raysim.dataset.store import Writer, open_readonly
+from raysim.dataset.store import Writer, open_readonly, refuse_other_versions
 from raysim.distributed.process import prepare_process, tune_malloc  # noqa: F401  (re-exported)
 
 _lock = threading.Lock()
@@ -61,6 +61,7 @@ def context(store: str, fingerprint: str) -> Context:
                       base=Path(str(attrs["spec_base"])))
     if spec.fingerprint != fingerprint:
         raise DatasetError(f"{store}: the store's spec changed under a running dataset")
+    refuse_other_versions(store, attrs)  # a worker on another machine, with other packages
     import zarr
 
     return Context(spec, Writer(zarr.open_group(store, mode="r+"), spec_data_names(spec), spec.seed))

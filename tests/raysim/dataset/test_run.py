@@ -344,3 +344,28 @@ def test_a_resume_that_only_repairs_an_ideal_intensity_says_so(reference, spec, 
     assert "nothing left to compute" not in line
     assert "1 done items failed verification and were recomputed" in line
     assert_same_store(reference, store)
+
+
+def test_a_store_made_with_other_versions_is_neither_resumed_nor_written_by_a_worker(reference, spec,
+                                                                                     tmp_path, monkeypatch):
+    """The store records the versions its samples depend on; a resume under another numpy (or
+    a Dask worker elsewhere with another Warp) added samples that differ from the others in
+    their last bits, exit 0. Both are refused, naming what changed; the store is untouched."""
+    store = tmp_path / "copy.zarr"
+    shutil.copytree(reference, store)
+    before = _arrays(store)
+    real = zstore.versions()
+    for key, name in (("version_numpy", "numpy"), ("version_warp", "warp")):
+        monkeypatch.setattr(zstore, "versions", lambda key=key: {**real, key: "0.0.1"})
+        recorded = real[key]
+        with pytest.raises(DatasetError, match=f"other versions .*\\({name} {recorded} -> 0.0.1\\)"):
+            generate(spec, store, resume=True, workers=1)
+        dataset_worker.context.cache_clear()
+        with pytest.raises(DatasetError, match=f"{name} {recorded} -> 0.0.1"):
+            dataset_worker.context(str(store), spec.fingerprint)
+    monkeypatch.setattr(zstore, "versions", lambda: {**real, "version_dask": "0.0.1"})  # no value depends on it
+    dataset_worker.context.cache_clear()
+    assert dataset_worker.context(str(store), spec.fingerprint).spec.fingerprint == spec.fingerprint
+    dataset_worker.context.cache_clear()
+    after = _arrays(store)
+    assert all(np.array_equal(before[k], after[k], equal_nan=before[k].dtype.kind == "f") for k in before)
