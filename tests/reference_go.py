@@ -173,7 +173,8 @@ def _rim_image(phi, F, R, D, delta, t_rim, steps: int = 8):
     t0, t1 = np.full(phi.shape, t_rim - 1e-3), np.full(phi.shape, t_rim + 1e-3)
     f0, f1 = excess(t0), excess(t1)
     for _ in range(steps):
-        slope = np.where(f1 != f0, (f1 - f0) / (t1 - t0), np.inf)
+        with np.errstate(divide="ignore", invalid="ignore"):  # a converged point: t1 == t0
+            slope = np.where(f1 != f0, (f1 - f0) / (t1 - t0), np.inf)
         t2 = t1 - f1 / slope
         t0, f0 = t1, f1
         t1, f1 = t2, excess(t2)
