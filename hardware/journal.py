@@ -170,14 +170,22 @@ class Journal:
         return journal
 
     @classmethod
-    def resume(cls, path: str | Path, fingerprint: str, steps: int) -> Journal:
-        """Open an existing journal for appending, after checking it belongs to this plan.
+    def resume(cls, path: str | Path, fingerprint: str, steps: int, also: tuple[str, ...] = (),
+               plans: tuple[str, ...] = ()) -> Journal:
+        """Open an existing journal for appending, after checking it belongs to this plan:
+        its fingerprint is ``fingerprint`` or one of ``also`` (what earlier versions wrote for
+        the same plan and settings). ``plans``: this plan's own fingerprints (without the
+        simulator's settings), to say which of the two differs.
 
         A torn last line is cut off first, so the next record starts on a fresh line.
         """
         path = Path(path)
         header, records, good = read_journal(path)
-        if header.get("fingerprint") != fingerprint or header.get("steps") != steps:
+        if header.get("fingerprint") not in (fingerprint, *also) or header.get("steps") != steps:
+            if plans and header.get("plan") in plans and header.get("steps") == steps:
+                raise JournalError(f"{path}: the journal was made with other settings of the "
+                                   "simulated rig (its noise, drift, seed, gain, calibration or "
+                                   "map) or of the probe; resume with the same options")
             raise JournalError(f"{path}: the journal belongs to another plan or other settings "
                                "(fingerprints differ); resume with the same plan and options")
         fd = _locked(path, os.O_WRONLY | os.O_APPEND)

@@ -46,6 +46,13 @@ SAMPLE = "sample"
 REFERENCE = "reference"
 
 
+#: settings that bound how a step is reached, never what it reads (left out of a journal's
+#: fingerprint): the instruments' addresses and read timeout, the axes' speed and move timeout,
+#: and the simulated rig's time scale
+NOT_READINGS = {"rig": ("resources", "speed", "move_timeout_s", "visa_timeout_s"),
+                "extra": ("sim_time_scale",)}
+
+
 @dataclass(frozen=True)
 class Step:
     """One acquisition step: a grid cell (i along theta, j along phi) or a reference reading.
@@ -124,15 +131,19 @@ class ScanPlan:
                 reference()
         return out
 
-    def fingerprint(self, extra: dict[str, Any] | None = None) -> str:
+    def fingerprint(self, extra: dict[str, Any] | None = None, legacy: bool = False) -> str:
         """A hash of everything that decides the samples (plan, rig, ``extra`` settings).
 
         The drift correction and the obstacles are left out: they only decide how the
         journal's readings are turned into a FieldMap, so they may change between a scan and
-        its resumption.
+        its resumption. So are the settings of :data:`NOT_READINGS`, which bound how a step is
+        reached and never what it reads: a crew may lengthen a timeout or slow an axis to get
+        a stopped scan going again. ``legacy``: the fingerprint journals written before that
+        recorded (those settings in), which a resume still accepts.
         """
         rig = asdict(self.rig)
-        rig.pop("resources")
+        for key in ("resources",) if legacy else NOT_READINGS["rig"]:
+            rig.pop(key)
         if self.rig.probe_response.ideal:
             rig.pop("probe_response")  # the journals of scans made before probes existed still match
         skip = ("text", "rig_text", "files", "rig", "simulator", "drift_correction",
@@ -140,7 +151,8 @@ class ScanPlan:
                                                 else ())
         content = {k: v for k, v in asdict(self).items() if k not in skip}
         content["rig"] = rig
-        content["extra"] = extra or {}
+        content["extra"] = {k: v for k, v in (extra or {}).items()
+                            if legacy or k not in NOT_READINGS["extra"]}
         blob = json.dumps(content, sort_keys=True, default=str).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
 

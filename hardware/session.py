@@ -100,10 +100,13 @@ def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
     steps = plan.steps()
     with _instrument_addresses(plan, resources, simulate, settings, faults) as (addr, sim_rig,
                                                                                  extra):
-        fingerprint = plan.fingerprint({k: v for k, v in extra.items() if k != "sim_field"})
+        decides = {k: v for k, v in extra.items() if k != "sim_field"}
+        fingerprint = plan.fingerprint(decides)
         held = journal_records(jpath)
         if resume and held:
-            jr = Journal.resume(jpath, fingerprint, len(steps))
+            jr = Journal.resume(jpath, fingerprint, len(steps),
+                                also=(plan.fingerprint(decides, legacy=True),),
+                                plans=(plan.fingerprint(), plan.fingerprint(legacy=True)))
         else:  # no journal, or one holding no step: nothing to resume, start afresh
             jr = Journal.create(jpath, fingerprint, len(steps), plan=plan.fingerprint())
         with jr:
@@ -206,7 +209,7 @@ def check_journal_plan(plan: ScanPlan, header: Mapping[str, Any], records: Seque
     to 1e-9), which the plan decides; so the readings of another grid, dish or frequency are
     never written into this plan's cells."""
     recorded = header.get("plan")
-    if recorded and recorded != plan.fingerprint():
+    if recorded and recorded not in (plan.fingerprint(), plan.fingerprint(legacy=True)):
         raise JournalError(f"{path}: the journal belongs to another plan (its plan fingerprint "
                            f"{recorded}, this plan's {plan.fingerprint()})")
     steps = plan.steps()

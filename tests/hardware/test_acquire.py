@@ -12,7 +12,7 @@ import pytest
 
 from hardware.errors import JournalError, PlanError
 from hardware.journal import Record, read_journal
-from hardware.plan import REFERENCE, load_plan
+from hardware.plan import REFERENCE, ScanPlan, load_plan
 from hardware.rig import Calibration, Rig
 from hardware.session import fieldmap_file_from_journal, fieldmap_from_journal, park, scan
 from hardware.sim.rig import Faults
@@ -183,8 +183,11 @@ def test_journal_guards(tmp_path: Path) -> None:
     with pytest.raises(JournalError, match="pass --resume"):
         scan(plan, out, simulate=field)
     noisier = dataclasses.replace(plan.simulator, noise_db=0.02)
-    with pytest.raises(JournalError, match="belongs to another plan"):
+    with pytest.raises(JournalError, match="other settings of the simulated rig"):
         scan(plan, out, simulate=field, sim=noisier, resume=True)
+    finer = dataclasses.replace(plan, frequency_hz=2.0 * plan.frequency_hz)
+    with pytest.raises(JournalError, match="belongs to another plan"):
+        scan(finer, out, simulate=field, resume=True)
     assert journal.read_bytes() == before
     # resuming a complete journal only rewrites the FieldMap
     again = scan(plan, out, simulate=field, resume=True)
@@ -262,3 +265,43 @@ def test_a_journal_being_written_is_not_taken_by_a_second_scan(tmp_path: Path) -
     assert path.read_bytes() == before and len(read_journal(path)[1]) == 1
     with Journal.resume(path, "abc", 4) as again:
         assert len(again.records) == 1
+
+
+def test_a_resume_after_a_longer_timeout_or_a_slower_axis_continues_the_scan(tmp_path: Path,
+                                                                             monkeypatch) -> None:
+    """A scan stopped by an instrument fault is resumed after the crew lengthened a timeout or
+    slowed the axes (what the fault's message suggests): those settings decide how a step is
+    reached, never what it reads. It was refused as "another plan or other settings". A change
+    of what the readings are (the simulator's noise) is still refused, and says so; a journal
+    whose fingerprint an earlier raysim wrote (those settings in it) still resumes under the
+    settings it was made with."""
+    plan = load_plan(write_plan(tmp_path, noise=0.02, drift=0.1))
+    field = aligned_field(tmp_path)
+    whole = scan(plan, tmp_path / "whole.nc", simulate=field).fieldmap
+    patient = dataclasses.replace(plan, rig=dataclasses.replace(
+        plan.rig, move_timeout_s=2.0 * plan.rig.move_timeout_s, visa_timeout_s=5.0,
+        speed=0.5 * plan.rig.speed))
+    slower_sim = dataclasses.replace(plan.simulator, time_scale=1e-3)  # was 0: instant moves
+    real = ScanPlan.fingerprint
+    for legacy in (False, True):
+        out = tmp_path / f"parts{int(legacy)}.nc"
+        if legacy:  # the fingerprint as raysim wrote it before: timeouts, speed, time scale in
+            with monkeypatch.context() as m:
+                m.setattr(ScanPlan, "fingerprint", lambda self, extra=None, legacy=False:
+                          real(self, extra, legacy=True))
+                with pytest.raises(InstrumentError, match="axis 2 stopped at"):
+                    scan(plan, out, simulate=field, faults=Faults(stall_at_move=10))
+        else:
+            with pytest.raises(InstrumentError, match="axis 2 stopped at"):
+                scan(plan, out, simulate=field, faults=Faults(stall_at_move=10))
+        # an earlier raysim's journal resumes under the settings it was made with
+        resumer, sim = (plan, plan.simulator) if legacy else (patient, slower_sim)
+        noisier = dataclasses.replace(plan.simulator, noise_db=0.03)
+        with pytest.raises(JournalError, match="other settings of the simulated rig"):
+            scan(resumer, out, simulate=field, sim=noisier, resume=True)
+        result = scan(resumer, out, simulate=field, sim=sim, resume=True)
+        assert result.steps_taken == 22 - 4
+        for name in whole.data_vars:
+            if name not in ("time", "reference_time"):
+                assert np.array_equal(whole[name].values, result.fieldmap[name].values,
+                                      equal_nan=True), name
