@@ -35,6 +35,7 @@ from hardware.sim.settings import SimSettings
 from raysim.files import check_output
 from raysim.maps import fieldmap as fieldmaps
 from raysim.maps.probe import probe_of
+from raysim.maps.sphere import SphereGrid
 from raysim.progress import Progress
 
 ROLES = ("meter", "motion")
@@ -294,6 +295,7 @@ def _instrument_addresses(plan: ScanPlan, resources: Mapping[str, str] | None,
                             f"plan's {ours:g} m")
     _check_probe(plan, ds, simulate)
     _check_obstacles(plan, ds, simulate)
+    _check_coverage(plan, ds, simulate)
     field = SphereField.from_fieldmap(ds)
     sha = hashlib.sha256(np.ascontiguousarray(field.ratio.values).tobytes())
     if field.blocked is not None:  # a map with obstacles: their shadows decide the readings too
@@ -305,6 +307,39 @@ def _instrument_addresses(plan: ScanPlan, resources: Mapping[str, str] | None,
                            power_unit_dbm=w_to_dbm(plan.power_unit), faults=faults)
     with sim_rig:
         yield sim_rig.resources, sim_rig, extra
+
+
+def _check_coverage(plan: ScanPlan, ds: xr.Dataset, simulate: str | os.PathLike[str]) -> None:
+    """Refuse a FieldMap to scan that does not hold the plan (:func:`check_map_holds_plan`)."""
+    check_map_holds_plan(plan, fieldmaps.grid_of(ds), float(ds.attrs["frequency_hz"]), str(simulate),
+                         "simulate the scene on a sphere that holds the plan's grid, at its frequency")
+
+
+def check_map_holds_plan(plan: ScanPlan, grid: SphereGrid, frequency_hz: float, source: str,
+                         remedy: str) -> None:
+    """Refuse (PlanError) a map to scan, on ``grid`` at ``frequency_hz``, that was simulated at
+    another frequency or does not hold every direction the plan reads: beyond its cells the
+    simulated meter could only repeat the map's edge values (a map of theta 0..40 deg under a
+    plan to 78 deg gave 108 cells of its 39 deg row, with nothing to tell them from readings).
+    ``source`` names the map, ``remedy`` says what to do."""
+    if not math.isclose(frequency_hz, plan.frequency_hz, rel_tol=1e-9):
+        raise PlanError(f"{source} is at {frequency_hz / 1e9:g} GHz, the plan reads at "
+                        f"{plan.frequency_hz / 1e9:g} GHz: {remedy}")
+    steps = plan.steps()
+    theta = np.array([step.theta for step in steps])
+    phi = np.array([step.phi for step in steps])
+    slack = 1e-9  # rad: a plan cell centred on the map's edge is inside it
+    outside = (theta < grid.theta_min - slack) | (theta > grid.theta_max + slack)
+    if not grid.full_circle:
+        along = np.mod(phi - grid.phi_min + slack, 2.0 * math.pi)
+        outside |= along > grid.phi_max - grid.phi_min + 2.0 * slack
+    if np.any(outside):
+        first = steps[int(np.argmax(outside))]
+        raise PlanError(f"{source} covers theta {math.degrees(grid.theta_min):g}.."
+                        f"{math.degrees(grid.theta_max):g} deg, phi {math.degrees(grid.phi_min):g}.."
+                        f"{math.degrees(grid.phi_max):g} deg; the plan reads {int(outside.sum())} "
+                        f"steps outside it (the first at theta {math.degrees(first.theta):g} deg, phi "
+                        f"{math.degrees(first.phi):g} deg): {remedy}")
 
 
 def _check_probe(plan: ScanPlan, ds: xr.Dataset, simulate: str | os.PathLike[str]) -> None:

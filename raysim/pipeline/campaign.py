@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from hardware.plan import ScanPlan, load_plan
-from hardware.session import scan
+from hardware.session import check_map_holds_plan, scan
 from raysim.files import write_text
 from raysim.maps import fieldmap as fieldmaps
 from raysim.maps import surfacemap as surfacemaps
@@ -101,6 +101,9 @@ def run_campaign(scene_path: str | os.PathLike[str], plan_path: str | os.PathLik
                           f"is not the scene's dish (F {scene.dish.focal_length:g} m, "
                           f"D {scene.dish.diameter:g} m)")
     check_obstacles(scene, plan)
+    check_map_holds_plan(plan, scene.sphere, scene.source.frequency_hz, f"the scene {scene_path}",
+                         "give the scene a [sphere] that holds the plan's grid, and the plan's "
+                         "frequency")
     # the files the scene names (a map an earlier campaign measured) are inputs too: a
     # folder holding one would be replaced with the input inside it
     folder = output_folder(out_dir, [("scene", scene_path), *scene.inputs(), *plan.inputs()], FILES,

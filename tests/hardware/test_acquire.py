@@ -185,13 +185,33 @@ def test_journal_guards(tmp_path: Path) -> None:
     noisier = dataclasses.replace(plan.simulator, noise_db=0.02)
     with pytest.raises(JournalError, match="other settings of the simulated rig"):
         scan(plan, out, simulate=field, sim=noisier, resume=True)
-    finer = dataclasses.replace(plan, frequency_hz=2.0 * plan.frequency_hz)
+    more = dataclasses.replace(plan, samples_per_point=plan.samples_per_point + 1)
     with pytest.raises(JournalError, match="belongs to another plan"):
-        scan(finer, out, simulate=field, resume=True)
+        scan(more, out, simulate=field, resume=True)
     assert journal.read_bytes() == before
     # resuming a complete journal only rewrites the FieldMap
     again = scan(plan, out, simulate=field, resume=True)
     assert again.steps_taken == 0
+
+
+def test_a_map_that_does_not_hold_the_plan_is_not_scanned(tmp_path: Path) -> None:
+    """A map short of the plan's grid was scanned to the end, the cells beyond it filled with
+    the map's edge values (a 0..40 deg map under a 0..60 deg plan: its last row repeated, exit
+    0), and a map of another frequency was scanned as the plan's. Both are refused in one line
+    before any step, and no journal is left; a map of exactly the plan's grid is scanned."""
+    plan = load_plan(write_plan(tmp_path))  # theta 0..60 deg in 20 deg cells, phi 0..360 deg
+    cases = {
+        "short.nc": (SphereGrid(R, 4, 6, 0.0, math.radians(40.0)), "the plan reads 6 steps outside it \\(the first at theta 50 deg"),
+        "half.nc": (SphereGrid(R, 3, 3, 0.0, math.radians(60.0), 0.0, math.pi), "steps outside it"),
+    }
+    for name, (grid, words) in cases.items():
+        with pytest.raises(PlanError, match=words):
+            scan(plan, tmp_path / "o.nc", simulate=write_field(tmp_path / name, grid))
+        assert not (tmp_path / "o.nc.journal").exists() and not (tmp_path / "o.nc").exists()
+    other = dataclasses.replace(plan, frequency_hz=2.0 * plan.frequency_hz)
+    with pytest.raises(PlanError, match="simulated at 0.3 GHz, the plan reads at 0.6 GHz"):
+        scan(other, tmp_path / "o.nc", simulate=aligned_field(tmp_path))
+    assert scan(plan, tmp_path / "o.nc", simulate=aligned_field(tmp_path)).steps_taken == len(plan.steps())
 
 
 def test_simulated_field_must_match_the_plan(tmp_path: Path) -> None:

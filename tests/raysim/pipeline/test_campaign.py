@@ -118,3 +118,21 @@ def test_a_campaign_refuses_an_output_folder_holding_a_file_the_scene_names(inpu
     assert "surface.nc" in line and "destroy the input" in line
     assert (prev / "surface.nc").read_bytes() == before
     assert sorted(p.name for p in prev.iterdir()) == ["surface.nc"]
+
+
+def test_a_campaign_whose_scene_does_not_hold_the_plan_is_refused_before_simulating(inputs, tmp_path):
+    """A scene simulated to theta 40 deg under a plan to 80 deg ran to the end with the map's
+    edge row read for every cell beyond it (exit 0); a plan at another frequency than the
+    scene's was scanned as the scene's. Both are refused in one line, nothing written."""
+    from hardware.errors import PlanError
+
+    _, plan = inputs
+    short = tmp_path / "short.toml"
+    short.write_text(SCENE.replace("n_theta = 45", "n_theta = 20\ntheta_max_deg = 40.0"))
+    with pytest.raises(PlanError, match="covers theta 0..40 deg.*the first at theta 42.5 deg"):
+        run_campaign(short, plan, tmp_path / "a")
+    other = tmp_path / "other.toml"
+    other.write_text(SCENE.replace("frequency_hz = 0.3e9", "frequency_hz = 1.2e9"))
+    with pytest.raises(PlanError, match="is at 1.2 GHz, the plan reads at 0.3 GHz"):
+        run_campaign(other, plan, tmp_path / "b")
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
