@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from hardware.drift import chi2_limit, drift
+from hardware.drift import chi2_limit, drift, reading_noise
 from hardware.journal import Record
 from hardware.plan import REFERENCE, SAMPLE, ScanPlan
 from hardware.rig import rig_attrs
@@ -62,7 +62,9 @@ def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
     intensity = np.full(shape, np.nan)
     std = np.full(shape, np.nan)
     refs = [r for r in records if r.kind == REFERENCE]
-    gain = drift(refs, plan.drift_correction, plan.drift_window)
+    noise = reading_noise([r for r in records if r.kind == SAMPLE], refs) \
+        if any(len(r.power) == 1 for r in refs) else None
+    gain = drift(refs, plan.drift_correction, plan.drift_window, noise)
     R = plan.rig.radius
     for rec in records:
         if rec.kind != SAMPLE:

@@ -50,12 +50,19 @@ class Drift:
         return float(np.interp(n, self.index, self.gains)) if self.index.size else 1.0
 
 
-def drift(references: Sequence[Record], mode: str, window: int) -> Drift:
-    """The drift of a scan from its reference records, corrected per ``mode``."""
+def drift(references: Sequence[Record], mode: str, window: int,
+          reading_noise: float | None = None) -> Drift:
+    """The drift of a scan from its reference records, corrected per ``mode``.
+
+    ``reading_noise``: the relative standard deviation of one reading, from elsewhere in the
+    scan (:func:`reading_noise`); it stands in for a reference of one reading, whose own
+    scatter is unknown (without it such references cannot rule drift out, and ``auto``
+    corrects)."""
     index = np.array([r.n for r in references], dtype=np.float64)
     power = np.array([np.mean(r.power) for r in references])
+    own = reading_noise if reading_noise is not None and reading_noise > 0 else np.nan
     sem = np.array([np.std(r.power, ddof=1) / math.sqrt(len(r.power)) if len(r.power) > 1
-                    else np.nan for r in references])
+                    else own * np.mean(r.power) for r in references])
     chi2 = reduced_chi2(power, sem)
     applied = mode
     if mode == "auto":
@@ -97,6 +104,17 @@ def best_window(index: np.ndarray, power: np.ndarray, largest: int) -> int:
         if error < best_error * (1.0 - 1e-6):
             best, best_error = window, error
     return best
+
+
+def reading_noise(samples: Sequence[Record], references: Sequence[Record]) -> float | None:
+    """The relative standard deviation of one reading (pooled variance of the readings about
+    their cell's mean, over the sample records of two or more readings and at least half the
+    references' mean power: a meter's relative noise grows where the power is low); None
+    without such records."""
+    level = 0.5 * float(np.mean([np.mean(r.power) for r in references])) if references else 0.0
+    spread = [np.var(r.power, ddof=1) / np.mean(r.power) ** 2 for r in samples
+              if len(r.power) > 1 and np.mean(r.power) >= level]
+    return float(math.sqrt(np.mean(spread))) if spread else None
 
 
 def reduced_chi2(power: np.ndarray, sem: np.ndarray) -> float:

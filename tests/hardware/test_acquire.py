@@ -209,7 +209,7 @@ def test_a_map_that_does_not_hold_the_plan_is_not_scanned(tmp_path: Path) -> Non
             scan(plan, tmp_path / "o.nc", simulate=write_field(tmp_path / name, grid))
         assert not (tmp_path / "o.nc.journal").exists() and not (tmp_path / "o.nc").exists()
     other = dataclasses.replace(plan, frequency_hz=2.0 * plan.frequency_hz)
-    with pytest.raises(PlanError, match="simulated at 0.3 GHz, the plan reads at 0.6 GHz"):
+    with pytest.raises(PlanError, match="is at 0.3 GHz, the plan reads at 0.6 GHz"):
         scan(other, tmp_path / "o.nc", simulate=aligned_field(tmp_path))
     assert scan(plan, tmp_path / "o.nc", simulate=aligned_field(tmp_path)).steps_taken == len(plan.steps())
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from hardware.drift import best_window, chi2_limit, drift, reduced_chi2, reference_gains
+from hardware.drift import best_window, chi2_limit, drift, reading_noise, reduced_chi2, reference_gains
 from hardware.journal import Record
 
 
@@ -88,3 +88,28 @@ def test_exact_predictions_tie_to_the_smallest_window() -> None:
     rng = np.random.default_rng(12)
     noisy = 1e-5 * (1.0 + 1e-8 * index + 1e-4 * rng.standard_normal(index.size))
     assert best_window(index, noisy, 9) > 1
+
+
+def test_references_of_one_reading_take_their_noise_from_the_scans_cells() -> None:
+    """References of one reading state no scatter, so auto corrected every such scan: with no
+    drift it applied the noise of 30 single readings line by line (a map 3x worse than
+    uncorrected). The cells' readings give the meter's noise: without drift auto now leaves
+    the scan alone, and a drift 20 times the noise is still removed."""
+    rng = np.random.default_rng(4)
+    cells = [Record(2 * m + 1, "sample", 0, m, (0.0, 0.0), (0.0, 0.0),
+                    tuple(1e-5 * (1.0 + 2e-3 * rng.standard_normal(4))), 0.0) for m in range(60)]
+    flat = records(np.ones(30), 2e-3, 1, seed=1)
+    noise = reading_noise(cells, flat)
+    assert noise == pytest.approx(2e-3, rel=0.15)
+    assert drift(flat, "auto", 9).applied != "none"  # nothing tells the noise: it must correct
+    quiet = drift(flat, "auto", 9, noise)
+    assert quiet.applied == "none" and np.all(quiet.gains == 1.0)
+    ramp = 1.0 + 0.04 * np.linspace(0.0, 1.0, 30)
+    moving = drift(records(ramp, 2e-3, 1, seed=1), "auto", 9, noise)
+    assert moving.applied in ("linear", "smooth")
+    left = moving.gains * moving.power[0] / 1e-5 - ramp  # the gains against the true drift
+    assert np.sqrt(np.mean(left**2)) < 0.1 * 0.04
+    # cells far dimmer than the references (noisier, relatively) are not pooled
+    dim = [Record(r.n, "sample", 0, 0, (0.0, 0.0), (0.0, 0.0), tuple(1e-3 * np.asarray(r.power)), 0.0)
+           for r in cells]
+    assert reading_noise(dim, records(np.ones(30), 0.0, 1, seed=1)) is None
