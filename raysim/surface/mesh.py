@@ -388,6 +388,7 @@ def load_reflector(path: str | Path, unit: float = 1.0, F: float | None = None,
                         np.asarray(mesh.faces, dtype=np.int64), F)
     except MeshError as exc:
         raise MeshError(f"{path}: {exc}") from None
+    _check_one_sheet(mesh, path)  # after the fit, which names stray pieces (a horn, legs) better
     F_used = fit.F
     shift = np.array([fit.x0, fit.y0, fit.z0])
     vertices = np.asarray(mesh.vertices, dtype=np.float64) - shift
@@ -424,7 +425,7 @@ def _ideal_vertices(ideal_path: str | Path, path: str | Path, unit: float,
         raise MeshError(f"{ideal_path}: the ideal mesh must share the deformed mesh's triangulation")
     raw_deformed = np.asarray(raw[0].vertices, dtype=np.float64) * unit
     raw_ideal = np.asarray(raw[1].vertices, dtype=np.float64) * unit
-    tol = 1e-9 * max(float(np.ptp(merged)), 1.0)
+    tol = 2.0 * MERGE_SHARE * max(float(np.ptp(merged)), 1.0)  # as _read_mesh merges them
     distance, index = cKDTree(merged).query(raw_deformed)
     used = distance <= tol  # vertices of dropped faces were removed from ``merged``
     out = np.full_like(merged, np.nan)
@@ -437,6 +438,7 @@ def _ideal_vertices(ideal_path: str | Path, path: str | Path, unit: float,
 
 
 MAX_MESH_SPAN_M = 1000.0  # the largest dish this project is for is 110 m
+MERGE_SHARE = 1e-7  # vertices closer than this share of the mesh's span are one vertex
 MIN_MESH_SPAN_M = 0.1
 
 
@@ -457,6 +459,15 @@ def _read_mesh(path: str | Path, unit: float):
     if not np.all(np.isfinite(np.asarray(mesh.vertices))):  # processing would drop them silently
         raise MeshError(f"{path}: holds vertices that are not finite numbers (NaN or infinite)")
     mesh.process()  # what loading with process=True does: merge duplicate vertices
+    # and merge again ignoring texture coordinates and normals (a textured OBJ keeps every
+    # face's corners apart by their UVs); if the faces are still mostly pieces of their own,
+    # the file wrote each face's corners anew with rounding differences: merge within
+    # MERGE_SHARE of the span. Otherwise each triangle would be a panel of its own, and
+    # go+edge would diffract from every triangle's edges
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    if np.unique(_vertex_pieces(faces, len(mesh.vertices))[faces[:, 0]]).size > 0.5 * len(faces):
+        _merge_close_vertices(mesh, MERGE_SHARE * float(np.max(np.ptp(np.asarray(mesh.vertices), axis=0))))
     _drop_repeated_faces(mesh)
     if len(mesh.faces) == 0:
         raise MeshError(f"{path}: holds no triangles (every face repeats a vertex)")
@@ -464,6 +475,8 @@ def _read_mesh(path: str | Path, unit: float):
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     if not np.all(np.isfinite(vertices)):
         raise MeshError(f"{path}: holds vertices that are not finite numbers")
+    _drop_flat_faces(mesh, path)
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
     span = float(np.max(np.ptp(vertices[:, :2], axis=0)))
     if span > MAX_MESH_SPAN_M:
         raise MeshError(f"{path}: spans {span:g} m across with dish.mesh_unit_m = {unit:g}: not a "
@@ -486,6 +499,77 @@ def _drop_repeated_faces(mesh) -> None:
     if not keep.all():
         mesh.update_faces(keep)
         mesh.remove_unreferenced_vertices()
+
+
+def _merge_close_vertices(mesh, distance: float) -> None:
+    """Make vertices within ``distance`` of each other (chains of them) one vertex, at the
+    first one's place: rounding to a grid would leave apart a pair that straddles a grid line."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    pairs = cKDTree(v).query_pairs(distance, output_type="ndarray") if distance > 0 else None
+    if pairs is None or len(pairs) == 0:
+        return
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(v), len(v)))
+    _, label = connected_components(graph, directed=False)
+    first = np.full(label.max() + 1, len(v))
+    np.minimum.at(first, label, np.arange(len(v)))
+    mesh.faces = first[label][np.asarray(mesh.faces)]
+    mesh.remove_unreferenced_vertices()
+
+
+def _drop_flat_faces(mesh, path: str | Path) -> None:
+    """Drop faces of no area: three points on a line to the file's precision (twice the area
+    below 1e-5 of the longest edge squared, a sliver 1 m long and 10 um high; a midpoint
+    stored in float32 reaches 1e-6). They have no normal: their NaN normals and edges made a
+    deformed map wholly NaN, and a point in the middle of an edge counted as departure."""
+    v = np.asarray(mesh.vertices, dtype=np.float64)[np.asarray(mesh.faces)]
+    area2 = np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    longest = np.max(np.linalg.norm(v - np.roll(v, 1, axis=1), axis=2), axis=1)
+    keep = area2 > 1e-5 * longest**2
+    if not keep.all():
+        mesh.update_faces(keep)
+        mesh.remove_unreferenced_vertices()
+        if len(mesh.faces) == 0:
+            raise MeshError(f"{path}: holds no triangles of any area")
+
+
+#: a reflecting sheet covers its footprint once: the faces' areas seen along z add up to at most
+#: the convex hull of the vertices seen so (less the gaps); a mesh above this share of it holds
+#: two layers (a panel's front and back faces, exported as a solid)
+MAX_COVER = 1.02
+#: faces steeper than this (|n_z| below it: 78 deg from the axis) are side walls, not a dish
+#: (a dish of F/D 0.1 meets its rim at n_z = 0.37)
+MIN_NZ = 0.2
+
+
+def _check_one_sheet(mesh, path: str | Path) -> None:
+    """Refuse a mesh that is not one reflecting sheet: two layers over each other (a solid's
+    front and back) or side walls. The ideal is the mesh moved onto the paraboloid, so a
+    back layer would land on the front one and reflect the aperture twice."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    tri = v[np.asarray(mesh.faces)]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area = 0.5 * np.linalg.norm(n, axis=1)
+    nz = np.abs(n[:, 2]) / np.maximum(2.0 * area, 1e-300)
+    steep = float(area[nz < MIN_NZ].sum() / area.sum())
+    if steep > 1e-3:
+        raise MeshError(f"{path}: {100 * steep:.1f} % of its area is side walls (faces within "
+                        f"{np.degrees(np.arccos(MIN_NZ)):.0f} deg of the dish's axis): give the "
+                        "reflecting surface alone (a panel exported as a solid has walls and a back)")
+    try:
+        hull = ConvexHull(v[:, :2]).volume  # in 2-D, the hull's area
+    except QhullError:
+        return  # no footprint (a line): the dish checks refuse it
+    cover = float((0.5 * np.abs(n[:, 2])).sum() / hull)
+    if cover > MAX_COVER:
+        raise MeshError(f"{path}: covers its footprint {cover:.2f} times: it holds more than one "
+                        "layer (a panel's front and back faces, exported as a solid?); give the "
+                        "reflecting surface alone")
 
 
 def _faces_up(vertices: NDArray, faces: NDArray) -> NDArray:

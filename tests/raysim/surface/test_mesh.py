@@ -12,7 +12,13 @@ from shapely.geometry import LineString, Point
 
 from raysim.errors import MeshError
 from raysim.surface.deformation import GaussianBumps, PanelRigid
-from raysim.surface.mesh import fit_paraboloid, load_reflector, paraboloid, unit_normals
+from raysim.surface.mesh import (
+    fit_paraboloid,
+    load_reflector,
+    mesh_departure_rms,
+    paraboloid,
+    unit_normals,
+)
 from raysim.surface.panels import PanelLayout
 
 D, F = 110.0, 33.0
@@ -350,3 +356,83 @@ def test_panels_that_touch_in_the_ideal_and_part_when_deformed_load_as_a_pair(tm
     dz = loaded.vertices[:, 2] - ideal.vertices[:, 2]
     expected = piston[design.vertex_panel[design.faces[:, 0]]]
     assert np.allclose(dz[loaded.faces], expected[:, None], atol=2e-6)
+
+
+def _sheet():
+    """A one-piece 10 m dish (F = 3 m) as a trimesh."""
+    return paraboloid(10.0, 3.0, 0.5).mesh
+
+
+def test_a_dish_exported_as_a_solid_is_refused(tmp_path: Path):
+    """A panel exported as a solid (front, back 2 cm lower, side walls) loaded as a dish: the
+    ideal (the mesh moved onto the paraboloid) put the back on the front and reflected the
+    aperture twice, FA 17.6 RMS with no deformation, exit 0. Two layers and side walls are each
+    refused, naming what was found; the front sheet alone loads."""
+    import trimesh
+
+    front = _sheet()
+    back = trimesh.Trimesh(front.vertices - [0.0, 0.0, 0.02], front.faces[:, ::-1], process=False)
+    trimesh.util.concatenate([front, back]).export(tmp_path / "layers.ply")
+    with pytest.raises(MeshError, match=r"covers its footprint 2.00 times: it holds more than one layer"):
+        load_reflector(tmp_path / "layers.ply")
+    # the rim's edges (each used by one face) drawn 5 cm down as a wall, joined to the sheet
+    edges = np.sort(front.edges, axis=1)
+    unique, count = np.unique(edges, axis=0, return_counts=True)
+    rim = unique[count == 1]
+    n = len(front.vertices)
+    low = front.vertices[rim.ravel()] - [0.0, 0.0, 0.05]
+    k = n + 2 * np.arange(len(rim))
+    walls = np.concatenate([np.column_stack([rim[:, 0], rim[:, 1], k + 1]),
+                            np.column_stack([rim[:, 0], k + 1, k])])
+    trimesh.Trimesh(np.vstack([front.vertices, low]), np.vstack([front.faces, walls]),
+                    process=False).export(tmp_path / "walls.ply")
+    with pytest.raises(MeshError, match=r"% of its area is side walls"):
+        load_reflector(tmp_path / "walls.ply")
+    front.export(tmp_path / "front.ply")
+    assert load_reflector(tmp_path / "front.ply")[1].n_panels == 1
+
+
+def test_a_textured_or_rewritten_mesh_is_one_piece(tmp_path: Path):
+    """A mesh whose every face has corners of its own (a textured OBJ: the corners differ by
+    their texture coordinates; a CAD export: by rounding, 1e-7 m) loaded with each triangle a
+    panel: go+edge diffracted from 68 688 edge points instead of 378, and FA moved by 9 times
+    its RMS. Both now load as the one piece they are, and as the shared-vertex file does."""
+    import trimesh
+    from trimesh.visual import TextureVisuals
+
+    sheet = _sheet()
+    corners = sheet.vertices[sheet.faces].reshape(-1, 3)
+    soup_faces = np.arange(len(corners)).reshape(-1, 3)
+    rng = np.random.default_rng(1)
+    uv = rng.random((len(corners), 2))
+    trimesh.Trimesh(corners, soup_faces, visual=TextureVisuals(uv=uv),
+                    process=False).export(tmp_path / "textured.obj")
+    trimesh.Trimesh(corners + rng.normal(0.0, 1e-7, corners.shape), soup_faces,
+                    process=False).export(tmp_path / "rewritten.ply")
+    sheet.export(tmp_path / "shared.ply")
+    reference = load_reflector(tmp_path / "shared.ply")[1]
+    for name in ("textured.obj", "rewritten.ply"):
+        loaded = load_reflector(tmp_path / name)[1]
+        assert loaded.n_panels == 1, name
+        assert len(loaded.vertices) == len(reference.vertices) and len(loaded.faces) == len(reference.faces)
+
+
+def test_faces_of_no_area_are_dropped(tmp_path: Path):
+    """Faces (a, midpoint of ab, b) gave NaN normals and edges: the deformed map wholly NaN
+    (po+ptd, go+edge), exit 0, and the midpoints counted as 0.2 mm of departure. They are
+    dropped: the mesh loads as it would without them."""
+    import trimesh
+
+    sheet = _sheet()
+    ab = sheet.faces[:40, :2]
+    mid = 0.5 * (sheet.vertices[ab[:, 0]] + sheet.vertices[ab[:, 1]])
+    flat = np.column_stack([ab[:, 0], len(sheet.vertices) + np.arange(40), ab[:, 1]])
+    trimesh.Trimesh(np.vstack([sheet.vertices, mid]), np.vstack([sheet.faces, flat]),
+                    process=False).export(tmp_path / "flat.ply")
+    sheet.export(tmp_path / "clean.ply")
+    (ideal, loaded, _), (clean_ideal, clean, _) = (load_reflector(tmp_path / n)
+                                                   for n in ("flat.ply", "clean.ply"))
+    assert len(loaded.faces) == len(clean.faces) and len(loaded.vertices) == len(clean.vertices)
+    assert np.all(np.isfinite(loaded.vertex_normals))
+    assert mesh_departure_rms(ideal, loaded) == pytest.approx(mesh_departure_rms(clean_ideal, clean),
+                                                              rel=1e-6)
