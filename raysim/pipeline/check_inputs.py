@@ -22,6 +22,7 @@ result says which engine ran and why.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -145,7 +146,8 @@ def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None
     if not (math.isfinite(R) and 0 < R < fit.F):
         raise CheckError(f"--sphere-radius must lie in (0, F = {fit.F:.4g}) m, got {R:g}")
     if scene is None:
-        text = (f'name = "{path.stem}"\n[dish]\nmesh = "{path.resolve().as_posix()}"\n'
+        # JSON's string escapes are TOML's: a name with a quote or a backslash stays a string
+        text = (f'name = {json.dumps(path.stem)}\n[dish]\nmesh = {json.dumps(path.resolve().as_posix())}\n'
                 f"focal_length_m = {float(fit.F)!r}\n[source]\nfrequency_hz = 1e9\n"
                 f"[sphere]\nradius_m = {float(R)!r}\n")
         scene = parse_scene(text, source=str(path), base=path.parent)

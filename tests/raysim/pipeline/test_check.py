@@ -9,6 +9,7 @@ wavelengths across); GO's own ideal map must be the closed form (rho / R)^2 of t
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -218,6 +219,22 @@ def test_a_mesh_scene_checks_at_the_scenes_frequency(tmp_path):
     assert frequencies_of(load_dish(scene), [0.3e9]) == (0.3e9,)  # the option still wins
     with pytest.raises(CheckError, match="--frequency"):
         frequencies_of(load_dish(stl, sphere_radius=1.0), None)
+
+
+def test_a_mesh_whose_name_holds_a_quote_or_a_backslash_is_checked(tmp_path):
+    """check wrote a mesh's path into a scene's TOML as it was: a name with a quote or a
+    backslash was refused as "not valid TOML", although the user gave a mesh."""
+    import shutil
+
+    from raysim.pipeline.check_inputs import load_dish
+
+    stl, _ = _panelled_stl(tmp_path)
+    plain = load_dish(stl, sphere_radius=1.0)
+    for name in ('we"ird.stl', "back\\slash.stl"):
+        odd = shutil.copy(stl, tmp_path / name)
+        dish = load_dish(odd, sphere_radius=1.0)
+        assert dish.go.dish.focal_length == plain.go.dish.focal_length
+        assert Path(dish.go.dish.mesh).name == name
 
 
 def test_check_warns_of_a_mesh_in_millimetres_as_simulate_does(raysim_cli, tmp_path):
