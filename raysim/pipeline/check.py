@@ -216,6 +216,7 @@ def _dataset(dish: inputs.Dish, freqs, results: list[dict], described: str, sour
         "diameter": dish.D,
         "focal_length": dish.F, "sphere_radius": sphere.radius, "deformation": described,
         "gap": inputs.gap_width(dish), "is_mesh": int(dish.is_mesh), "mesh_fit_rms": dish.fit_rms,
+        "mesh_pieces": dish.pieces,
         "scene": dish.go.text or "", "usable_theta_max": float(b0.hi[-1]) if len(b0.hi) else math.nan,
         "rule": inputs.ENGINE_RULE, VERSION_ATTR: __version__,
     })

@@ -75,6 +75,7 @@ class Dish:
     fit_rms: float = 0.0  # m, the mesh's RMS departure from its best-fit paraboloid
     notes: tuple[str, ...] = ()
     warning: str = ""  # what the user should know before trusting the check (a mesh in mm)
+    pieces: int = 0  # a mesh's connected pieces (its panels); 0 for a generated dish
 
     @property
     def D(self) -> float:
@@ -156,7 +157,7 @@ def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None
             f"paraboloid F = {fit.F:.4g} m, D = {D:.4g} m, fit RMS {fit.rms * 1e6:.3g} um; every "
             "engine on the file's facets")
     return Dish(scene, scene, str(path if source is None else source), True, fit.rms, (note,),
-                _size_warning(D, scene=source is not None))
+                _size_warning(D, scene=source is not None), int(ideal.n_panels))
 
 
 def _size_warning(D: float, scene: bool) -> str:

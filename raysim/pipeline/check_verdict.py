@@ -59,7 +59,12 @@ def gap_text(ds: xr.Dataset, i: int) -> str:
     if dark == 0:
         return ""
     gap = float(ds.attrs.get("gap", math.nan))
-    name = f"the {gap * 1e3:g} mm gaps" if math.isfinite(gap) and gap > 0 else "the mesh's gaps"
+    if math.isfinite(gap) and gap > 0:
+        name = f"the {gap * 1e3:g} mm gaps"
+    elif int(ds.attrs.get("mesh_pieces", 0)) == 1:  # no gap in one piece: the lines are the facets'
+        name = "the mesh's facets (one piece, no gaps)"
+    else:
+        name = "the mesh's gaps"
     wave_dip, noise = float(ds["gap_wave_dip"].values[i]), float(ds["gap_wave_dip_elsewhere"].values[i])
     seen = "visible in the wave data" if abs(wave_dip) > 2 * noise else "lost in the wave data's ripple"
     share = 100 * dark / int(ds["gap_usable_cells"].values[i])

@@ -298,3 +298,19 @@ def test_a_mesh_checks_against_its_own_departure_as_well_as_the_mix(tmp_path):
 
     assert corr(ds["truth"].values) > 0.6
     assert abs(corr(ds["error_go_data"].values)) < 0.3
+
+
+def test_a_one_piece_mesh_has_its_dark_lines_called_facets_not_gaps():
+    """check called GO's dark lines on a gapless one-piece mesh "the mesh's gaps" (23.7 % of
+    the cells); a mesh of one piece has none: the lines are its facets'."""
+    from raysim.pipeline.check_verdict import gap_text
+
+    def clause(pieces: int) -> str:
+        ds = xr.Dataset({name: ("frequency", [value]) for name, value in (
+            ("gap_dark_cells", 40), ("gap_usable_cells", 400), ("gap_go_dip", -0.3),
+            ("gap_wave_dip", -0.001), ("gap_wave_dip_elsewhere", 0.002))},
+            attrs={"gap": math.nan, "is_mesh": 1, "mesh_pieces": pieces})
+        return gap_text(ds, 0)
+
+    assert "the mesh's facets (one piece, no gaps): GO draws dark lines on 40 cells (10.0 %)" in clause(1)
+    assert "the mesh's gaps: GO draws dark lines" in clause(30)
