@@ -215,6 +215,9 @@ def check_journal_plan(plan: ScanPlan, header: Mapping[str, Any], records: Seque
                            f"{recorded}, this plan's {plan.fingerprint()})")
     steps = plan.steps()
     for record in records:
+        if record.n >= len(steps):
+            raise JournalError(f"{path}: holds step {record.n}, the plan has {len(steps)} steps: "
+                               "the journal is not this plan's")
         step = steps[record.n]
         command = plan.rig.axes(step.theta, step.phi)
         if (record.kind, record.i, record.j) != (step.kind, step.i, step.j) or not all(

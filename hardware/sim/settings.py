@@ -72,7 +72,13 @@ class SimSettings:
             raise PlanError(f"the simulator's centre_offset must be finite, got {self.centre_offset}")
 
     def true_rig(self, rig: Rig) -> Rig:
-        """The rig as it really is: the file's rig with this simulator's true calibration."""
+        """The rig as it really is: the file's rig with this simulator's true calibration.
+        Its centre offset must lie well inside the track, as the rig file's must: at 0.5 R and
+        beyond the probe comes near the focus (a 15 m offset on a 10 m track gave a divide by
+        zero and a FieldMap of nothing, exit 0)."""
+        if self.centre_offset is not None and math.dist(self.centre_offset, (0, 0, 0)) >= 0.5 * rig.radius:
+            raise PlanError(f"the simulator's centre_offset {tuple(self.centre_offset)} m must lie well "
+                            f"inside the track: under half its radius ({0.5 * rig.radius:g} m)")
         cal = rig.calibration
         return rig.with_calibration(Calibration(
             centre_offset=cal.centre_offset if self.centre_offset is None else self.centre_offset,

@@ -325,3 +325,24 @@ def test_a_resume_after_a_longer_timeout_or_a_slower_axis_continues_the_scan(tmp
             if name not in ("time", "reference_time"):
                 assert np.array_equal(whole[name].values, result.fieldmap[name].values,
                                       equal_nan=True), name
+
+
+def test_a_true_centre_offset_beyond_the_track_and_a_journal_longer_than_the_plan_are_refused(
+        tmp_path: Path) -> None:
+    """The simulator's true centre offset had no bound: 15 m on a 10 m track gave a divide by
+    zero and a FieldMap of nothing, exit 0. A journal holding a step past the plan's last gave
+    an IndexError traceback. Both are refused in one line."""
+    plan = load_plan(write_plan(tmp_path))
+    field = aligned_field(tmp_path)
+    far = dataclasses.replace(plan.simulator, centre_offset=(0.0, 0.0, 0.5 * R))
+    with pytest.raises(PlanError, match="centre_offset .* must lie well inside the track"):
+        scan(plan, tmp_path / "far.nc", simulate=field, sim=far)
+    assert not (tmp_path / "far.nc.journal").exists()
+    out = tmp_path / "scan.nc"
+    scan(plan, out, simulate=field)
+    journal = tmp_path / "scan.nc.journal"
+    last = read_journal(journal)[1][-1]
+    with open(journal, "ab") as handle:
+        handle.write(dataclasses.replace(last, n=last.n + 1).line())
+    with pytest.raises(JournalError, match=f"holds step {last.n + 1}, the plan has {last.n + 1} steps"):
+        fieldmap_from_journal(plan, journal)
