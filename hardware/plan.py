@@ -37,7 +37,7 @@ from hardware.sim.settings import SimSettings, sim_settings_from_table
 from raysim.errors import SceneError
 from raysim.files import find_input
 from raysim.maps.probe import Probe
-from raysim.maps.sphere import SphereGrid
+from raysim.maps.sphere import SphereGrid, theta_rim
 from raysim.scene.obstacles import obstacles_of
 from raysim.scene.scene import check_frequency, check_sphere_cells
 from raysim.surface.obstacles import Obstacle, ObstacleMesh, obstacle_mesh
@@ -286,6 +286,10 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
     g.done()
     if phi_hi - phi_lo > 2 * math.pi + 1e-9:
         raise g.fail("'grid': the phi range exceeds 360 deg")
+    if theta_lo >= theta_rim(D, F) - 1e-12:  # refused before hours of scanning, not after
+        raise g.fail(f"'grid' starts at theta {math.degrees(theta_lo):g} deg, beyond the rim image "
+                     f"(theta {math.degrees(theta_rim(D, F)):.4g} deg for D = {D:g} m, F = {F:g} m): "
+                     "the dish lights none of its cells")
     try:  # the same caps as a scene's sphere: a plan's points are its cells
         check_sphere_cells(n_theta, n_phi, ("'grid' theta cells", "phi cells"))
     except SceneError as exc:

@@ -71,6 +71,10 @@ def test_fingerprint_follows_what_decides_the_samples(tmp_path: Path) -> None:
     ("power_unit_dbm = -20.0", "power_unit_dbm = \"loud\"", "must be a number"),
     ("seed = 3", "seed = 3\nnoise = 0.1", "unknown key 'simulator.noise' .did you mean 'noise_db'"),
     ("phi_max_deg = 360.0", "phi_max_deg = 420.0", "exceeds 360 deg"),
+    # a grid wholly beyond the rim image (79.6 deg) ran to its end, then "no ideal intensity"
+    ("theta_min_deg = 0.0\ntheta_max_deg = 60.0\ntheta_step_deg = 20.0",
+     "theta_min_deg = 80.0\ntheta_max_deg = 90.0\ntheta_step_deg = 10.0",
+     "starts at theta 80 deg, beyond the rim image .theta 79.61 deg"),
     ("[reflector]", "[reflectr]", "missing table [reflector]"),
     ('drift_correction = "smooth"', 'drift_correction = "spline"',
      "must be one of auto, none, linear, smooth"),
