@@ -36,6 +36,7 @@ from solver.resample import (
     MAX_HOLE_SHARE,
     Coverage,
     Hole,
+    cap_rows,
     fill_along_phi,
     largest_hole,
     sphere_to_aperture,
@@ -108,7 +109,17 @@ class Scan:
                 "supported)")
         self._check_rim_image()
         missing = ~np.isfinite(intensity_ratio_fa(used.intensity, used.intensity_ideal))
-        hole = largest_hole(missing & ~hidden, used.sphere)
+        grid = used.sphere
+        cap = cap_rows(self.sphere)
+        if cap:  # the polar cap a scan starting off the pole does not reach is filled like a
+            # hole (resample.from_the_pole), so it counts as one, joined to the first row's:
+            # a scan from 25 deg was filled there in silence (the map's sign wrong at a bump)
+            grid = SphereGrid(grid.radius, grid.n_theta + cap, grid.n_phi,
+                              max(grid.theta_min - cap * grid.dtheta, 0.0), grid.theta_max,
+                              grid.phi_min, grid.phi_max)
+            missing = np.vstack([np.ones((cap, grid.n_phi), dtype=bool), missing])
+            hidden = np.vstack([np.zeros((cap, grid.n_phi), dtype=bool), hidden])
+        hole = largest_hole(missing & ~hidden, grid)
         if hole is not None and hole.share > MAX_HOLE_SHARE:
             raise FieldMapError(f"the scan misses a whole region ({hole.describe()}): the "
                                 "inversion would fill it with a smooth guess; measure it")

@@ -133,3 +133,23 @@ def test_a_dish_with_a_central_hole_inverts_like_a_whole_one(tmp_path):
     x, y = np.meshgrid(surface["x"].values, surface["y"].values)
     assert np.all(np.isnan(surface["deformation"].values[np.hypot(x, y) < 1.2]))
     assert rrms["holed"] < 1.5 * rrms["whole"] < 0.06
+
+
+def test_a_scan_that_starts_off_the_pole_counts_its_cap_as_a_hole(field):
+    """A scan from theta_min > 0 had its polar cap filled by the same smooth guess with no
+    check (from 25 deg on a 50 m dish: a 100 um bump at the centre read -44.5 um, exit 0).
+    The cap is a hole joined to the first row: refused beyond a tenth of the cells inside the
+    rim image, said above a hundredth; a scan from the pole has none."""
+    from solver.invert import invert
+
+    def from_row(k: int):
+        s = SphereGrid(10.0, 45, 72)
+        cut = field.isel(theta=slice(k, None)).copy()
+        cut.attrs.update(theta_min=float(s.theta_edges[k]))
+        return cut
+
+    with pytest.raises(FieldMapError, match=r"misses a whole region \(.*theta 0.0..10.0 deg"):
+        invert(from_row(5), refine_iterations=0, N=64)
+    one = invert(from_row(1), refine_iterations=0, N=64).attrs  # a 2 deg cap: 1 row of 39 inside the rim image
+    assert one["largest_hole_share"] == pytest.approx(1 / 39) and "theta 0.0..2.0 deg" in one["hole_warning"]
+    assert invert(field, refine_iterations=0, N=64).attrs["largest_hole_share"] == 0.0
