@@ -19,6 +19,7 @@ from raysim.maps.sphere import SphereGrid
 from raysim.maps.surfacemap import HARMONIC_FIXED, HARMONIC_UNOBSERVABLE
 from solver import metrics
 from solver.aperture import ApertureGrid
+from solver.boundary import harmonic_order
 from solver.fit import remove_terms
 from solver.gainmode import MeasuredFA
 from solver.linear import LinearInverse, LinearSolution, Scan
@@ -59,6 +60,9 @@ def surface_attrs(opts: InvertOptions, out: Outcome) -> dict[str, Any]:
         "boundary": out.inverse.describe_boundary(),
         "harmonic_part": HARMONIC_FIXED if opts.rim is not None else HARMONIC_UNOBSERVABLE,
         "harmonic_observable": opts.rim is not None,
+        # the order the targets' spread fixes: the rim's harmonics above it are assumed zero
+        # (16 targets over half the rim fix order 1: the map 99 um off, and it said "fixed")
+        **({"rim_harmonic_order": harmonic_order(opts.rim)} if opts.rim is not None else {}),
         "removed_terms": ",".join(opts.terms) or "none",
         "refine_iterations": opts.refine_iterations,
         "refine_model": setup.model,

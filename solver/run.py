@@ -124,6 +124,11 @@ def summary(result: xr.Dataset) -> list[str]:
     if a["harmonic_part"] == HARMONIC_UNOBSERVABLE:
         lines.append("harmonic part (tilt, astigmatism, any r^n cos n phi) is UNOBSERVABLE "
                      "without rim targets: the map assumes zero on the rim")
+    elif int(a.get("rim_harmonic_order", boundary.MAX_HARMONICS)) < boundary.MAX_HARMONICS:
+        k = int(a["rim_harmonic_order"])
+        lines.append(f"{'WARNING: ' if k < 3 else ''}the rim targets fix the harmonic part to "
+                     f"order {k} (r^n cos n phi, n <= {k}; their count and widest gap allow no "
+                     "more): higher orders are UNOBSERVABLE, assumed zero on the rim")
     if "removed_central_mode_m" in a:
         lines.append(f"blocked centre r < {a['central_hole_radius_m']:.2f} m: its central mode is "
                      f"UNOBSERVABLE and removed (c = {a['removed_central_mode_m'] * 1e6:.2f} um)")

@@ -109,6 +109,22 @@ def test_rim_targets_fix_the_unobservable_harmonic_part(harmonic_field):
     assert with_rim.attrs["harmonic_part"] == "fixed by rim targets"
     assert "64 points from test targets" in with_rim.attrs["boundary"]
     assert with_rim.attrs["rms_m"] < 15e-6
+    assert with_rim.attrs["rim_harmonic_order"] == 12  # the fit's cap: nothing said
+
+
+def test_rim_targets_on_half_the_rim_say_how_little_of_the_harmonic_part_they_fix(harmonic_field):
+    """16 targets over half the rim fix the harmonic part to order 1 only (the widest gap, pi,
+    allows no more), and the map carried the rest of its astigmatism while the SurfaceMap said
+    "fixed by rim targets". The order is recorded, and the summary warns under order 3."""
+    from solver.run import summary
+
+    phi = np.linspace(0, np.pi, 16)
+    x, y = 0.995 * A * np.cos(phi), 0.995 * A * np.sin(phi)
+    half = linear(harmonic_field, harmonic_delta, rim=RimTargets(x, y, harmonic_delta(x, y)))
+    assert half.attrs["rim_harmonic_order"] == 1
+    assert half.attrs["rms_m"] > 50e-6  # the astigmatism (order 2) is still missed
+    text = "\n".join(summary(half))
+    assert "WARNING: the rim targets fix the harmonic part to order 1" in text
 
 
 def test_intensity_std_gives_a_deformation_std_that_matches_the_scatter(paper_field, sphere):

@@ -75,6 +75,19 @@ def test_partial_scans_are_refused():
         usable_rows(SphereGrid(R, 60, 360, theta_max=np.radians(60.0)), F, D)
 
 
+def test_coarse_rows_that_leave_the_outer_ring_unmeasured_are_refused():
+    """Coarse rows may stop up to three cells short of the rim image: on the paper's dish (rim
+    image at 79.6 deg) 9 deg rows to 72 deg end their last centre at 67.5 deg, r = 44.1 m of
+    55: 20 % of the radius was the spline's extrapolation, without a word. The ring's width
+    (r from 2 F tan(theta / 2)) is bounded; 5 deg rows to 75 deg (12 %) and 1 deg rows to
+    79 deg still count."""
+    with pytest.raises(FieldMapError, match=r"reaches the dish at r = 44.1 m of 55 m: the ring "
+                                            r"beyond \(20 % of the radius\)"):
+        usable_rows(SphereGrid(R, 8, 72, theta_max=np.radians(72.0)), F, D)
+    assert usable_rows(SphereGrid(R, 15, 72, theta_max=np.radians(75.0)), F, D) == 15
+    assert usable_rows(SphereGrid(R, 79, 360, theta_max=np.radians(79.0)), F, D) == 79
+
+
 @pytest.mark.parametrize(("theta_min_deg", "cap_limit"),
                          [(4.0, 1e-3), (10.0, 2e-2), (4.5, 1e-3), (7.9, 1e-2), (2.7, 1e-3)])
 def test_a_scan_that_starts_short_of_the_pole_has_its_cap_filled_and_counted(theta_min_deg, cap_limit):
