@@ -71,6 +71,7 @@ from solver.record import (
     fit_attrs,
     hole_attrs,
     rim_attrs,
+    ring_attrs,
     surface_attrs,
 )
 from solver.refinement import ModelChoice, RefinementSetup, choose_model, refinement_setup
@@ -203,6 +204,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     attrs = surface_attrs(opts, outcome)
     attrs.update(rim_attrs(shift, n_all - clear, scan.sphere))
     attrs.update(hole_attrs(hole))
+    attrs.update(ring_attrs(scan))
     attrs.update(report_attrs(gn, why))
     if gn is not None and gn.misfit_rms:  # the map is Gauss-Newton's: its misfit says the fit
         attrs.pop("refine_warning", None)

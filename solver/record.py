@@ -26,7 +26,7 @@ from solver.linear import LinearInverse, LinearSolution, Scan
 from solver.nonlinear import RefineHistory
 from solver.options import InvertOptions
 from solver.refinement import RefinementSetup
-from solver.resample import HOLE_SHARE_WARNING, Hole
+from solver.resample import HOLE_SHARE_WARNING, RING_SHARE_WARNING, Hole, unmeasured_ring
 from solver.unobservable import Unobservable
 
 
@@ -114,6 +114,20 @@ def hole_attrs(hole: Hole | None) -> dict[str, Any]:
     if hole.share > HOLE_SHARE_WARNING:
         attrs["hole_warning"] = (f"the scan misses a region ({hole.describe()}), filled by "
                                  "a smooth guess: the map there is not measured")
+    return attrs
+
+
+def ring_attrs(scan: Scan) -> dict[str, Any]:
+    """The ring between the scan's last usable row and the rim, which the spline extrapolates
+    (:func:`solver.resample.unmeasured_ring`), with a warning above
+    :data:`solver.resample.RING_SHARE_WARNING` of the radius."""
+    share, reached = unmeasured_ring(scan.sphere, scan.F, scan.D)
+    attrs: dict[str, Any] = {"unmeasured_ring_share": share}
+    if share > RING_SHARE_WARNING:
+        attrs["ring_warning"] = (f"the scan's last row inside the rim image reaches the dish at "
+                                 f"r = {reached:.3g} m of {0.5 * scan.D:.3g} m: the ring beyond "
+                                 f"({100 * share:.0f} % of the radius) is extrapolated, not "
+                                 "measured; scan in finer rows to the rim image")
     return attrs
 
 

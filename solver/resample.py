@@ -33,11 +33,11 @@ from solver.aperture import ApertureGrid
 PAD = 8             # cells of padding around the spline's array
 EXTRA_ROWS = 6      # rows extrapolated past the last usable one
 MAX_GAP_CELLS = 3   # how far (in cells) the last usable row may stop short of the rim
-#: and how far its centre's aperture radius may stop short of the rim, as a share of the
-#: rim's radius: the ring beyond is the spline's extrapolation (4.5 deg rows stopping at 54 deg
-#: on a rim image at 64 deg left 22 % of the radius, a third of the dish, and a bump there read
-#: with the wrong sign; the campaign's coarse 5 deg rows on the 110 m dish leave 12 %)
-MAX_RING_SHARE = 0.15
+#: the share of the rim's radius beyond the last usable row's centre above which the map says
+#: that ring is extrapolated, not measured (4.5 deg rows stopping at 54 deg on a rim image at
+#: 64 deg left 22 % of the radius, a third of the dish, and a bump there read with the wrong
+#: sign, without a word; the campaign's coarse 5 deg rows on the 110 m dish leave 12 %)
+RING_SHARE_WARNING = 0.15
 
 
 @dataclass(frozen=True)
@@ -60,14 +60,14 @@ def usable_rows(sphere: SphereGrid, F: float, D: float) -> int:
         raise FieldMapError(
             f"the scan stops at theta = {np.degrees(sphere.theta_max):.2f} deg, short of the "
             f"rim image at {np.degrees(theta_rim(D, F)):.2f} deg")
-    reached = float(aperture_radius(sphere.theta[n - 1], F))
-    if 0.5 * D - reached > MAX_RING_SHARE * 0.5 * D:
-        raise FieldMapError(
-            f"the scan's last row inside the rim image (centred at theta = "
-            f"{np.degrees(sphere.theta[n - 1]):.2f} deg) reaches the dish at r = {reached:.3g} m "
-            f"of {0.5 * D:.3g} m: the ring beyond ({100 * (1 - 2 * reached / D):.0f} % of the "
-            "radius) would be extrapolated; scan in finer rows to the rim image")
     return n
+
+
+def unmeasured_ring(sphere: SphereGrid, F: float, D: float) -> tuple[float, float]:
+    """(share of the rim's radius, aperture radius in m) the scan's last usable row's centre
+    leaves to the rim: the ring the spline extrapolates rather than interpolates."""
+    reached = float(aperture_radius(sphere.theta[usable_rows(sphere, F, D) - 1], F))
+    return max(1.0 - 2.0 * reached / D, 0.0), reached
 
 
 def modelled_rows(sphere: SphereGrid, F: float, D: float, h: float) -> int:

@@ -118,17 +118,19 @@ def summary(result: xr.Dataset) -> list[str]:
                      f"stopped: {a['gn_stopped']}")
     if "hole_warning" in a:
         lines.append(f"WARNING: {a['hole_warning']}")
+    if "ring_warning" in a:
+        lines.append(f"WARNING: {a['ring_warning']}")
     if a.get("rows_dropped_at_rim"):
         lines.append(f"rim: {a['rows_dropped_why']}")
     lines.append(f"boundary: {a['boundary']}")
     if a["harmonic_part"] == HARMONIC_UNOBSERVABLE:
         lines.append("harmonic part (tilt, astigmatism, any r^n cos n phi) is UNOBSERVABLE "
                      "without rim targets: the map assumes zero on the rim")
-    elif int(a.get("rim_harmonic_order", boundary.MAX_HARMONICS)) < boundary.MAX_HARMONICS:
+    elif int(a.get("rim_harmonic_order", boundary.MAX_HARMONICS)) < 3:  # not even astigmatism
         k = int(a["rim_harmonic_order"])
-        lines.append(f"{'WARNING: ' if k < 3 else ''}the rim targets fix the harmonic part to "
-                     f"order {k} (r^n cos n phi, n <= {k}; their count and widest gap allow no "
-                     "more): higher orders are UNOBSERVABLE, assumed zero on the rim")
+        lines.append(f"WARNING: the rim targets fix the harmonic part to order {k} only (r^n cos "
+                     f"n phi, n <= {k}; their count and widest gap allow no more): higher orders "
+                     "are UNOBSERVABLE, assumed zero on the rim")
     if "removed_central_mode_m" in a:
         lines.append(f"blocked centre r < {a['central_hole_radius_m']:.2f} m: its central mode is "
                      f"UNOBSERVABLE and removed (c = {a['removed_central_mode_m'] * 1e6:.2f} um)")

@@ -6,7 +6,8 @@ import pytest
 from raysim.errors import FieldMapError
 from raysim.maps.sphere import SphereGrid
 from solver.aperture import ApertureGrid
-from solver.resample import fill_missing, sphere_to_aperture, usable_rows
+from solver.linear import Scan
+from solver.resample import fill_missing, sphere_to_aperture, unmeasured_ring, usable_rows
 
 F, D, R = 33.0, 110.0, 10.0
 
@@ -75,17 +76,29 @@ def test_partial_scans_are_refused():
         usable_rows(SphereGrid(R, 60, 360, theta_max=np.radians(60.0)), F, D)
 
 
-def test_coarse_rows_that_leave_the_outer_ring_unmeasured_are_refused():
+def test_coarse_rows_that_leave_the_outer_ring_unmeasured_say_so():
     """Coarse rows may stop up to three cells short of the rim image: on the paper's dish (rim
     image at 79.6 deg) 9 deg rows to 72 deg end their last centre at 67.5 deg, r = 44.1 m of
-    55: 20 % of the radius was the spline's extrapolation, without a word. The ring's width
-    (r from 2 F tan(theta / 2)) is bounded; 5 deg rows to 75 deg (12 %) and 1 deg rows to
-    79 deg still count."""
-    with pytest.raises(FieldMapError, match=r"reaches the dish at r = 44.1 m of 55 m: the ring "
-                                            r"beyond \(20 % of the radius\)"):
-        usable_rows(SphereGrid(R, 8, 72, theta_max=np.radians(72.0)), F, D)
-    assert usable_rows(SphereGrid(R, 15, 72, theta_max=np.radians(75.0)), F, D) == 15
-    assert usable_rows(SphereGrid(R, 79, 360, theta_max=np.radians(79.0)), F, D) == 79
+    55: 20 % of the radius was the spline's extrapolation, without a word. The ring (r from
+    2 F tan(theta / 2)) is measured, and the SurfaceMap warns above 15 % of the radius; 5 deg
+    rows to 75 deg (12 %) and 1 deg rows to 79 deg do not."""
+    from raysim.maps.fieldmap import fieldmap
+    from raysim.maps.sphere import ideal_go_intensity
+    from solver.record import ring_attrs
+
+    grid = SphereGrid(R, 8, 72, theta_max=np.radians(72.0))
+    share, reached = unmeasured_ring(grid, F, D)
+    assert reached == pytest.approx(2 * F * np.tan(np.radians(67.5) / 2), rel=1e-12)
+    assert share == pytest.approx(1 - reached / 55.0, rel=1e-12)
+    assert unmeasured_ring(SphereGrid(R, 15, 72, theta_max=np.radians(75.0)), F, D)[0] < 0.15
+    assert unmeasured_ring(SphereGrid(R, 79, 360, theta_max=np.radians(79.0)), F, D)[0] < 0.03
+    t, _ = np.meshgrid(grid.theta, grid.phi, indexing="ij")
+    ideal = ideal_go_intensity(t, F, R, D)
+    coarse = fieldmap(grid, ideal, ideal, focal_length=F, diameter=D, frequency_hz=3e8,
+                      method="go", sampling="cell_mean")
+    attrs = ring_attrs(Scan.from_fieldmap(coarse))
+    assert "r = 44.1 m of 55 m: the ring beyond (20 % of the radius) is extrapolated" in attrs["ring_warning"]
+
 
 
 @pytest.mark.parametrize(("theta_min_deg", "cap_limit"),
