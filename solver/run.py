@@ -87,6 +87,12 @@ def run_invert(field_path: str | os.PathLike[str], output: str | os.PathLike[str
     return result
 
 
+def _scale(c: float) -> str:
+    """A scan's scale as the summary prints it: six decimals near 1, else six significant
+    digits (readings in W are 1e-9 of the ideal: "0.000000" told nothing)."""
+    return f"{c:.6f}" if 1e-2 <= abs(c) < 1e3 else f"{c:.6g}"
+
+
 def summary(result: xr.Dataset) -> list[str]:
     """Lines for the user: accuracy (when the truth is known), solver, boundary, time."""
     a = result.attrs
@@ -137,12 +143,12 @@ def summary(result: xr.Dataset) -> list[str]:
     if a.get("samples_blocked"):
         lines.append(f"{a['samples_blocked']} samples hidden by obstacles: treated as missing")
     if a.get("gain_known", True):
-        lines.append(f"gain known ({a['gain_choice']}): scale {a['gain']:.6f} trusted, delta_c "
+        lines.append(f"gain known ({a['gain_choice']}): scale {_scale(a['gain'])} trusted, delta_c "
                      "kept")
     else:
         spread = (f"+- {a['gain_std']:.1e}" if math.isfinite(a["gain_std"])
                   else "(no standard error: the readings' noise is unknown)")
-        lines.append(f"gain ESTIMATED ({a['gain_choice']}): scale {a['gain']:.6f} {spread}, "
+        lines.append(f"gain ESTIMATED ({a['gain_choice']}): scale {_scale(a['gain'])} {spread}, "
                      f"{100 * a['gain_coverage']:.1f} % of the power "
                      f"scanned; delta_c (the shape a scale error makes) is UNOBSERVABLE and "
                      f"removed: coefficient {a['removed_delta_c']:.3e} (an FA offset), "

@@ -154,6 +154,10 @@ def test_a_trusted_gain_on_another_scale_is_refused_and_an_estimated_one_inverts
     same = invert(paper_field, gain="power", N=64, refine_iterations=0, truth=paper_delta)
     assert est.attrs["gain"] == pytest.approx(c * same.attrs["gain"], rel=1e-9)
     assert est.attrs["rms_m"] == pytest.approx(same.attrs["rms_m"], rel=1e-6)
+    if c < 1e-2:  # the scale as a number one can read (it printed "0.000000" in W)
+        from solver.run import summary
+
+        assert f"scale {est.attrs['gain']:.6g} +-" in "\n".join(summary(est))
 
 
 def test_a_trusted_gain_within_the_balance_is_taken_as_it_is(paper_field):
