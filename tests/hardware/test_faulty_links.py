@@ -120,8 +120,11 @@ def test_a_controller_gone_silent_mid_move_is_stopped_through_a_new_connection(s
         esp.move({1: math.radians(30.0)}, tolerance=1e-6, timeout_s=5.0)
     esp.stop((1, 2))  # what acquire and park do on any failure
     esp.close()
-    deadline = time.monotonic() + 2.0
-    while time.monotonic() < deadline and not any("1ST" in log for log in server.received[1:]):
+    # the server logs each line on its own thread: wait for both stops (waiting for the first
+    # alone raced the second's arrival on a loaded machine)
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline and not any(log[-2:] == ["1ST", "2ST"]
+                                                  for log in server.received[1:]):
         time.sleep(0.02)
     first, *later = server.received
     assert "1PA30.000000" in first and "1ST" not in first
