@@ -75,9 +75,10 @@ def assert_same_store(a: Path, b: Path) -> None:
 
 
 def _markers(path: Path) -> set[int]:
-    """Samples whose completion marker exists (one chunk file per sample)."""
+    """Samples whose completion marker exists (one chunk file per sample; zarr writes each
+    under a temporary ``N.<hex>.partial`` name first, which a listing may catch)."""
     folder = path / "status" / "c"
-    return {int(p.name) for p in folder.iterdir()} if folder.is_dir() else set()
+    return {int(p.name) for p in folder.iterdir() if p.name.isdigit()} if folder.is_dir() else set()
 
 
 class _ZernikeReference:
