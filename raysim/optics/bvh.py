@@ -30,7 +30,7 @@ def facet_sag(reflector: Reflector) -> float:
         return 0.0
     v, f = reflector.vertices, reflector.faces
     c = (v[f[:, 0]] + v[f[:, 1]] + v[f[:, 2]]) / 3.0  # five times faster than v[f].mean(axis=1)
-    panel = reflector.face_panel if reflector.layout is not None else None
+    panel = reflector.surface_panel(np.arange(len(f)))
     return float(np.abs(reflector.surface.height(c[:, 0], c[:, 1], panel) - c[:, 2]).max())
 
 

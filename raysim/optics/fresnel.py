@@ -109,7 +109,9 @@ def applies(reflector: Reflector, wave: Illumination) -> str | None:
     if not np.allclose(wave.k_hat, _AXIS, rtol=0.0, atol=1e-12):
         return "the incident wave is not on the axis"
     if reflector.surface is None:
-        return "the reflector has no smooth surface z = r^2 / 4F + delta (a loaded mesh)"
+        return "the reflector has no smooth surface z = r^2 / 4F + delta"
+    if reflector.from_file:
+        return "the reflector is a loaded mesh (its departure has no continuation beyond the rim)"
     if isinstance(reflector.surface.deformation, NoDeformation):
         return "the reflector is not deformed"
     return None

@@ -95,8 +95,9 @@ def shared_lattice(reflector: Reflector, m: int, curve: bool = True) -> RayLatti
         t = (param[:, p] / m)[:, None]
         points[:, p] = (1.0 - t) * v[lo] + t * v[hi]
         normals[:, p] = (1.0 - t) * reflector.vertex_normals[lo] + t * reflector.vertex_normals[hi]
-    panel = np.repeat(reflector.face_panel[:, None], len(W), axis=1)
-    if curve and reflector.surface is not None:
+    own = np.arange(n_faces) if reflector.from_file else reflector.face_panel  # the surface's keys
+    panel = np.repeat(own[:, None], len(W), axis=1)
+    if curve and reflector.arc_edges:
         _bend_onto_arcs(reflector, m, W, points)
     _, first, compact = np.unique(gid.ravel(), return_index=True, return_inverse=True)
     normals = normals.reshape(-1, 3)[first]
@@ -135,7 +136,7 @@ def _bend_onto_arcs(reflector: Reflector, m: int, W: NDArray, points: NDArray) -
     # points with a weight on both ends of the arc: the arc's own and the face's interior ones
     # (the others are shared with neighbouring faces and stay where they are)
     moved = (wb > 0) & (wc > 0)
-    panel = reflector.face_panel[face] if reflector.layout is not None else None
+    panel = reflector.surface_panel(face)
     z = reflector.surface.height(xy[..., 0], xy[..., 1],
                                  None if panel is None else np.repeat(panel[:, None], xy.shape[1], 1))
     new = np.concatenate([xy, z[..., None]], axis=-1)

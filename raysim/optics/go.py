@@ -106,7 +106,7 @@ def ray_lattice(reflector: Reflector, subdivisions: int = 1) -> RayLattice:
     if m < 1:
         raise RaysimError(f"subdivisions must be >= 1, got {m}")
     if m == 1:
-        return RayLattice(reflector.vertices, reflector.vertex_panel, reflector.vertex_normals,
+        return RayLattice(reflector.vertices, reflector.vertex_surface_panel, reflector.vertex_normals,
                           reflector.faces.astype(np.int32))
     w, local = _lattice_tables(m)
     corners = reflector.vertices[reflector.faces]  # (F, 3, 3)
@@ -116,7 +116,8 @@ def ray_lattice(reflector: Reflector, subdivisions: int = 1) -> RayLattice:
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     n_faces, n_local = len(reflector.faces), len(w)
     tubes = (local[None, :, :] + n_local * np.arange(n_faces)[:, None, None]).reshape(-1, 3)
-    panel = np.repeat(reflector.face_panel, n_local)
+    # the surface's keys: a loaded mesh's departure is blended over each face
+    panel = np.repeat(np.arange(n_faces) if reflector.from_file else reflector.face_panel, n_local)
     return RayLattice(points, panel, normals, tubes.astype(np.int32))
 
 

@@ -142,7 +142,7 @@ def _curvature(reflector: Reflector, edges: Edges, t: NDArray, u: NDArray, y: ND
     surface = reflector.surface
     if surface is None:
         return np.zeros((len(edges), 3))
-    panel = reflector.face_panel[edges.face] if reflector.layout is not None else None
+    panel = reflector.surface_panel(edges.face)
     p, h = edges.points, CURVATURE_STEP
 
     def slope_of_normal(e: NDArray) -> NDArray:

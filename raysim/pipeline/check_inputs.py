@@ -155,7 +155,7 @@ def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None
     scene = replace(scene, dish=replace(scene.dish, diameter=D, focal_length=fit.F))
     note = (f"mesh {path.name}: {len(ideal.faces):,} faces, {int(ideal.n_panels)} pieces, best-fit "
             f"paraboloid F = {fit.F:.4g} m, D = {D:.4g} m, fit RMS {fit.rms * 1e6:.3g} um; every "
-            "engine on the file's facets")
+            "engine on that paraboloid plus the file's departure from it, piece by piece")
     return Dish(scene, scene, str(path if source is None else source), True, fit.rms, (note,),
                 _size_warning(D, scene=source is not None), int(ideal.n_panels))
 

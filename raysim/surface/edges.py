@@ -88,9 +88,8 @@ def edge_quadrature(reflector: Reflector, spacing: float | SpacingRule, which: s
     on_rim = (r[b] >= r_max * (1.0 - RIM_TOLERANCE)) & (r[c] >= r_max * (1.0 - RIM_TOLERANCE))
     if which == "rim":
         b, c, a, face, on_rim = b[on_rim], c[on_rim], a[on_rim], face[on_rim], on_rim[on_rim]
-    smooth = reflector.surface is not None
     arc = np.zeros(len(b), dtype=bool)
-    if smooth and curve:
+    if reflector.arc_edges and curve:
         rb, rc = r[b], r[c]
         arc = (rb > 0) & (np.abs(rb - rc) <= 1e-9 * np.maximum(rb, rc))
     dphi = np.angle(np.exp(1j * (np.arctan2(v[c, 1], v[c, 0]) - np.arctan2(v[b, 1], v[b, 0]))))
@@ -137,7 +136,7 @@ def _edge_points(refl: Reflector, b, c, a, face, arc, dphi, on_rim, order: int) 
         m = arc[:, None]
         x, y = np.where(m, xa, xs).ravel(), np.where(m, ya, ys).ravel()
         dx, dy = np.where(m, dxa, dxs).ravel(), np.where(m, dya, dys).ravel()
-        panel = np.repeat(refl.face_panel[face], P) if refl.layout is not None else None
+        panel = refl.surface_panel(np.repeat(face, P))
         z = refl.surface.height(x, y, panel)
         hx, hy = refl.surface.slope(x, y, panel)
         points = np.column_stack([x, y, z])

@@ -7,10 +7,11 @@ The deformed mesh is the ideal one with every vertex moved along z, so both shar
 triangulation and the facets' own errors cancel in the intensity ratio. Panels own their
 vertices: nothing is shared, averaged or triangulated across a gap.
 
-Where the scene defines the surface (``Reflector.surface``), ray hits and normals are taken
-on that smooth surface, not on the flat facets (a facet of size h sags h^2/(16F) below it).
-A mesh loaded from a file has no such surface: its hits lie on the facets and its normals are
-interpolated vertex normals, the same for its ideal counterpart.
+Ray hits and normals are taken on the reflector's smooth surface (``Reflector.surface``), not
+on the flat facets (a facet of size h sags h^2/(16F) below it). For a mesh loaded from a file
+that surface is the fitted paraboloid plus the mesh's own departure from it, interpolated
+smoothly over each connected piece (:mod:`raysim.surface.departure`); its ideal counterpart
+is the paraboloid itself (or the ideal file's departure), on the same triangulation.
 """
 
 from __future__ import annotations
@@ -30,21 +31,36 @@ from raysim.surface.panels import PanelLayout
 
 @dataclass(frozen=True)
 class ParaboloidSurface:
-    """The smooth surface z = (x^2 + y^2)/(4F) + delta(x, y, panel), metres."""
+    """The smooth surface z = (x^2 + y^2)/(4F) + d(x, y) + delta(x, y, panel), metres.
+
+    ``departure`` d is a loaded mesh's own departure from its fitted paraboloid
+    (:class:`raysim.surface.departure.MeshDeparture`), None for raysim's own dishes. With it,
+    ``panel`` holds the mesh's faces the points lie on, which are d's to use; ``deformation``
+    (a scene's, on top of the mesh) then finds its panels from (x, y).
+    """
 
     F: float
     deformation: Deformation = field(default_factory=NoDeformation)
+    departure: Deformation | None = None
 
     def height(self, x: ArrayLike, y: ArrayLike, panel: ArrayLike | None = None) -> NDArray:
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
-        return (x * x + y * y) / (4.0 * self.F) + self.deformation(x, y, panel)
+        z = (x * x + y * y) / (4.0 * self.F)
+        if self.departure is None:
+            return z + self.deformation(x, y, panel)
+        return z + self.departure(x, y, panel) + self.deformation(x, y, None)
 
     def slope(self, x: ArrayLike, y: ArrayLike, panel: ArrayLike | None = None) -> tuple[NDArray, NDArray]:
         """(dz/dx, dz/dy) of the surface, dimensionless."""
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
-        gx, gy = self.deformation.gradient(x, y, panel)
+        if self.departure is None:
+            gx, gy = self.deformation.gradient(x, y, panel)
+        else:
+            dx, dy = self.departure.gradient(x, y, panel)
+            ex, ey = self.deformation.gradient(x, y, None)
+            gx, gy = dx + ex, dy + ey
         return x / (2.0 * self.F) + gx, y / (2.0 * self.F) + gy
 
     def normal(self, x: ArrayLike, y: ArrayLike, panel: ArrayLike | None = None) -> NDArray:
@@ -76,7 +92,8 @@ class Reflector:
     """A triangulated reflector with float64 vertices and per-face panel ids.
 
     ``vertex_normals`` are unit normals towards +z, smooth within a panel. ``surface`` is the
-    smooth surface hits belong on, or None for a loaded mesh (hits on the facets).
+    smooth surface hits belong on (for a loaded mesh, its fitted paraboloid plus its
+    departure), or None for a bare triangulation (hits on the facets).
     ``obstacles``: what stands in the beam (:mod:`raysim.surface.obstacles`), shared by the
     deformed twin; None for a clear aperture.
     """
@@ -110,6 +127,35 @@ class Reflector:
                                face_attributes={"panel": self.face_panel}, process=False)
 
     @property
+    def from_file(self) -> bool:
+        """A mesh loaded from a file: its surface holds the mesh's own departure."""
+        return getattr(self.surface, "departure", None) is not None
+
+    @property
+    def arc_edges(self) -> bool:
+        """Free edges whose two ends lie at one radius are arcs of that circle (raysim's own
+        layouts lay panel rows on circles); a file's edges stay the straight segments it has."""
+        return self.surface is not None and not self.from_file
+
+    def surface_panel(self, face: NDArray[np.int64]) -> NDArray[np.int64] | None:
+        """What the smooth surface takes as ``panel`` for points on faces ``face``: a loaded
+        mesh's faces themselves (its departure is blended over each), the layout's panels,
+        None for a one-piece generated dish."""
+        if self.from_file:
+            return np.asarray(face, dtype=np.int64)
+        return self.face_panel[face] if self.layout is not None else None
+
+    @cached_property
+    def vertex_surface_panel(self) -> NDArray[np.int64]:
+        """What the smooth surface takes as ``panel`` at the vertices (as
+        :meth:`surface_panel`; for a loaded mesh a face holding each vertex)."""
+        if self.from_file:
+            from raysim.surface.departure import vertex_faces
+
+            return vertex_faces(self.faces, len(self.vertices))
+        return self.vertex_panel
+
+    @property
     def n_panels(self) -> int:
         return int(self.face_panel.max()) + 1 if len(self.face_panel) else 0
 
@@ -128,10 +174,10 @@ class Reflector:
         vertices = self.vertices.copy()
         vertices[:, 2] += deformation(x, y, panel)
         if self.surface is not None:
-            surface = ParaboloidSurface(self.F, self.surface.deformation + deformation
-                                        if not isinstance(self.surface.deformation, NoDeformation)
-                                        else deformation)
-            normals = surface.normal(x, y, panel)
+            surface = replace(self.surface, deformation=self.surface.deformation + deformation
+                              if not isinstance(self.surface.deformation, NoDeformation)
+                              else deformation)
+            normals = surface.normal(x, y, self.vertex_surface_panel if self.from_file else panel)
         else:
             surface = None
             normals = facet_vertex_normals(vertices, self.faces)
@@ -140,6 +186,7 @@ class Reflector:
 
     def _panel_for_deformation(self) -> NDArray[np.int64] | None:
         # scene panel ids only mean something for deformations when the layout made the mesh
+        # (a loaded mesh's pieces are its departure's, which the moved vertices already hold)
         return self.vertex_panel if self.layout is not None else None
 
 
@@ -396,14 +443,29 @@ def load_reflector(path: str | Path, unit: float = 1.0, F: float | None = None,
     faces = _faces_up(vertices, faces)
     panel = _components(faces, len(vertices))
     D = 2.0 * float(np.max(np.hypot(vertices[:, 0], vertices[:, 1])))
-    deformed = Reflector(vertices, faces, panel, facet_vertex_normals(vertices, faces), F_used, D)
+    deformed = _on_own_surface(vertices, faces, panel, F_used, D)
     if ideal_path is not None:
         iv = _ideal_vertices(ideal_path, path, unit, np.asarray(mesh.vertices, dtype=np.float64)) - shift
     else:
         iv = vertices.copy()
-        iv[:, 2] = (iv[:, 0] ** 2 + iv[:, 1] ** 2) / (4.0 * F_used)
-    ideal = Reflector(iv, faces, panel, facet_vertex_normals(iv, faces), F_used, D)
+        iv[:, 2] = (iv[:, 0] * iv[:, 0] + iv[:, 1] * iv[:, 1]) / (4.0 * F_used)
+    ideal = _on_own_surface(iv, faces, panel, F_used, D)
     return ideal, deformed, fit
+
+
+def _on_own_surface(vertices: NDArray, faces: NDArray, face_panel: NDArray, F: float,
+                    D: float) -> Reflector:
+    """A loaded mesh as a reflector whose smooth surface is the paraboloid of focal length F
+    plus the vertices' departure from it (:class:`raysim.surface.departure.MeshDeparture`,
+    blended over the mesh's own faces, so each connected piece ``face_panel`` alone); normals
+    from that surface."""
+    from raysim.surface.departure import MeshDeparture, vertex_faces
+
+    x, y = vertices[:, 0], vertices[:, 1]
+    departure = vertices[:, 2] - (x * x + y * y) / (4.0 * F)
+    surface = ParaboloidSurface(F, departure=MeshDeparture(vertices[:, :2], departure, faces))
+    normals = surface.normal(x, y, vertex_faces(faces, len(vertices)))
+    return Reflector(vertices, faces, face_panel, normals, F, D, surface)
 
 
 def _ideal_vertices(ideal_path: str | Path, path: str | Path, unit: float,

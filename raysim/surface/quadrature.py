@@ -7,12 +7,13 @@ area element (m^2) of sample i, n_i the unit normal towards the dish's front (+z
 Where the reflector has a smooth surface z = h(x, y) (``Reflector.surface``), the surface is a
 graph over the aperture plane, so every face is integrated over its projection on (x, y): the
 sample lies at (x, y, h(x, y)) and n dA = (-dh/dx, -dh/dy, 1) dx dy. This is exact geometry: the
-flat facets only define the domain. Free mesh edges whose two ends lie on one circle about the
-axis (the rim, a central hole, the inner and outer edges of a ring of panels) are taken as arcs
-of that circle: the thin circular segment between chord and arc is added (outer boundaries) or
-removed (inner boundaries) by a product Gauss rule in polar coordinates. Without a smooth
-surface (a mesh from a file) the samples lie on the flat facets, with the facet's area and the
-interpolated vertex normal.
+flat facets only define the domain. On raysim's own dishes, free mesh edges whose two ends lie
+on one circle about the axis (the rim, a central hole, the inner and outer edges of a ring of
+panels) are taken as arcs of that circle: the thin circular segment between chord and arc is
+added (outer boundaries) or removed (inner boundaries) by a product Gauss rule in polar
+coordinates; a mesh file's edges are the straight ones it has (``Reflector.arc_edges``).
+Without a smooth surface (a bare triangulation) the samples lie on the flat facets, with the
+facet's area and the interpolated vertex normal.
 
 Each face carries a conical product rule of order n (n^2 points, exact to degree 2n - 1; the
 conical product formulas of Stroud, *Approximate Calculation of Multiple Integrals*, 1971):
@@ -212,7 +213,7 @@ class FaceQuadrature:
 
     @cached_property
     def arcs(self) -> Arcs:
-        if self.reflector.surface is None or not self.curve_rim:
+        if not self.reflector.arc_edges or not self.curve_rim:
             empty = np.zeros(0, dtype=np.int64)
             return Arcs(empty, empty, empty, np.zeros(0), np.zeros(0))
         return boundary_arcs(self.reflector)
@@ -273,7 +274,7 @@ class FaceQuadrature:
         """Points on the smooth surface over (x, y) and their vector areas for projected
         areas ``weight`` (m^2)."""
         refl = self.reflector
-        panel = refl.face_panel[face] if refl.layout is not None else None
+        panel = refl.surface_panel(face)
         z = refl.surface.height(x, y, panel)
         sx, sy = refl.surface.slope(x, y, panel)
         points = np.column_stack([x, y, z])

@@ -110,20 +110,22 @@ def test_a_mesh_file_gives_the_numbers_of_the_scene_it_came_from(tmp_path):
     from_scene = check(scene, **options)
     from_mesh = check(stl, sphere_radius=1.0, **options)
     assert from_mesh.attrs["is_mesh"] == 1 and abs(from_mesh.attrs["focal_length"] - 3.0) < 1e-6
-    # the faceting error: GO on the file's flat facets (interpolated vertex normals) against GO
-    # on the smooth panels, over the usable cells (about 5 %, most of it at the vertex and
-    # beside the gaps); every figure agrees within twice that
+    # the file is the scene's triangulation, rounded to float32: GO on its smooth surface (the
+    # fitted paraboloid plus the vertices' departure) is GO on the scene's smooth panels (on
+    # the facets' interpolated vertex normals it was 5 % off). The wave engines differ by the
+    # file's straight rim chords against the scene's arcs; the inversion's error by the truth,
+    # interpolated from the file's vertices
     use = usable(SphereGrid(1.0, 24, 36), 10.0, 3.0)[:, None] & np.ones((1, 36), bool)
-    facet = rms_ratio(from_mesh["intensity_ideal_go"].values[0], from_scene["intensity_ideal_go"].values[0],
-                      use)
-    assert 0 < facet < 0.1
-    for name in ("ideal_difference", "fa_difference", "rms_go_model"):
+    go = rms_ratio(from_mesh["intensity_ideal_go"].values[0], from_scene["intensity_ideal_go"].values[0], use)
+    assert go < 1e-6
+    assert rms_ratio(from_mesh["fa_go"].values[0], from_scene["fa_go"].values[0], use) < 0.01
+    for name, within in (("ideal_difference", 1e-3), ("fa_difference", 1e-3), ("rms_go_model", 0.02)):
         m, s = float(from_mesh[name][0]), float(from_scene[name][0])
-        assert abs(m - s) <= 2 * facet * abs(s), (name, m, s, facet)
-    # GO's dark gap lines: most of the scene's are found on the mesh too (the facets' own 5 %
-    # add cells below the 1 % threshold there); the wave field fills them in, in both
+        assert abs(m - s) <= within * abs(s), (name, m, s)
+    # GO's dark gap lines are the scene's (a cell at the 1 % threshold may go either way); the
+    # wave field fills them in, in both
     dark_s, dark_m = from_scene["gap_dark"].values[0] == 1, from_mesh["gap_dark"].values[0] == 1
-    assert dark_s.sum() > 0 and (dark_s & dark_m).sum() >= 0.67 * dark_s.sum()
+    assert dark_s.sum() > 0 and (dark_s & dark_m).sum() >= 0.95 * max(dark_s.sum(), dark_m.sum())
     for ds in (from_scene, from_mesh):
         go_dip, wave_dip = float(ds["gap_go_dip"][0]), float(ds["gap_wave_dip"][0])
         assert go_dip < -0.01 and abs(wave_dip) < 0.5 * abs(go_dip), (go_dip, wave_dip)
