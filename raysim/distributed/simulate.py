@@ -21,7 +21,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -123,13 +123,30 @@ def _check_rebuilds(scene: Scene, job: SceneJob) -> None:
         again = job.scene()
     except Exception as exc:
         raise ClusterError(f"the scene cannot be rebuilt from its text on the workers ({exc})") from exc
-    same = (again.dish == scene.dish and again.source == scene.source and again.sphere == scene.sphere
+    same = (_resolved(again.dish) == _resolved(scene.dish) and again.source == scene.source
+            and again.sphere == scene.sphere
             and again.subdivisions == scene.subdivisions and repr(again.panels) == repr(scene.panels)
             and again.deformation.describe() == scene.deformation.describe()
-            and again.obstacles == scene.obstacles)
+            and _resolved_obstacles(again.obstacles) == _resolved_obstacles(scene.obstacles))
     if not same:
         raise ClusterError("the scene differs from its TOML text (changed in Python?): workers rebuild "
                            "it from the text, with only the frequency and grid overridden")
+
+
+def _absolute(path: Path | None) -> Path | None:
+    return None if path is None else Path(path).resolve()
+
+
+def _resolved(dish):
+    """The dish with its files' paths absolute: the workers' scene resolves them against the
+    scene's folder made absolute, a scene read as ``scene.toml`` against ``.`` (a mesh scene
+    run from its own folder was refused as changed in Python)."""
+    return replace(dish, mesh=_absolute(dish.mesh), ideal_mesh=_absolute(dish.ideal_mesh))
+
+
+def _resolved_obstacles(obstacles: tuple) -> tuple:
+    """The obstacles with their mesh files' paths absolute (as :func:`_resolved`)."""
+    return tuple(replace(o, path=_absolute(o.path)) if hasattr(o, "path") else o for o in obstacles)
 
 
 def simulate(scene: Scene, output: str | Path, method: str | None = None, device: str = "cpu",

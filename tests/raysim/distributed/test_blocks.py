@@ -290,3 +290,27 @@ def test_a_worker_refuses_a_file_the_scene_names_changed_after_the_run_began(inp
     with connect(inproc) as cluster, pytest.raises(ClusterError, match=r"bump\.csv, a file the scene names, changed"):
         run_blocks(cluster.client, job, [1], block_bounds(job.n_points, 40), store)
     assert store.markers() == {}
+
+
+def test_a_mesh_scene_read_from_its_own_folder_runs_in_blocks(inproc, tmp_path, monkeypatch):
+    """``raysim simulate scene.toml --workers 2`` in the scene's folder: its mesh and obstacle
+    paths are relative there and absolute on the workers, the same files. It was refused as
+    "changed in Python"; the blocks give the single-process FieldMap."""
+    import trimesh
+
+    from raysim.scene.scene import load_scene
+    from raysim.surface.mesh import paraboloid
+
+    dish = paraboloid(10.0, 4.0, 1.0)
+    trimesh.Trimesh(dish.vertices + np.array([0.0, 0.0, 1e-4]) * dish.vertices[:, :1], dish.faces,
+                    process=False).export(tmp_path / "dish.ply")
+    trimesh.creation.box((0.6, 0.6, 0.1)).apply_translation((0.0, 0.0, 4.0)).export(tmp_path / "cabin.stl")
+    text = SMALL.replace('diameter_m = 10.0\nfocal_length_m = 4.0\nresolution_m = 1.0',
+                         'mesh = "dish.ply"\nfocal_length_m = 4.0')
+    text = text.replace('[[deformation]]\ntype = "paper"\nscale = 1.0\n',
+                        '[[obstacle]]\ntype = "mesh"\nfile = "cabin.stl"\n')
+    (tmp_path / "scene.toml").write_text(text)
+    monkeypatch.chdir(tmp_path)
+    scene = load_scene(Path("scene.toml"))
+    ds = simulate_blocks(scene, "field.nc", "po", scheduler=inproc, block_size=40)
+    assert_same_fieldmap(simulate(scene, "po"), ds)
