@@ -76,6 +76,9 @@ def surface_attrs(opts: InvertOptions, out: Outcome) -> dict[str, Any]:
         "refine_update_rms_m": ",".join(f"{v:.3e}" for v in history.update_rms),
         "refine_misfit_rms": ",".join(f"{v:.3e}" for v in history.misfit_rms),
         "refine_stopped": history.stopped or "no: every iteration ran",
+        # how many times each kept update was halved before it lowered the misfit (0: full step)
+        "refine_backtracks": ",".join(str(v) for v in history.backtracks),
+        "refine_forward_runs": history.evaluations,
         **_fit_attrs(out),
         "refine_seconds": history.seconds,
         "gain_mode": gain.mode, "gain_known": not gain.estimated, "gain_choice": gain.reason,

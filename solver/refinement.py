@@ -102,9 +102,10 @@ def refinement_setup(inverse: LinearInverse, chosen: ModelChoice, iterations: in
     from solver.wave import WaveCorrection
 
     report = progress or (lambda stage, fraction: None)
+    # the first of the refinement's iterations + 2 planned model runs (solver.nonlinear.refine)
     E0 = forward.ideal_field(scan.sphere, scan.F, scan.D,
                              lambda stage, f: report(f"ideal reflector: {stage}",
-                                                     f / (iterations + 1)))
+                                                     f / (iterations + 2)))
     weight = inverse.weight if inverse.weight is not None else np.ones_like(scan.intensity_ideal)
     fresnel = bool(getattr(forward, "fresnel_smoothing", True))
     correct = WaveCorrection(inverse, E0, float(scan.attrs["frequency_hz"]),
