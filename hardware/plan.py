@@ -320,7 +320,44 @@ def plan_from_table(top: Table, text: str = "", base: Path = Path("."),
                     ((rig_file,) if rig_file is not None else ()) + tuple(top.files),
                     polarization, obstacles)
     plan.check_reach()
+    _check_reference_lit(plan, acq)
     return plan
+
+
+#: a drift reference whose cell loses more than this share of its GO power to the obstacles
+#: reads their shadow, not the beam
+REFERENCE_BLOCKED_SHARE = 0.5
+
+
+def _check_reference_lit(plan: ScanPlan, acq: Table) -> None:
+    """Refuse a drift reference that cannot see the dish's beam, unless drift is not
+    corrected: beyond the rim image, or in the obstacles' shadow. Its readings would be the
+    receiver's floor, and the corrections taken from them would scale every line by noise (a
+    simulated floor even followed the simulated gain, so the scan looked corrected)."""
+    if plan.drift_correction == "none":
+        return
+    theta, phi = plan.reference
+    where = f"the drift reference (theta {math.degrees(theta):g}, phi {math.degrees(phi):g} deg)"
+    remedy = ("move it into the lit beam (acquisition.reference_theta_deg, reference_phi_deg) or "
+              'set acquisition.drift_correction = "none"')
+    rim = theta_rim(plan.diameter, plan.focal_length)
+    if theta >= rim:
+        raise acq.fail(f"{where} lies beyond the rim image (theta {math.degrees(rim):.4g} deg): it "
+                       f"reads no beam; {remedy}")
+    if not plan.obstacles:
+        return
+    g = plan.grid
+    half_theta = 0.5 * min(g.theta_edges[1] - g.theta_edges[0], rim - theta)
+    half_phi = 0.5 * (g.phi_edges[1] - g.phi_edges[0])
+    lo = max(theta - half_theta, 0.0)
+    cell = SphereGrid(g.radius, 1, 1, lo, lo + 2 * half_theta, phi - half_phi, phi + half_phi)
+    probe = plan.rig.probe_response
+    share = float(_blocked_share(cell, plan.focal_length, plan.diameter, plan.obstacles,
+                                 None if probe.ideal else probe, plan.polarization,
+                                 _file_stamps(plan.obstacles))[0, 0])
+    if share > REFERENCE_BLOCKED_SHARE:
+        raise acq.fail(f"{where} lies in the obstacles' shadow ({100 * share:.0f} % of its GO power "
+                       f"blocked): it would read the receiver's floor, not the beam; {remedy}")
 
 
 def dbm_to_w(p_dbm: float) -> float:

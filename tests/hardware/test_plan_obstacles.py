@@ -14,6 +14,7 @@ carry the scene's marks, obstacles and blocked ideal.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +71,7 @@ phi_step_deg = {PHI_STEP}
 samples_per_point = 1
 reference_samples = 1
 reference_every_lines = 36
+reference_theta_deg = 30.0
 [simulator]
 time_scale = 0.0
 """
@@ -217,3 +219,25 @@ def test_an_obstacle_mesh_edited_between_two_reads_is_read_again(tmp_path):
     second = load_plan(tmp_path / "plan.toml").obstacle_mesh
     reach = [float(np.max(np.hypot(m.vertices[:, 0], m.vertices[:, 1]))) for m in (first, second)]
     assert reach[0] == pytest.approx(1.0, rel=1e-6) and reach[1] == pytest.approx(2.0, rel=1e-6)
+
+
+@pytest.mark.parametrize(("reference", "drift", "refused"), [
+    ((0.0, 0.0), "auto", "in the obstacles' shadow (100 %"),  # behind the cabin
+    ((20.0, ROTATION), "linear", "in the obstacles' shadow"),  # along a leg
+    ((80.0, 0.0), "auto", "beyond the rim image"),
+    ((0.0, 0.0), "none", None),  # no drift correction: the reference only costs time
+    ((30.0, 0.0), "auto", None),
+])
+def test_a_drift_reference_that_cannot_see_the_beam_is_refused(folder, reference, drift, refused):
+    """The cabin hides theta < 2 atan(r_c / 2F) = 10.7 deg, a leg a strip along its azimuth:
+    a reference there reads the receiver's floor, and drift corrections taken from it would
+    scale every line by noise."""
+    text = PLAN.replace("reference_theta_deg = 30.0", f"reference_theta_deg = {reference[0]}\n"
+                        f"reference_phi_deg = {reference[1]}\ndrift_correction = \"{drift}\"")
+    path = folder / f"plan_reference_{reference[0]:g}_{reference[1]:g}_{drift}.toml"
+    path.write_text(text + OBSTACLES)
+    if refused is None:
+        load_plan(path)
+    else:
+        with pytest.raises(PlanError, match=re.escape(refused)):
+            load_plan(path)
