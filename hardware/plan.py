@@ -347,14 +347,20 @@ def _check_reference_lit(plan: ScanPlan, acq: Table) -> None:
     if not plan.obstacles:
         return
     g = plan.grid
-    half_theta = 0.5 * min(g.theta_edges[1] - g.theta_edges[0], rim - theta)
-    half_phi = 0.5 * (g.phi_edges[1] - g.phi_edges[0])
-    lo = max(theta - half_theta, 0.0)
-    cell = SphereGrid(g.radius, 1, 1, lo, lo + 2 * half_theta, phi - half_phi, phi + half_phi)
-    probe = plan.rig.probe_response
-    share = float(_blocked_share(cell, plan.focal_length, plan.diameter, plan.obstacles,
-                                 None if probe.ideal else probe, plan.polarization,
-                                 _file_stamps(plan.obstacles))[0, 0])
+    i = int(np.searchsorted(g.theta_edges, theta, side="right")) - 1
+    j = int(np.searchsorted(g.phi_edges, g.phi_edges[0] + (phi - g.phi_edges[0]) % (2 * np.pi),
+                            side="right")) - 1
+    if 0 <= i < g.n_theta and 0 <= j < g.n_phi:  # the grid's own marks, which the scan needs anyway
+        share = float(plan.blocked_share[i, j])
+    else:  # a cell of the grid's size about the reference, traced alone
+        half_theta = 0.5 * min(g.theta_edges[1] - g.theta_edges[0], rim - theta)
+        half_phi = 0.5 * (g.phi_edges[1] - g.phi_edges[0])
+        lo = max(theta - half_theta, 0.0)
+        cell = SphereGrid(g.radius, 1, 1, lo, lo + 2 * half_theta, phi - half_phi, phi + half_phi)
+        probe = plan.rig.probe_response
+        share = float(_blocked_share(cell, plan.focal_length, plan.diameter, plan.obstacles,
+                                     None if probe.ideal else probe, plan.polarization,
+                                     _file_stamps(plan.obstacles))[0, 0])
     if share > REFERENCE_BLOCKED_SHARE:
         raise acq.fail(f"{where} lies in the obstacles' shadow ({100 * share:.0f} % of its GO power "
                        f"blocked): it would read the receiver's floor, not the beam; {remedy}")
