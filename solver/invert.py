@@ -347,15 +347,14 @@ def _truth_from_scene(attrs: dict) -> Callable | None:
 
 
 def mesh_truth(scene, attrs: dict | None = None) -> Callable | None:
-    """delta(x, y) (m, along z) of a mesh scene: the deformed mesh's z minus its ideal's (the
-    ``ideal_mesh``, else the fitted paraboloid), vertex by vertex, linear over the ideal's
-    (x, y) and the nearest vertex's beyond its hull. The scene's own deformation, if any, is
-    in it. None when the mesh no longer loads, or departs from its ideal by another RMS than
-    the FieldMap's ``mesh_departure_rms_m`` (another file under its name): the truth is then
-    unknown (taking the scene's zero deformation made every mesh's map read as its own
-    error)."""
-    from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
-
+    """delta(x, y) (m, along z) of a mesh scene: the deformed reflector's surface height less
+    its ideal's at the same (x, y), as the engines simulate them (the fitted paraboloid plus
+    each file's departure, :mod:`raysim.surface.departure`, and the scene's own deformation
+    on top). Heights at one (x, y), not vertex by vertex: nodes that slid along the surface
+    (an FEM output's) are no deformation. None when the mesh no longer loads, or departs from
+    its ideal by another RMS than the FieldMap's ``mesh_departure_rms_m`` (another file under
+    its name): the truth is then unknown (taking the scene's zero deformation made every
+    mesh's map read as its own error)."""
     from raysim.errors import RaysimError
     from raysim.surface.mesh import mesh_departure_rms, reflectors_for
 
@@ -367,15 +366,24 @@ def mesh_truth(scene, attrs: dict | None = None) -> Callable | None:
     if recorded is not None and not np.isclose(mesh_departure_rms(ideal, deformed), float(recorded),
                                                rtol=1e-6, atol=1e-12):
         return None  # another file now has the name the scene gives: not the mesh simulated
+
+    from scipy.spatial import cKDTree
+
     xy = ideal.vertices[:, :2]
-    dz = deformed.vertices[:, 2] - ideal.vertices[:, 2]
-    linear, nearest = LinearNDInterpolator(xy, dz), NearestNDInterpolator(xy, dz)
+    edges = xy[ideal.faces] - xy[np.roll(ideal.faces, 1, axis=1)]
+    reach = float(np.median(np.hypot(edges[..., 0], edges[..., 1])))
+    tree = cKDTree(xy)
 
     def delta(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
-        values = linear(x, y)
-        outside = ~np.isfinite(values)
-        values[outside] = nearest(x[outside], y[outside])
-        return values
+        # each point on the face of its nearest vertex, the scene's deformation finding its own
+        # panels; a point over a triangle's edge away from every vertex (in a wide gap, beyond
+        # the rim) takes the nearest vertex's value, not the surfaces' continuation
+        x, y = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64))
+        distance, nearest = tree.query(np.column_stack([x.ravel(), y.ravel()]))
+        far = distance > reach
+        px, py = x.ravel().copy(), y.ravel().copy()
+        px[far], py[far] = xy[nearest[far], 0], xy[nearest[far], 1]
+        return (deformed.surface.height(px, py) - ideal.surface.height(px, py)).reshape(x.shape)
 
     return delta
 

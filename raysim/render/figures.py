@@ -55,11 +55,19 @@ class SceneTruth:
 
 def scene_deformation(field: xr.Dataset) -> SceneTruth | None:
     """The true deformation of the scene the FieldMap carries, or None (measured scan, or a
-    scene that refers to files not present here)."""
+    scene that refers to files not present here). A mesh scene's is its mesh's departure from
+    its ideal with the scene's deformation on top (:func:`solver.invert.mesh_truth`; the
+    scene's own deformation alone drew a flat zero for a mesh that departs)."""
     from raysim.scene.scene import scene_of
+    from solver.invert import mesh_truth
 
     scene = scene_of(field)
-    return None if scene is None else SceneTruth(scene.deformation, scene.panels)
+    if scene is None:
+        return None
+    if scene.dish.mesh is None:
+        return SceneTruth(scene.deformation, scene.panels)
+    delta = mesh_truth(scene, dict(field.attrs))
+    return None if delta is None else SceneTruth(lambda x, y, panel=None: delta(x, y))
 
 
 def fa_on_aperture(field: xr.Dataset, x: np.ndarray) -> np.ndarray:
