@@ -112,9 +112,13 @@ class MeshDeparture(Deformation):
         return face
 
     def _nearest_face(self, q: Array) -> NDArray[np.int64]:
-        used = np.unique(self.faces)
         _, index = self._tree.query(q)
-        return self._vertex_face[used[index]]
+        return self._vertex_face[self._used[index]]
+
+    @cached_property
+    def _used(self) -> NDArray[np.int64]:
+        """The vertices on faces (the others have no face to blend over)."""
+        return np.unique(self.faces)
 
     @cached_property
     def vertex_jet(self) -> Array:
@@ -129,7 +133,7 @@ class MeshDeparture(Deformation):
     def _tree(self):
         from scipy.spatial import cKDTree
 
-        return cKDTree(self.xy[np.unique(self.faces)])
+        return cKDTree(self.xy[self._used])
 
 
 def vertex_faces(faces: NDArray[np.int64], n_vertices: int) -> NDArray[np.int64]:
