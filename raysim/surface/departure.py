@@ -10,12 +10,11 @@ interpolated across a gap). The paraboloid's curvature, which dominates, is then
 what is interpolated is the small departure alone, so its errors are a share of the
 departure's.
 
-The interpolation: each vertex has the least-squares cubic through its neighbours up to two
-edges away on the mesh's own faces (its gradient O(h^3) and curvature O(h^2) for a smooth d;
-a quadratic or a plane where a vertex has too few); at a point, the three corners'
-quadratics (the cubic's first two orders) and their gradients are blended with the point's
-barycentric weights in its face. Normals are then continuous, and so, to O(h), is their
-derivative, the curvature that GO's intensity follows.
+The interpolation: each vertex has the least-squares quadratic through its neighbours up to
+two edges away on the mesh's own faces (its gradient O(h^2) for a smooth d; a plane where a
+vertex has too few); at a point, the three corners' quadratics and their gradients are
+blended with the point's barycentric weights in its face. Normals are then continuous, and
+so, to O(h), is their derivative, the curvature that GO's intensity follows.
 
 Frame and units of docs/physics.md: reflector frame (vertex at the origin, axis +z), metres;
 d in metres along z, its gradient dimensionless.
@@ -32,10 +31,9 @@ from raysim.surface.deformation import Deformation
 
 Array = NDArray[np.float64]
 
-#: a vertex's cubic fit (9 unknowns), quadratic fit (5) and plane (2) need this many
-#: neighbours (a margin, so that a row of neighbours along a rim does not fix the curvature
-#: across it)
-FIT_NEIGHBOURS = {9: 12, 5: 8, 2: 2}
+#: a vertex's quadratic fit (5 unknowns) and plane (2) need this many neighbours (a margin,
+#: so that a row of neighbours along a rim does not fix the curvature across it)
+FIT_NEIGHBOURS = {5: 8, 2: 2}
 #: ... and its normal matrix's condition, in units of the neighbours' own spacing, below this
 FIT_CONDITION = 1e8
 
@@ -87,10 +85,8 @@ class MeshDeparture(Deformation):
         # each corner's own quadratic about it, at the point, blended: the curvature is then
         # the corners' blended too (blending the corners' gradients alone made it constant on
         # a face and jump at its edges, which go+edge's rays, finer than the faces, saw: 0.245
-        # of FA's RMS against the analytic dish at 0.15 m triangles; now 0.148). The corners'
-        # cubic terms, though they make the pointwise Laplacian better (0.094 against 0.115 of
-        # its RMS), made go+edge worse (0.211): only the fit uses them
-        c = self.vertex_jet[corners]  # (n, 3, 9): the corners' Taylor coefficients
+        # of FA's RMS against the analytic dish at 0.15 m triangles; now 0.174)
+        c = self.vertex_jet[corners]  # (n, 3, 5): the corners' Taylor coefficients
         dx, dy = (q[:, None, :] - self.xy[corners]).transpose(2, 0, 1)
         gx = c[..., 0] + c[..., 2] * dx + c[..., 3] * dy
         gy = c[..., 1] + c[..., 3] * dx + c[..., 4] * dy
@@ -122,7 +118,7 @@ class MeshDeparture(Deformation):
 
     @cached_property
     def vertex_jet(self) -> Array:
-        """(n, 9) d's Taylor coefficients at the vertices (:func:`vertex_jets`)."""
+        """(n, 5) d's Taylor coefficients at the vertices (:func:`vertex_jets`)."""
         return vertex_jets(self.xy, self.departure, self.faces)
 
     @cached_property
@@ -160,18 +156,17 @@ def vertex_gradients(xy: Array, value: Array, faces: NDArray[np.int64]) -> Array
 
 
 def vertex_jets(xy: Array, value: Array, faces: NDArray[np.int64]) -> Array:
-    """(n, 9) Taylor coefficients of ``value`` about each vertex: the gradient (dimensionless),
-    the second derivatives h_xx, h_xy, h_yy (1/m) and the cubic's c_30, c_21, c_12, c_03 (the
-    coefficients of dx^3, dx^2 dy, dx dy^2, dy^3, 1/m^2), of the weighted least-squares cubic
-    through the vertex (its value held) and its neighbours up to two edges away on ``faces``,
-    whose second derivatives err by O(h^2) (a quadratic's by O(h), which go+edge's pointwise
-    amplitudes showed); the quadratic, then the plane, with the higher terms zero, where a
-    vertex has too few neighbours (:data:`FIT_NEIGHBOURS`) or they fix the fit badly; zero
-    for a vertex on no face."""
+    """(n, 5) Taylor coefficients of ``value`` about each vertex: the gradient (dimensionless)
+    and the second derivatives h_xx, h_xy, h_yy (1/m) of the weighted least-squares quadratic
+    through the vertex (its value held) and its neighbours up to two edges away on ``faces``;
+    the plane (no curvature) where a vertex has too few neighbours (:data:`FIT_NEIGHBOURS`)
+    or they fix the quadratic badly; zero for a vertex on no face. (A cubic fit gives better
+    second derivatives on exact data, but draws the float32 rounding of a binary STL into
+    them: a 25 m dish's GO FA went from 0.093 to 0.21 of its RMS off the equation.)"""
     from scipy.sparse import coo_matrix
 
     n = len(xy)
-    out = np.zeros((n, 9))
+    out = np.zeros((n, 5))
     if len(faces) == 0:
         return out
     rows = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
@@ -189,8 +184,7 @@ def vertex_jets(xy: Array, value: Array, faces: NDArray[np.int64]) -> Array:
     scale = np.sqrt(np.bincount(i, weights=dist2, minlength=n) / np.maximum(count, 1))
     u, v = d[:, 0] / scale[i], d[:, 1] / scale[i]
     w = 1.0 / (1.0 + u * u + v * v)  # nearer neighbours weigh more
-    # columns apart: stacking 2 M rows cost a second
-    basis = [u, v, u * u, u * v, v * v, u * u * u, u * u * v, u * v * v, v * v * v]
+    basis = [u, v, u * u, u * v, v * v]  # columns apart: stacking 2 M rows cost a second
     weighted = [w * b for b in basis]
     rhs_value = value[j] - value[i]
     k = len(basis)
@@ -201,7 +195,7 @@ def vertex_jets(xy: Array, value: Array, faces: NDArray[np.int64]) -> Array:
         for b in range(a, k):
             normal[:, a, b] = normal[:, b, a] = np.bincount(i, weights=weighted[a] * basis[b], minlength=n)
     left = count >= 2
-    for size in (9, 5, 2):  # cubic, quadratic, plane: the richest fit each vertex fixes
+    for size in (5, 2):  # quadratic, plane: the richer fit each vertex fixes
         fits = np.flatnonzero(left & (count >= FIT_NEIGHBOURS[size]))
         fits = fits[_conditioned(normal[fits][:, :size, :size])]
         if len(fits):
@@ -210,8 +204,7 @@ def vertex_jets(xy: Array, value: Array, faces: NDArray[np.int64]) -> Array:
             left[fits] = False
     unit = np.where(scale > 0, scale, 1.0)[:, None]
     # back to metres (u = dx / scale); the u^2, v^2 coefficients are half the second derivatives
-    return out * np.array([1.0, 1.0, 2.0, 1.0, 2.0, 1.0, 1.0, 1.0, 1.0]) / unit ** np.array(
-        [1, 1, 2, 2, 2, 3, 3, 3, 3])
+    return out * np.array([1.0, 1.0, 2.0, 1.0, 2.0]) / unit ** np.array([1, 1, 2, 2, 2])
 
 
 def _conditioned(normal: Array) -> NDArray[np.bool_]:
