@@ -43,7 +43,8 @@ class ParaboloidSurface:
     F: float
     deformation: Deformation = field(default_factory=NoDeformation)
     departure: Deformation | None = None
-    face_layout_panel: NDArray[np.int64] | None = None
+    # an array: left out of the dataclass's equality and hash (both stay defined)
+    face_layout_panel: NDArray[np.int64] | None = field(default=None, compare=False)
 
     def _deformation_panel(self, panel: ArrayLike | None) -> ArrayLike | None:
         """The ``panel`` ids the deformation takes for the surface's ``panel``."""
