@@ -95,8 +95,7 @@ def shared_lattice(reflector: Reflector, m: int, curve: bool = True) -> RayLatti
         t = (param[:, p] / m)[:, None]
         points[:, p] = (1.0 - t) * v[lo] + t * v[hi]
         normals[:, p] = (1.0 - t) * reflector.vertex_normals[lo] + t * reflector.vertex_normals[hi]
-    own = np.arange(n_faces) if reflector.from_file else reflector.face_panel  # the surface's keys
-    panel = np.repeat(own[:, None], len(W), axis=1)
+    panel = np.repeat(reflector.face_surface_panel[:, None], len(W), axis=1)
     if curve and reflector.arc_edges:
         _bend_onto_arcs(reflector, m, W, points)
     _, first, compact = np.unique(gid.ravel(), return_index=True, return_inverse=True)

@@ -116,8 +116,7 @@ def ray_lattice(reflector: Reflector, subdivisions: int = 1) -> RayLattice:
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     n_faces, n_local = len(reflector.faces), len(w)
     tubes = (local[None, :, :] + n_local * np.arange(n_faces)[:, None, None]).reshape(-1, 3)
-    # the surface's keys: a loaded mesh's departure is blended over each face
-    panel = np.repeat(np.arange(n_faces) if reflector.from_file else reflector.face_panel, n_local)
+    panel = np.repeat(reflector.face_surface_panel, n_local)
     return RayLattice(points, panel, normals, tubes.astype(np.int32))
 
 

@@ -157,6 +157,12 @@ class Reflector:
         return self.face_panel[face] if self.layout is not None else None
 
     @cached_property
+    def face_surface_panel(self) -> NDArray[np.int64]:
+        """Per face, the ids a ray lattice carries for the smooth surface (every lattice point
+        of a face takes its face's): a loaded mesh's faces, else the faces' panels."""
+        return np.arange(len(self.faces)) if self.from_file else self.face_panel
+
+    @cached_property
     def vertex_surface_panel(self) -> NDArray[np.int64]:
         """What the smooth surface takes as ``panel`` at the vertices (as
         :meth:`surface_panel`; for a loaded mesh a face holding each vertex)."""
