@@ -52,6 +52,9 @@ def check(
                                                help="Mesh only: probe-sphere radius R (m), default 0.3 F."),
     focal_length: float | None = typer.Option(None, "--focal-length",
                                               help="Mesh only: F (m) instead of the fitted one."),
+    mesh_unit: float | None = typer.Option(None, "--mesh-unit",
+                                           help="Mesh only: metres per file unit (0.001 for a file "
+                                                "in millimetres; default 1)."),
     resolution: float | None = typer.Option(None, "--resolution",
                                             help="Generated dish: GO triangle edge (m)."),
     json_path: str | None = json_option(),
@@ -79,6 +82,7 @@ def check(
                                grid=parse_grid(sphere), N=grid, refine=refine,
                                refine_model=refine_model, device=device, sphere_radius=sphere_radius,
                                focal_length=focal_length, resolution=resolution, progress=report,
+                               mesh_unit=mesh_unit,
                                radiator=radiator, radiator_tol=radiator_tol)
     rows, title = summary_rows(ds), "GO against the wave engine"
     write_json(json_path, "check", title, _records(ds), rows, verdict=verdict_lines(ds),

@@ -52,14 +52,16 @@ def check(source: str | os.PathLike[str], *, frequencies: list[float] | None = N
           N: int = 256, refine: int = 3, refine_model: str = "auto", device: str = "cpu",
           sphere_radius: float | None = None, focal_length: float | None = None,
           resolution: float | None = None, progress: Progress | None = None,
-          radiator: str = "fast", radiator_tol: float = DEFAULT_TOL) -> xr.Dataset:
+          radiator: str = "fast", radiator_tol: float = DEFAULT_TOL,
+          mesh_unit: float | None = None) -> xr.Dataset:
     """Compare GO with a wave engine on ``source`` at each frequency; return the check dataset.
 
     Parameters
     ----------
     source : a scene TOML file (or a shipped example's name), or a mesh file (STL, PLY, OBJ,
         GLB) of the dish, fitted to its paraboloid (``focal_length`` m fixes F;
-        ``sphere_radius`` m sets the probe sphere, default 0.3 F).
+        ``sphere_radius`` m sets the probe sphere, default 0.3 F; ``mesh_unit`` is metres per
+        file unit, default 1, 0.001 for a file in millimetres).
     frequencies : Hz; None: the scene's (a mesh needs them).
     deformation : ``auto`` (the scene's when it has one, else the mix), ``scene`` or ``mix``
         (gravity-like astigmatism plus actuator bumps of ``rms`` m RMS, drawn from ``seed``).
@@ -83,7 +85,7 @@ def check(source: str | os.PathLike[str], *, frequencies: list[float] | None = N
     if refine_model not in REFINE_MODELS:
         raise CheckError(f"unknown --refine-model {refine_model!r}: use one of {', '.join(REFINE_MODELS)}")
     dish = inputs.load_dish(source, sphere_radius=sphere_radius, focal_length=focal_length,
-                            resolution=resolution)
+                            resolution=resolution, mesh_unit=mesh_unit)
     freqs = inputs.frequencies_of(dish, frequencies)
     dish = inputs.with_gap(inputs.with_grid(dish, grid), gap_m)
     dish, truth, described = inputs.choose_deformation(dish, deformation, rms, seed)

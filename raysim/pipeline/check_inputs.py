@@ -54,6 +54,7 @@ DEFAULT_RMS_M = 100e-6
 #: dish at 3 GHz, 3.0e10, took 207 s), the time 1.2e10 pairs took before the lanes kernels / a GPU
 PO_PAIR_BUDGET = {"cpu": 3.6e10, "cuda": 1e12}
 WAVE_FACE_M = 4.0  # quadrature faces of the wave data (the refinement's PO model uses 5 m)
+MESH_UNIT_OPTION = "--mesh-unit"  # how check's user scales a bare mesh file's coordinates
 SPHERE_RADIUS_OF_F = 0.3  # a mesh's probe sphere by default: R = 0.3 F (the paper's 10 / 33)
 MAX_FREQUENCIES = 12
 
@@ -91,19 +92,21 @@ def is_mesh(source: str | Path) -> bool:
 
 
 def load_dish(source: str | Path, *, sphere_radius: float | None = None,
-              focal_length: float | None = None, resolution: float | None = None) -> Dish:
+              focal_length: float | None = None, resolution: float | None = None,
+              mesh_unit: float | None = None) -> Dish:
     """The dish of a scene file (or a shipped example's name) or of a mesh file.
 
     A mesh is fitted to the paraboloid z = r^2 / (4F) (``focal_length`` fixes F) and refused
     when it is not a dish: F / D outside 0.1 .. 5, or an RMS departure from the fit over 2 %
     of the dish's depth. ``sphere_radius`` (m) sets its probe sphere (default 0.3 F);
-    ``resolution`` (m) the triangle edge of a generated GO mesh.
+    ``mesh_unit`` (m per file unit, default 1) scales its coordinates; ``resolution`` (m) the
+    triangle edge of a generated GO mesh.
     """
     if is_mesh(source):
-        return _mesh_dish(Path(source), sphere_radius, focal_length)
-    if sphere_radius is not None or focal_length is not None:
-        raise CheckError("--sphere-radius and --focal-length apply to a mesh file; a scene sets "
-                         "its own in [sphere] and [dish]")
+        return _mesh_dish(Path(source), sphere_radius, focal_length, unit=mesh_unit)
+    if sphere_radius is not None or focal_length is not None or mesh_unit is not None:
+        raise CheckError("--sphere-radius, --focal-length and --mesh-unit apply to a mesh file; a "
+                         "scene sets its own in [sphere] and [dish]")
     from raysim.files import find_input
 
     scene = load_scene(find_input(source))
@@ -123,16 +126,22 @@ def load_dish(source: str | Path, *, sphere_radius: float | None = None,
 
 
 def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None = None,
-               source: str | Path | None = None) -> Dish:
-    """The dish of the mesh file ``path``: a bare mesh, or the mesh a ``scene`` (read from
-    ``source``, the dish's recorded source) names."""
+               source: str | Path | None = None, unit: float | None = None) -> Dish:
+    """The dish of the mesh file ``path``: a bare mesh (``unit`` m per file unit, default 1),
+    or the mesh a ``scene`` (read from ``source``, the dish's recorded source) names."""
     from raysim.surface.mesh import check_stated_dish, load_reflector
 
     if not path.is_file():
         raise CheckError(f"{path}: no such mesh file")
     if F is not None and not (math.isfinite(F) and F > 0):
         raise CheckError(f"--focal-length must be a length > 0 m, got {F:g}")
-    ideal, loaded, fit = load_reflector(path, scene.dish.mesh_unit if scene else 1.0, F)
+    if unit is not None and not (math.isfinite(unit) and unit > 0):
+        raise CheckError(f"--mesh-unit must be metres per file unit > 0 (0.001 for mm), got {unit:g}")
+    if scene is not None:
+        ideal, loaded, fit = load_reflector(path, scene.dish.mesh_unit, F)
+    else:
+        unit = 1.0 if unit is None else float(unit)
+        ideal, loaded, fit = load_reflector(path, unit, F, unit_setting=MESH_UNIT_OPTION)
     if scene is not None:  # its diameter_m was replaced by the mesh's without a word
         check_stated_dish(path, loaded, fit, scene.dish.diameter, F)
     D = float(ideal.D)
@@ -149,7 +158,7 @@ def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None
     if scene is None:
         # JSON's string escapes are TOML's: a name with a quote or a backslash stays a string
         text = (f'name = {json.dumps(path.stem)}\n[dish]\nmesh = {json.dumps(path.resolve().as_posix())}\n'
-                f"focal_length_m = {float(fit.F)!r}\n[source]\nfrequency_hz = 1e9\n"
+                f"mesh_unit_m = {unit!r}\nfocal_length_m = {float(fit.F)!r}\n[source]\nfrequency_hz = 1e9\n"
                 f"[sphere]\nradius_m = {float(R)!r}\n")
         scene = parse_scene(text, source=str(path), base=path.parent)
     scene = replace(scene, dish=replace(scene.dish, diameter=D, focal_length=fit.F))
@@ -164,9 +173,9 @@ def _size_warning(D: float, scene: bool) -> str:
     """:func:`raysim.simulate.mesh_size_warning` (the same line as ``simulate``'s), with the fix
     ``check`` offers: a scene's ``mesh_unit_m``; "" below the size."""
     from raysim.simulate import mesh_size_warning
+    from raysim.surface.mesh import setting_line
 
-    size = mesh_size_warning(D, "set dish.mesh_unit_m = 0.001" if scene else
-                             "check a scene whose [dish] names the mesh with mesh_unit_m = 0.001")
+    size = mesh_size_warning(D, setting_line("dish.mesh_unit_m" if scene else MESH_UNIT_OPTION, 0.001))
     return f"WARNING: {size}" if size else ""
 
 

@@ -458,15 +458,17 @@ def _weighted_median(values: NDArray, weights: NDArray) -> float:
 
 
 def load_reflector(path: str | Path, unit: float = 1.0, F: float | None = None,
-                   ideal_path: str | Path | None = None) -> tuple[Reflector, Reflector, ParaboloidFit]:
+                   ideal_path: str | Path | None = None, unit_setting: str = "dish.mesh_unit_m",
+                   ) -> tuple[Reflector, Reflector, ParaboloidFit]:
     """Load any mesh trimesh reads (STL, PLY, OBJ, GLB) as the deformed reflector.
 
     Returns (ideal, deformed, fit). The mesh is shifted so the best-fit paraboloid's vertex is
     the origin; the ideal counterpart is ``ideal_path`` (same triangulation required) or the
     mesh's own vertices moved onto the paraboloid z = r^2/(4F) (F given, or fitted). Panels
-    are the mesh's connected pieces. ``unit`` scales file coordinates to metres.
+    are the mesh's connected pieces. ``unit`` scales file coordinates to metres;
+    ``unit_setting`` is how the caller's user sets it, named when the span looks wrong.
     """
-    mesh = _read_mesh(path, unit)
+    mesh = _read_mesh(path, unit, unit_setting)
     try:
         fit = _fit_dish(np.asarray(mesh.vertices, dtype=np.float64),
                         np.asarray(mesh.faces, dtype=np.int64), F)
@@ -541,7 +543,14 @@ MERGE_SHARE = 1e-7  # vertices closer than this share of the mesh's span are one
 MIN_MESH_SPAN_M = 0.1
 
 
-def _read_mesh(path: str | Path, unit: float):
+def setting_line(unit_setting: str, unit: float) -> str:
+    """How to set the mesh's unit to ``unit`` (m per file unit): a scene's key or a CLI option."""
+    if unit_setting.startswith("--"):
+        return f"give {unit_setting} {unit:g}"
+    return f"set {unit_setting} = {unit:g}"
+
+
+def _read_mesh(path: str | Path, unit: float, unit_setting: str = "dish.mesh_unit_m"):
     import trimesh
 
     path = Path(path)
@@ -578,11 +587,11 @@ def _read_mesh(path: str | Path, unit: float):
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     span = float(np.max(np.ptp(vertices[:, :2], axis=0)))
     if span > MAX_MESH_SPAN_M:
-        raise MeshError(f"{path}: spans {span:g} m across with dish.mesh_unit_m = {unit:g}: not a "
-                        f"dish in metres (is the file in mm? then set dish.mesh_unit_m = 0.001)")
+        raise MeshError(f"{path}: spans {span:g} m across with {unit_setting} = {unit:g}: not a "
+                        f"dish in metres (is the file in mm? then {setting_line(unit_setting, 0.001)})")
     if span < MIN_MESH_SPAN_M:
-        raise MeshError(f"{path}: spans only {span:g} m across with dish.mesh_unit_m = {unit:g}: "
-                        "is dish.mesh_unit_m right?")
+        raise MeshError(f"{path}: spans only {span:g} m across with {unit_setting} = {unit:g}: "
+                        f"is {unit_setting} right?")
     return mesh
 
 

@@ -242,7 +242,8 @@ def test_a_mesh_whose_name_holds_a_quote_or_a_backslash_is_checked(tmp_path):
 def test_check_warns_of_a_mesh_in_millimetres_as_simulate_does(raysim_cli, tmp_path):
     """A 0.5 m dish written in mm reads as a 500 m dish: simulate warns (no steerable dish is
     that large), check did not and ran on. Both now warn at the same size; check's fix for a
-    bare mesh is a scene with mesh_unit_m, which then reads it as 0.5 m, without a warning."""
+    bare mesh is its --mesh-unit option (it used to ask for a scene with mesh_unit_m, having no
+    option of its own), which then reads it as 0.5 m, without a warning."""
     import html
 
     import trimesh
@@ -264,11 +265,18 @@ def test_check_warns_of_a_mesh_in_millimetres_as_simulate_does(raysim_cli, tmp_p
                          "-o", str(tmp_path / "out"))
     assert checked.code == 0, checked.stderr
     line = next(x for x in checked.stdout.splitlines() if warned in x)
-    assert "millimetres" in line and "mesh_unit_m = 0.001" in line
+    assert "millimetres" in line and "give --mesh-unit 0.001" in line
     assert html.escape(warned) in (tmp_path / "out" / "check.html").read_text()  # the page too
     assert "set dish.mesh_unit_m = 0.001" in load_dish(tmp_path / "mm.toml").warning
     in_metres = load_dish(tmp_path / "m.toml")
     assert in_metres.warning == "" and abs(in_metres.D - 0.5) < 1e-3
+    given = load_dish(tmp_path / "mm.stl", mesh_unit=1e-3, sphere_radius=0.15)
+    assert given.warning == "" and abs(given.D - 0.5) < 1e-3 and given.go.dish.mesh_unit == 1e-3
+    checked = raysim_cli("check", str(tmp_path / "mm.stl"), "--mesh-unit", "0.001", "--frequency",
+                         "1e10", "--sphere", "18x36", "--grid", "32", "--refine", "0",
+                         "--refine-model", "none", "-o", str(tmp_path / "out_m"))
+    assert checked.code == 0 and "WARNING" not in checked.stdout, checked.stdout + checked.stderr
+    assert "D = 0.5 m" in (tmp_path / "out_m" / "check.html").read_text()
 
 
 @pytest.mark.slow
