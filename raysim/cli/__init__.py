@@ -80,6 +80,9 @@ def main(argv: list[str] | None = None) -> None:
     clean-up of the running command (its ``finally`` blocks) has run."""
     command = typer.main.get_command(app)
     args = sys.argv[1:] if argv is None else list(argv)
+    # what a command run before in this process (tests, the API) received and said is its own
+    _received.clear()
+    interrupt_notes.clear()
     if argv is None:  # the real command (not a test calling main in its own process)
         signal.signal(signal.SIGTERM, _on_signal)
         signal.signal(signal.SIGINT, _on_signal)

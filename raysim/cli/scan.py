@@ -98,7 +98,10 @@ def scan(
                                 simulate=simulate, resume=resume, sim_options=options,
                                 progress=progress)
     except KeyboardInterrupt:  # SIGINT or SIGTERM: the one interrupt line (raysim.cli.main)
-        note_interrupt(f"{done[0]} of {done[1]} steps are in {journal or journal_path(output)}")
+        kept = Path(journal or journal_path(output))
+        # before the first step the session removes the journal it made: say so, not "0 of 0"
+        note_interrupt(f"{done[0]} of {done[1]} steps are in {kept}" if kept.is_file() else
+                       f"no step taken, no journal kept at {kept}")
         raise
     ds = result.fieldmap
     say(f"wrote {result.output}: {ds.attrs['samples_measured']} samples, "

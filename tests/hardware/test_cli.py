@@ -122,6 +122,30 @@ def test_unreachable_instrument(tmp_path: Path, raysim_main) -> None:
     assert "power meter at" in error_line(err) and "unreachable" in err
 
 
+def test_an_interrupt_before_the_first_step_says_no_journal_was_kept(tmp_path: Path, raysim_main,
+                                                                      fine_field: Path, monkeypatch):
+    """Ctrl-C while the instruments were opened: the session removes the journal it had just
+    made, and the line said "0 of 0 steps are in s.nc.journal", naming a file that was gone."""
+    import logging
+    import signal
+
+    import hardware.session
+    from raysim import cli
+
+    def interrupted(*args, **kwargs):
+        cli._on_signal(signal.SIGINT, None)  # what Ctrl-C runs in the command's process
+
+    monkeypatch.setattr(hardware.session, "open_instruments", interrupted)
+    out = tmp_path / "s.nc"
+    try:
+        code, _, err = raysim_main("scan", str(write_plan(tmp_path)), "-o", str(out), "--simulate",
+                                   str(fine_field))
+    finally:
+        logging.disable(logging.NOTSET)  # the signal handler silences logging for the exit
+    assert code == 130 and not Path(str(out) + ".journal").exists() and not out.exists()
+    assert f"(no step taken, no journal kept at {out}.journal)" in err and "0 of 0" not in err
+
+
 @pytest.mark.parametrize(("args", "message"), [
     (["--resource", "scope=TCPIP::1.2.3.4::5::SOCKET"], "write ROLE=VISA"),
     (["--simulate", "missing.nc"], "missing.nc: no such file"),
