@@ -253,6 +253,12 @@ def workspace(tmp_path_factory):
     save(_fieldmap(), ws / "report" / "field.nc")
     (ws / "user_folder").mkdir()
     (ws / "user_folder" / "notes.txt").write_text("keep me\n")
+    # a crew's own measurement under the names a run writes: replaced, exit 0, before
+    (ws / "crew_folder").mkdir()
+    save(_fieldmap(), ws / "crew_folder" / "surface.nc")
+    (ws / "crew_check").mkdir()
+    (ws / "crew_check" / "figures").mkdir()
+    (ws / "crew_check" / "figures" / "fa.png").write_bytes(b"\x89PNG\r\n\x1a\n")
     (ws / "existing_file").write_text("not a store\n")
     from solver.run import run_invert
 
@@ -406,6 +412,7 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["report", "scene.toml", "-o", "rep_new", "--method", "magic"], "unknown method 'magic'"),
         (["report", "report/field.nc", "-o", "report"], "holds the FieldMap"),
         (["report", "f.nc", "-o", "user_folder"], "holds files that are not a raysim report"),
+        (["report", "f.nc", "-o", "crew_folder"], "holds surface.nc but no report.html"),
         (["report", "f.nc", "-o", "notes.txt"], "exists and is not a folder"),
         (["report", "f.nc", "-o", "notes.txt/rep"], "notes.txt is a file, not a folder"),
         (["report", "f.nc", "-o", "/proc/rep"], "cannot write in /proc"),  # before the work
@@ -424,6 +431,7 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
          "--mesh-unit must be metres per file unit > 0"),
         (["check", "scene.toml", "-o", "rep_new", "--mesh-unit", "0.001"], "apply to a mesh file"),
         (["check", "scene.toml", "-o", "user_folder"], "holds files that are not a raysim check"),
+        (["check", "scene.toml", "-o", "crew_check"], "holds figures but no check.html"),
         (["check", "scene.toml", "-o", "notes.txt"], "exists and is not a folder"),
         (["check", "scene.toml", "-o", "/proc/chk"], "cannot write in /proc"),
         # issue 31: the fast radiator's options
@@ -517,6 +525,8 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
     ],
     "campaign": [
         (["campaign", "missing.toml", "plan_noisy.toml", "-o", "c"], "no such scene file"),
+        (["campaign", "scene.toml", "plan_noisy.toml", "-o", "crew_folder"],
+         "holds surface.nc but no campaign.txt, so it is not a raysim campaign's folder"),
         (["campaign", "scene.toml", "missing.toml", "-o", "c"], "no such scan plan file"),
         (["campaign", "scene.toml", "plan.toml", "-o", "c"], "noise_db must be above 0"),
         (["campaign", "scene.toml", "plan_other_dish.toml", "-o", "c"], "is not the scene's dish"),

@@ -107,7 +107,7 @@ def run_campaign(scene_path: str | os.PathLike[str], plan_path: str | os.PathLik
     # the files the scene names (a map an earlier campaign measured) are inputs too: a
     # folder holding one would be replaced with the input inside it
     folder = output_folder(out_dir, [("scene", scene_path), *scene.inputs(), *plan.inputs()], FILES,
-                           "a raysim campaign")
+                           "a raysim campaign", "campaign.txt")
     noise = plan.simulator.noise_db
     if not noise > 0:
         raise SolverError("the plan's [simulator] noise_db must be above 0 for a campaign")

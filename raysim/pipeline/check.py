@@ -281,7 +281,7 @@ def write_check(source: str | os.PathLike[str], out_dir: str | os.PathLike[str],
     from raysim.pipeline.check_page import write_page
     from raysim.pipeline.report import output_folder, staging
 
-    target = output_folder(out_dir, source_inputs(source), CHECK_FILES, "a raysim check")
+    target = output_folder(out_dir, source_inputs(source), CHECK_FILES, "a raysim check", "check.html")
     ds = check(source, **options)
     with staging(target) as out:
         save(ds, out / "check.nc")

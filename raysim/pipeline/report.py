@@ -131,12 +131,14 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
 
 def _target(out_dir: str | os.PathLike[str], inputs) -> Path:
     """The report folder, checked (:func:`output_folder`)."""
-    return output_folder(out_dir, inputs, REPORT_FILES, "a raysim report")
+    return output_folder(out_dir, inputs, REPORT_FILES, "a raysim report", "report.html")
 
 
-def output_folder(out_dir: str | os.PathLike[str], inputs, files: tuple[str, ...], what: str) -> Path:
-    """An output folder, checked: not a file, not holding an input, holding nothing but the
-    ``files`` of an earlier run (``what`` names that run in the message)."""
+def output_folder(out_dir: str | os.PathLike[str], inputs, files: tuple[str, ...], what: str,
+                  mark: str) -> Path:
+    """An output folder, checked: not a file, not holding an input, and either empty or an
+    earlier run's: holding nothing but the ``files`` of one, among them ``mark``, the file every
+    run writes (``what`` names that run in the messages)."""
     from raysim.files import check_output_folder
 
     target = Path(out_dir).expanduser()
@@ -144,10 +146,16 @@ def output_folder(out_dir: str | os.PathLike[str], inputs, files: tuple[str, ...
         raise RenderError(f"{target}: exists and is not a folder")
     check_output_folder(target, inputs, RenderError)
     if target.is_dir():
-        other = sorted(p.name for p in target.iterdir() if p.name not in files)
+        held = sorted(p.name for p in target.iterdir())
+        other = [name for name in held if name not in files]
         if other:
             raise RenderError(f"{target}: holds files that are not {what} ({other[0]}, ...); "
                               "give a new or empty folder")
+        # names alone do not make an earlier run: a crew's own scan.nc or surface.nc in the
+        # folder was replaced by the run's, exit 0
+        if held and mark not in held:
+            raise RenderError(f"{target}: holds {held[0]} but no {mark}, so it is not {what}'s "
+                              "folder, and the run would replace it; give a new or empty folder")
     _check_writable(target)
     return target
 
