@@ -256,7 +256,8 @@ def _refine(inverse: LinearInverse, linear: LinearSolution, data: MeasuredFA,
     scan = inverse.scan
     return refine(linear.delta, data.fa, scan.sphere, scan.F, scan.D, inverse.grid, data.n_rows,
                   setup.correct, opts.refine_iterations, setup.forward, opts.device,
-                  weight=inverse.weight, fit_gain=setup.fit_gain, progress=setup.progress)
+                  weight=inverse.weight, fit_gain=setup.fit_gain, progress=setup.progress,
+                  noise_variance=data.noise_variance)
 
 
 def _central_mode(inverse: LinearInverse, delta: NDArray[np.float64], data: MeasuredFA,

@@ -107,7 +107,8 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
            F: float, D: float, grid: ApertureGrid, n_rows: int, correct: Correct,
            iterations: int, forward: ForwardModel | Forward | None = None, device: str | None = "cpu",
            memory: int = 3, weight: NDArray[np.float64] | None = None, fit_gain: bool = False,
-           progress: Progress | None = None) -> tuple[NDArray[np.float64], RefineHistory]:
+           progress: Progress | None = None,
+           noise_variance: float = 0.0) -> tuple[NDArray[np.float64], RefineHistory]:
     """Refine ``delta`` (m, (N, N)) by defect correction against the measured FA on the sphere.
 
     Every map the loop returns has had its misfit measured: each update is evaluated with the
@@ -140,6 +141,9 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
     fit_gain : estimate the scan's scale with the surface (see the module docstring).
     progress : ``progress(stage, fraction)`` over the whole refinement (fraction 0..1); the
         model reports within each of its calls.
+    noise_variance : the relative variance v of the scan's noise (its FA's, per cell); the
+        misfit's noise floor sqrt(v mean(weight^2)) is what no update can remove, so a shortened
+        step is asked to remove its share of the misfit above that floor only.
     """
     start = time.perf_counter()
     model = as_model(forward) if forward is not None else go_forward(device)
@@ -176,6 +180,7 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
         return float(np.sqrt(np.nanmean(misfit[:n_rows] ** 2)))
 
     mask = grid.mask
+    floor = _noise_floor(noise_variance, fa_measured, w, n_rows)
     delta = np.array(delta, dtype=np.float64, copy=True)
     gamma = 1.0
     misfit = misfit_of(delta, gamma, "starting map")
@@ -215,7 +220,7 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
             trial_misfit = misfit_of(trial, trial_gamma, label if not halvings else
                                      f"{label}, step / {2**halvings}")
             trial_rms = rms(trial_misfit)
-            verdict = _compare(history.misfit_rms[-1], trial_rms, length)
+            verdict = _compare(history.misfit_rms[-1], trial_rms, length, floor)
             if verdict != "misfit rose":
                 break
         else:  # no step along this direction lowered the misfit enough: the map before it stays
@@ -230,7 +235,7 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
             # within the tolerance, but no better: the map before it stays
             history.stopped = f"misfit stalled at update {k + 1} of {iterations}: the map before it kept"
             break
-        efficiency = (1.0 - trial_rms / history.misfit_rms[-1]) / length
+        efficiency = _removed_share(history.misfit_rms[-1], trial_rms, floor) / length
         history.update_rms.append(float(np.sqrt(np.mean((trial - delta)[mask] ** 2))))
         history.backtracks.append(halvings)
         delta, gamma, misfit = trial, trial_gamma, trial_misfit
@@ -262,14 +267,34 @@ MAX_BACKTRACKS = 3
 SUFFICIENT_DECREASE = 0.5
 
 
-def _compare(before: float, now: float, length: float = 1.0) -> str:
+def _noise_floor(noise_variance: float, fa: NDArray[np.float64], weight: NDArray[np.float64] | float,
+                 n_rows: int) -> float:
+    """RMS of the misfit's noise over the compared cells: sqrt(v mean(weight^2))."""
+    w = np.broadcast_to(weight, fa.shape)[:n_rows]
+    cells = np.isfinite(fa[:n_rows]) & np.isfinite(w)
+    if not cells.any() or not noise_variance > 0:
+        return 0.0
+    return float(np.sqrt(noise_variance * np.mean(w[cells] ** 2)))
+
+
+def _removed_share(before: float, now: float, floor: float = 0.0) -> float:
+    """The share of the misfit above the noise ``floor`` that a step took ``before`` -> ``now``
+    away (RMS values); a misfit at or under the floor has nothing to remove: 0."""
+    excess = before - floor
+    return (before - now) / excess if excess > 0 else 0.0
+
+
+def _compare(before: float, now: float, length: float = 1.0, floor: float = 0.0) -> str:
     """How the misfit ``now`` of a trial map, a step of ``length`` (1: the full update) from
     the map of misfit ``before``, compares with it: "misfit rose" (or, for a shortened step, fell
-    by less than :data:`SUFFICIENT_DECREASE` of its share ``length`` of the misfit), "misfit
-    stalled" (within the tolerance) or "" (it fell)."""
+    by less than :data:`SUFFICIENT_DECREASE` of its share ``length`` of the misfit above the
+    noise ``floor``, which no step removes), "misfit stalled" (within the tolerance) or "" (it
+    fell). (Against the whole misfit, 0.0005 dB of noise near the dish, R = 0.95 F, made the
+    halved steps, which removed 6 % of a misfit mostly noise, fail the test: the linear map was
+    returned, 69 to 116 um off where noise-free data gave 3 um.)"""
     if now > before * (1.0 + MISFIT_TOLERANCE):
         return "misfit rose"
-    if length < 1.0 and now > before * (1.0 - SUFFICIENT_DECREASE * length):
+    if length < 1.0 and before > floor and now > before - SUFFICIENT_DECREASE * length * (before - floor):
         return "misfit rose"
     if now > before * (1.0 - MISFIT_TOLERANCE):
         return "misfit stalled"
