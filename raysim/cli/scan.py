@@ -74,7 +74,7 @@ def scan(
     if from_journal:
         ds = fieldmap_file_from_journal(plan, output, rig=rig, journal=journal)
         say(f"wrote {output} from the journal: {ds.attrs['samples_measured']} of "
-            f"{ds.attrs['samples_expected']} samples")
+            f"{ds.attrs['samples_expected']} samples{_drift_note(ds.attrs)}")
         return
     options = {"seed": seed, "noise_db": noise_db, "drift_db": drift_db,
                "centre_offset": _vector3(centre_offset, "--centre-offset"), "time_scale": time_scale}
@@ -105,7 +105,15 @@ def scan(
         raise
     ds = result.fieldmap
     say(f"wrote {result.output}: {ds.attrs['samples_measured']} samples, "
-        f"{result.steps_taken} of {result.steps_total} steps taken now (journal {result.journal})")
+        f"{result.steps_taken} of {result.steps_total} steps taken now (journal {result.journal})"
+        f"{_drift_note(ds.attrs)}")
+
+
+def _drift_note(attrs: dict) -> str:
+    """What the summary line adds when the drift correction was not the one asked for
+    (``drift_note``, :mod:`hardware.drift`): '' when it was."""
+    note = str(attrs.get("drift_note", ""))
+    return f"; drift: {note}" if note else ""
 
 
 @rig_app.command("park")

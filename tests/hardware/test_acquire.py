@@ -98,7 +98,10 @@ def test_auto_drift_correction_follows_the_references(tmp_path: Path) -> None:
     drifting = load_plan(write_plan(tmp_path / "b", noise=0.01, drift=0.3, reference_samples=16,
                                     drift_correction="auto"))
     ds = scan(drifting, tmp_path / "b.nc", simulate=field).fieldmap
-    assert ds.attrs["drift_correction_applied"] == "smooth"
+    # leave-one-out picks a smoothing; its lines miss these few references by more than their
+    # noise, so they are followed as read (hardware.drift.widest_consistent), and it says so
+    assert ds.attrs["drift_correction_applied"] == "linear"
+    assert "followed the references (linear)" in ds.attrs["drift_note"]
     assert ds.attrs["drift_chi2"] > 100 * ds.attrs["drift_chi2_limit"]
 
 
