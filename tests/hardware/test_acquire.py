@@ -217,6 +217,25 @@ def test_a_map_that_does_not_hold_the_plan_is_not_scanned(tmp_path: Path) -> Non
     assert scan(plan, tmp_path / "o.nc", simulate=aligned_field(tmp_path)).steps_taken == len(plan.steps())
 
 
+def test_a_map_on_another_sphere_or_a_hair_off_in_frequency_is_refused_saying_so(tmp_path: Path) -> None:
+    """QA: a map made at R = 3 m scanned by a 5 m track gave a FieldMap labelled R = 5 holding
+    R = 3 intensities (the inverted map 52 um RMS off a 36 um map), exit 0; and a plan at
+    3.0000001 GHz against a 3 GHz map was refused as 'at 3 GHz, the plan reads at 3 GHz'.
+    The radius is refused like the frequency, and both lines show the numbers that differ; a
+    radius or frequency off by float round-off still scans."""
+    plan = load_plan(write_plan(tmp_path))
+    grid = SphereGrid(R, 3, 6, 0.0, math.radians(60.0))
+    wider = write_field(tmp_path / "wide.nc", dataclasses.replace(grid, radius=0.6 * R))
+    with pytest.raises(PlanError, match=f"radius {0.6 * R:g} m, the rig's track has R = {R:g} m"):
+        scan(plan, tmp_path / "o.nc", simulate=wider)
+    assert not (tmp_path / "o.nc.journal").exists() and not (tmp_path / "o.nc").exists()
+    hair = dataclasses.replace(plan, frequency_hz=plan.frequency_hz * (1.0 + 1e-7 / 3.0))
+    with pytest.raises(PlanError, match=r"is at 0\.3 GHz, the plan reads at 0\.30000001 GHz"):
+        scan(hair, tmp_path / "o.nc", simulate=aligned_field(tmp_path))
+    close = write_field(tmp_path / "close.nc", dataclasses.replace(grid, radius=R * (1.0 + 1e-13)))
+    assert scan(plan, tmp_path / "o.nc", simulate=close).steps_taken == len(plan.steps())
+
+
 def test_simulated_field_must_match_the_plan(tmp_path: Path) -> None:
     plan = load_plan(write_plan(tmp_path))
     other = dataclasses.replace(plan, focal_length=40.0)
