@@ -86,7 +86,7 @@ def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
     sim : simulator settings (default: the plan's ``[simulator]`` table).
     faults : faults the simulated instruments inject (tests).
     resume : continue the journal after its last complete step; without it an existing
-        journal with records is an error.
+        journal with records is an error, with it a missing one (or one holding no step).
     progress : ``progress(stage, fraction)`` after each step (:func:`hardware.acquire.step_progress`).
     rm : PyVISA resource manager (default: pyvisa-py).
     """
@@ -97,18 +97,21 @@ def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
     check_output(jpath, [("FieldMap the simulated rig scans", simulate)], PlanError)
     if resources and simulate is not None:
         raise PlanError("give either --resource or --simulate, not both")
+    if resume and not journal_records(jpath):
+        # starting afresh instead re-scanned everything (hours on a real rig) and left the
+        # real journal, wherever it was, orphaned
+        raise JournalError(f"no journal to resume at {jpath}; run without --resume to start the scan")
     settings = sim if sim is not None else plan.simulator
     steps = plan.steps()
     with _instrument_addresses(plan, resources, simulate, settings, faults) as (addr, sim_rig,
                                                                                  extra):
         decides = {k: v for k, v in extra.items() if k != "sim_field"}
         fingerprint = plan.fingerprint(decides)
-        held = journal_records(jpath)
-        if resume and held:
+        if resume:
             jr = Journal.resume(jpath, fingerprint, len(steps),
                                 also=(plan.fingerprint(decides, legacy=True),),
                                 plans=(plan.fingerprint(), plan.fingerprint(legacy=True)))
-        else:  # no journal, or one holding no step: nothing to resume, start afresh
+        else:  # not resuming: a journal holding no step is replaced, one with steps refused
             jr = Journal.create(jpath, fingerprint, len(steps), plan=plan.fingerprint())
         with jr:
             start = len(jr.records)

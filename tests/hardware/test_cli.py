@@ -144,6 +144,30 @@ def test_an_interrupt_before_the_first_step_says_no_journal_was_kept(tmp_path: P
         logging.disable(logging.NOTSET)  # the signal handler silences logging for the exit
     assert code == 130 and not Path(str(out) + ".journal").exists() and not out.exists()
     assert f"(no step taken, no journal kept at {out}.journal)" in err and "0 of 0" not in err
+    # nothing is there to resume (a --resume would be refused): the line must not offer one
+    assert "resume" not in error_line(err).replace("interrupted:", "")
+
+
+def test_resume_without_a_journal_is_refused(tmp_path: Path, raysim_main, fine_field: Path) -> None:
+    """QA: --resume with no journal at the path it resumes re-scanned everything from the
+    first step (hours on a real rig), leaving the real journal (given with --journal the
+    first time) orphaned. It is refused in one line before any instrument is opened; the
+    real journal resumes, and a journal holding only its header is nothing to resume either."""
+    plan = write_plan(tmp_path)
+    out, real = tmp_path / "s.nc", tmp_path / "elsewhere.journal"
+    args = ("scan", str(plan), "-o", str(out), "--simulate", str(fine_field))
+    assert raysim_main(*args, "--journal", str(real)).code == 0
+    out.unlink()
+    before = real.read_bytes()
+    code, _, err = raysim_main(*args, "--resume")
+    assert code == 2 and not out.exists() and not Path(f"{out}.journal").exists()
+    assert error_line(err) == (f"error: no journal to resume at {out}.journal; run without --resume "
+                               "to start the scan")
+    assert real.read_bytes() == before
+    header = before.splitlines(keepends=True)[0]
+    Path(f"{out}.journal").write_bytes(header)
+    assert raysim_main(*args, "--resume").code == 2
+    assert raysim_main(*args, "--journal", str(real), "--resume").code == 0 and out.exists()
 
 
 @pytest.mark.parametrize(("args", "message"), [
