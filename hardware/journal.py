@@ -19,6 +19,8 @@ import json
 import math
 import os
 import zlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -232,6 +234,28 @@ def _locked(path: Path, flags: int) -> int:
         raise JournalError(f"{path}: another scan is writing this journal; wait for it to end, "
                            "or give another output") from None
     return fd
+
+
+@contextmanager
+def not_being_written(path: str | Path) -> Iterator[None]:
+    """Hold the journal at ``path`` still while it is read (a shared ``flock``: a scan cannot
+    start appending meanwhile); refuse one that a scan is writing (it holds the exclusive
+    lock): what is read would be a moment of a scan still going, and what is written from it
+    that scan's output. A missing or unreadable file is left to its reader to report."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise JournalError(f"{path}: a scan is writing this journal; wait for it to end "
+                               "(its FieldMap is written when it does)") from None
+        yield
+    finally:
+        os.close(fd)
 
 
 def _sync_dir(folder: Path) -> None:

@@ -27,7 +27,7 @@ from hardware.errors import JournalError, PlanError
 from hardware.instruments.motion import MotionController
 from hardware.instruments.power_meter import PowerMeter
 from hardware.interp import SphereField
-from hardware.journal import Journal, Record, read_journal
+from hardware.journal import Journal, Record, not_being_written, read_journal
 from hardware.plan import REFERENCE, ScanPlan, w_to_dbm
 from hardware.rig import Rig
 from hardware.sim.rig import Faults, SimulatedRig
@@ -166,13 +166,17 @@ def fieldmap_file_from_journal(plan: str | os.PathLike[str], output: str | os.Pa
                                rig: str | os.PathLike[str] | None = None,
                                journal: str | os.PathLike[str] | None = None) -> xr.Dataset:
     """``raysim scan --from-journal``: write the FieldMap of the journal as it stands (cells not
-    yet measured are NaN), without a rig."""
+    yet measured are NaN), without a rig; refused while a scan writes the journal."""
     from hardware.plan import load_plan
 
     scan_plan = load_plan(plan, rig=rig)
     _check_outputs(scan_plan, output, journal)
-    ds = fieldmap_from_journal(scan_plan, journal or journal_path(output))
-    fieldmaps.save(ds, output)
+    path = journal or journal_path(output)
+    # a scan writing the journal would have its partial map written over its own output (or
+    # over the finished file): refused while it holds the journal's lock
+    with not_being_written(path):
+        ds = fieldmap_from_journal(scan_plan, path)
+        fieldmaps.save(ds, output)
     return ds
 
 

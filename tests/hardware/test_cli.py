@@ -258,3 +258,24 @@ def test_from_journal_refuses_readings_no_meter_gives(tmp_path: Path, raysim_mai
     said = error_line(err)
     assert f"{journal}: line {line} (step {line - 2})" in said and message in said
     assert not out.exists()
+
+
+def test_from_journal_is_refused_while_a_scan_writes_the_journal(tmp_path: Path, raysim_main,
+                                                                 fine_field: Path) -> None:
+    """QA: --from-journal run while a scan wrote d.nc's journal ignored the journal's lock and
+    wrote the live scan's output: a partial FieldMap over the finished file. It is refused in
+    one line while the lock is held, the file left as it was, and works once the scan ends."""
+    from hardware.journal import Journal
+
+    plan = write_plan(tmp_path)
+    out = tmp_path / "d.nc"
+    assert raysim_main("scan", str(plan), "-o", str(out), "--simulate", str(fine_field)).code == 0
+    before = out.read_bytes()
+    journal = Path(f"{out}.journal")
+    header = read_journal(journal)[0]
+    with Journal.resume(journal, header["fingerprint"], header["steps"]):  # a scan at work
+        code, _, err = raysim_main("scan", str(plan), "-o", str(out), "--from-journal")
+        assert code == 2 and out.read_bytes() == before
+        assert error_line(err) == f"error: {journal}: a scan is writing this journal; wait for it to end " \
+            "(its FieldMap is written when it does)"
+    assert raysim_main("scan", str(plan), "-o", str(out), "--from-journal").code == 0
