@@ -10,6 +10,14 @@ kill during the write) is ignored and cut off before the journal is appended to 
 record followed by good ones is corruption and an error. Records must carry the indices 0, 1,
 2, ... in order, so a resumed scan continues after the last complete one with no duplicate,
 no gap and no reordering.
+
+Between records, a session line ``{"session": {...}}`` (with its CRC) says what the FieldMap
+must say of the instruments that took the steps after it: whether the rig was simulated (and
+the simulator's settings), the meter's identity, the controller's version. Each session that
+opens the instruments writes one before its first step, so a journal alone (``--from-journal``,
+a resume with no step left) gives the FieldMap the attributes of the scan that made it: a
+rehearsal never reads as a real measurement. Version 2 has them; version 1 journals (none)
+are still read and resumed.
 """
 
 from __future__ import annotations
@@ -29,7 +37,9 @@ from typing import Any
 from hardware.errors import JournalError
 
 FORMAT = "raysim-scan-journal"
-VERSION = 1
+VERSION = 2
+#: versions read: 1 had no session lines
+READ_VERSIONS = (1, 2)
 
 
 @dataclass(frozen=True)
@@ -74,6 +84,13 @@ def _parse(line: bytes) -> dict[str, Any] | None:
 
 def read_journal(path: str | Path) -> tuple[dict[str, Any], list[Record], int]:
     """Read a journal: (header, complete records, byte length of the intact part)."""
+    header, records, good, _ = read_journal_sessions(path)
+    return header, records, good
+
+
+def read_journal_sessions(path: str | Path) -> tuple[dict[str, Any], list[Record], int,
+                                                      dict[str, Any]]:
+    """:func:`read_journal` and the last session line's attributes ({} when there is none)."""
     path = Path(path)
     try:
         data = path.read_bytes()
@@ -82,9 +99,11 @@ def read_journal(path: str | Path) -> tuple[dict[str, Any], list[Record], int]:
     lines = data.splitlines(keepends=True)
     if not lines or (header := _parse(lines[0])) is None or header.get("format") != FORMAT:
         raise JournalError(f"{path}: not a raysim scan journal (bad or missing header)")
-    if header.get("version") != VERSION:
-        raise JournalError(f"{path}: journal version {header.get('version')} is not {VERSION}")
+    if header.get("version") not in READ_VERSIONS:
+        raise JournalError(f"{path}: journal version {header.get('version')} is not one of "
+                           f"{', '.join(map(str, READ_VERSIONS))}")
     records: list[Record] = []
+    session: dict[str, Any] = {}
     good = len(lines[0])
     for number, line in enumerate(lines[1:], start=2):
         body = _parse(line)
@@ -92,6 +111,10 @@ def read_journal(path: str | Path) -> tuple[dict[str, Any], list[Record], int]:
             if number == len(lines):
                 break  # a torn last line: the step it described was not completed
             raise JournalError(f"{path}: line {number} is damaged and complete records follow it")
+        if set(body) == {"session"} and isinstance(body["session"], dict):
+            session = body["session"]
+            good += len(line)
+            continue
         try:
             record = Record(n=body["n"], kind=body["kind"], i=body["i"], j=body["j"],
                             command=tuple(body["command"]), readback=tuple(body["readback"]),
@@ -106,7 +129,7 @@ def read_journal(path: str | Path) -> tuple[dict[str, Any], list[Record], int]:
                                f"{len(records)} (records out of order or duplicated)")
         records.append(record)
         good += len(line)
-    return header, records, good
+    return header, records, good, session
 
 
 def _real(value: Any) -> bool:
@@ -203,6 +226,12 @@ class Journal:
                                f"{len(self.records)} records")
         self._write(record.line())
         self.records.append(record)
+
+    def note_session(self, attrs: dict[str, Any]) -> None:
+        """Write a session line: what the FieldMap says of the instruments that take the
+        steps from here (flat attributes: strings and finite numbers), synced to disk."""
+        values = {k: v for k, v in attrs.items() if isinstance(v, str) or _real(v)}
+        self._write(_with_crc({"session": values}))
 
     def _write(self, blob: bytes) -> None:
         written = os.write(self._fd, blob)

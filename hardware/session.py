@@ -27,7 +27,7 @@ from hardware.errors import JournalError, PlanError
 from hardware.instruments.motion import MotionController
 from hardware.instruments.power_meter import PowerMeter
 from hardware.interp import SphereField
-from hardware.journal import Journal, Record, not_being_written, read_journal
+from hardware.journal import Journal, Record, not_being_written, read_journal, read_journal_sessions
 from hardware.plan import REFERENCE, ScanPlan, w_to_dbm
 from hardware.rig import Rig
 from hardware.sim.rig import Faults, SimulatedRig
@@ -122,6 +122,10 @@ def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
                     try:
                         attrs["meter_idn"] = inst.meter.idn
                         attrs["motion_version"] = inst.motion.version
+                        # the journal alone must tell a rehearsal and the instruments
+                        # (--from-journal, a resume with no step left): hardware.journal
+                        jr.note_session({k: v for k, v in attrs.items()
+                                         if k != "journal_fingerprint"})
                         acquire(plan, inst, jr, progress=progress,
                                 before_step=sim_rig.set_sample if sim_rig else None)
                     finally:
@@ -200,14 +204,17 @@ def journal_records(path: str | os.PathLike[str]) -> int:
 
 def fieldmap_from_journal(plan: ScanPlan, path: str | os.PathLike[str],
                           attrs: Mapping[str, object] | None = None) -> xr.Dataset:
-    """The FieldMap of ``plan`` from a journal file alone (cells not yet measured are NaN)."""
-    header, records, _ = read_journal(path)
+    """The FieldMap of ``plan`` from a journal file alone (cells not yet measured are NaN), with
+    the attributes its last session line records (the simulator's, the instruments'
+    identities) under ``attrs``."""
+    header, records, _, session = read_journal_sessions(path)
     if header.get("steps") != len(plan.steps()):
         raise JournalError(f"{path}: the journal has {header.get('steps')} steps, "
                            f"the plan {len(plan.steps())}")
     check_journal_plan(plan, header, records, path)
+    # the last session's instruments (hardware.journal), under what the caller knows now
     return build_fieldmap(plan, records, {"journal_fingerprint": header.get("fingerprint", ""),
-                                          **(attrs or {})})
+                                          **session, **(attrs or {})})
 
 
 def check_journal_plan(plan: ScanPlan, header: Mapping[str, Any], records: Sequence[Record],

@@ -368,3 +368,42 @@ def test_a_true_centre_offset_beyond_the_track_and_a_journal_longer_than_the_pla
         handle.write(dataclasses.replace(last, n=last.n + 1).line())
     with pytest.raises(JournalError, match=f"holds step {last.n + 1}, the plan has {last.n + 1} steps"):
         fieldmap_from_journal(plan, journal)
+
+
+def test_a_journal_alone_gives_the_fieldmap_the_scans_attributes(tmp_path: Path) -> None:
+    """QA: a FieldMap rebuilt by --from-journal from a simulated rig's journal lost
+    `simulated` and every `sim_*` attribute (a rehearsal read as a measurement), and a resume
+    with no step left dropped `meter_idn` and `motion_version`. The journal records them, so
+    both give the original's attributes; a journal from before (no session line) still
+    resumes and assembles."""
+    from hardware.journal import _with_crc
+    from hardware.session import fieldmap_file_from_journal
+
+    plan_path = write_plan(tmp_path)
+    plan = load_plan(plan_path)
+    field = aligned_field(tmp_path)
+    out = tmp_path / "s.nc"
+    original = scan(plan, out, simulate=field).fieldmap.attrs
+    assert original["simulated"] == 1 and "sim_seed" in original and original["meter_idn"]
+    journal = tmp_path / "s.nc.journal"
+    rebuilt = fieldmap_file_from_journal(plan_path, tmp_path / "r.nc", journal=journal).attrs
+    again = scan(plan, out, simulate=field, resume=True)
+    assert again.steps_taken == 0
+    stamps = {"created", "date_created", "history"}  # when written, not what was measured
+
+    def same(attrs: dict) -> dict:
+        return {k: v for k, v in attrs.items() if k not in stamps}
+
+    for attrs in (rebuilt, again.fieldmap.attrs):
+        assert set(same(attrs)) == set(same(original))
+        for key, value in same(original).items():
+            assert np.array_equal(attrs[key], value, equal_nan=isinstance(value, float)), key
+    # a journal an earlier raysim wrote: no session line; it resumes and assembles as before
+    lines = journal.read_bytes().splitlines(keepends=True)
+    old = [line for line in lines if not line.startswith(b'{"session"')]
+    assert len(old) == len(lines) - 1
+    header = {**read_journal(journal)[0], "version": 1}
+    journal.write_bytes(_with_crc(header) + b"".join(old[1:]))
+    assert read_journal(journal)[0]["version"] == 1
+    assert "simulated" not in fieldmap_file_from_journal(plan_path, tmp_path / "o.nc", journal=journal).attrs
+    assert scan(plan, out, simulate=field, resume=True).fieldmap.attrs["simulated"] == 1
