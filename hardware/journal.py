@@ -32,7 +32,7 @@ from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from hardware.errors import JournalError
 
@@ -84,13 +84,24 @@ def _parse(line: bytes) -> dict[str, Any] | None:
 
 def read_journal(path: str | Path) -> tuple[dict[str, Any], list[Record], int]:
     """Read a journal: (header, complete records, byte length of the intact part)."""
-    header, records, good, _ = read_journal_sessions(path)
-    return header, records, good
+    contents = read_journal_sessions(path)
+    return contents.header, contents.records, contents.good
 
 
-def read_journal_sessions(path: str | Path) -> tuple[dict[str, Any], list[Record], int,
-                                                      dict[str, Any]]:
-    """:func:`read_journal` and the last session line's attributes ({} when there is none)."""
+class Contents(NamedTuple):
+    """A journal as read: its header, complete records, the byte length of the intact part,
+    the last session line's attributes ({} when none) and the line (1: the header) of each
+    record, which session lines move from its step + 2."""
+
+    header: dict[str, Any]
+    records: list[Record]
+    good: int
+    session: dict[str, Any]
+    lines: list[int]
+
+
+def read_journal_sessions(path: str | Path) -> Contents:
+    """:func:`read_journal` with the session lines' attributes and each record's line."""
     path = Path(path)
     try:
         data = path.read_bytes()
@@ -103,6 +114,7 @@ def read_journal_sessions(path: str | Path) -> tuple[dict[str, Any], list[Record
         raise JournalError(f"{path}: journal version {header.get('version')} is not one of "
                            f"{', '.join(map(str, READ_VERSIONS))}")
     records: list[Record] = []
+    numbers: list[int] = []
     session: dict[str, Any] = {}
     good = len(lines[0])
     for number, line in enumerate(lines[1:], start=2):
@@ -128,8 +140,9 @@ def read_journal_sessions(path: str | Path) -> tuple[dict[str, Any], list[Record
             raise JournalError(f"{path}: line {number} holds step {record.n}, expected "
                                f"{len(records)} (records out of order or duplicated)")
         records.append(record)
+        numbers.append(number)
         good += len(line)
-    return header, records, good, session
+    return Contents(header, records, good, session, numbers)
 
 
 def _real(value: Any) -> bool:

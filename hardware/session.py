@@ -207,22 +207,23 @@ def fieldmap_from_journal(plan: ScanPlan, path: str | os.PathLike[str],
     """The FieldMap of ``plan`` from a journal file alone (cells not yet measured are NaN), with
     the attributes its last session line records (the simulator's, the instruments'
     identities) under ``attrs``."""
-    header, records, _, session = read_journal_sessions(path)
+    header, records, _, session, lines = read_journal_sessions(path)
     if header.get("steps") != len(plan.steps()):
         raise JournalError(f"{path}: the journal has {header.get('steps')} steps, "
                            f"the plan {len(plan.steps())}")
-    check_journal_plan(plan, header, records, path)
+    check_journal_plan(plan, header, records, path, lines)
     # the last session's instruments (hardware.journal), under what the caller knows now
     return build_fieldmap(plan, records, {"journal_fingerprint": header.get("fingerprint", ""),
                                           **session, **(attrs or {})})
 
 
 def check_journal_plan(plan: ScanPlan, header: Mapping[str, Any], records: Sequence[Record],
-                       path: str | os.PathLike[str]) -> None:
+                       path: str | os.PathLike[str], lines: Sequence[int] = ()) -> None:
     """Refuse a journal that is not ``plan``'s: its header's plan fingerprint (journals written
     since it was recorded), and for every record the step's kind, cell and commanded axes (rad,
     to 1e-9), which the plan decides; so the readings of another grid, dish or frequency are
-    never written into this plan's cells."""
+    never written into this plan's cells. ``lines``: each record's line in the file (default
+    its step + 2, as in a journal without session lines)."""
     recorded = header.get("plan")
     if recorded and recorded not in (plan.fingerprint(), plan.fingerprint(legacy=True)):
         raise JournalError(f"{path}: the journal belongs to another plan (its plan fingerprint "
@@ -242,7 +243,8 @@ def check_journal_plan(plan: ScanPlan, header: Mapping[str, Any], records: Seque
         # hand-edited journal, whose mean and spread would be of other readings
         count = plan.reference_samples if step.kind == REFERENCE else plan.samples_per_point
         if len(record.power) != count:
-            raise JournalError(f"{path}: line {record.n + 2} (step {record.n}) holds "
+            line = lines[record.n] if lines else record.n + 2
+            raise JournalError(f"{path}: line {line} (step {record.n}) holds "
                                f"{len(record.power)} power readings, the plan takes {count}")
 
 

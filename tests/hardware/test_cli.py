@@ -251,12 +251,14 @@ def test_from_journal_refuses_readings_no_meter_gives(tmp_path: Path, raysim_mai
     field = write_field(tmp_path / "field.nc", SphereGrid(R, 3, 6, 0.0, math.radians(60.0), 0.0, 2 * math.pi))
     scan(load_plan(plan), tmp_path / "scan.nc", simulate=field)
     journal = tmp_path / "scan.nc.journal"
+    # the step's line in the file: the session line (hardware.journal) comes before step 0
+    step, line = line - 2, line + 1
     _edit_journal(journal, line, power)
     out = tmp_path / "again.nc"
     code, _, err = raysim_main("scan", str(plan), "-o", str(out), "--journal", str(journal), "--from-journal")
     assert code == 2
     said = error_line(err)
-    assert f"{journal}: line {line} (step {line - 2})" in said and message in said
+    assert f"{journal}: line {line} (step {step})" in said and message in said
     assert not out.exists()
 
 
