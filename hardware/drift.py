@@ -88,9 +88,13 @@ def drift(references: Sequence[Record], mode: str, window: int,
     fit, note = math.nan, ""
     if applied == "smooth" and min(window, index.size) >= 3:
         asked = min(window, index.size)
-        window, fit = widest_consistent(index, power, sem, asked)
+        # the noise pooled over the references: one reference's own spread, from a couple of
+        # readings, can be tiny by chance (2 readings at 0.01 dB made quiet references miss a
+        # line by "450x their noise"), and the check would then follow noise, not drift
+        pooled = math.sqrt(float(np.mean((sem / power) ** 2))) * power
+        window, fit = widest_consistent(index, power, pooled, asked)
         if window < asked:
-            far = fit_chi2(index, power, sem, asked)
+            far = fit_chi2(index, power, pooled, asked)
             note = (f"line fits over {asked} references miss them by {math.sqrt(far):.3g}x their "
                     "noise (rms); " + ("followed the references (linear) instead" if window == 1
                                        else f"smoothed over {window} instead"))
