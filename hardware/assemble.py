@@ -120,6 +120,10 @@ def build_fieldmap(plan: ScanPlan, records: Sequence[Record],
         "drift_window_applied": gain.window,
         "drift_chi2": gain.chi2,
         "drift_chi2_limit": chi2_limit(gain.index.size),
+        # the smoothing's own check (hardware.drift): why it narrowed the window or followed
+        # the references, so that a rehearsal's analyst sees it ("" when it did as asked)
+        "drift_fit_chi2": gain.fit_chi2,
+        "drift_note": gain.note,
         "drift_window": plan.drift_window,
         "reference_theta": plan.reference[0],
         "reference_phi": plan.reference[1],

@@ -10,6 +10,14 @@ kill during the write) is ignored and cut off before the journal is appended to 
 record followed by good ones is corruption and an error. Records must carry the indices 0, 1,
 2, ... in order, so a resumed scan continues after the last complete one with no duplicate,
 no gap and no reordering.
+
+Between records, a session line ``{"session": {...}}`` (with its CRC) says what the FieldMap
+must say of the instruments that took the steps after it: whether the rig was simulated (and
+the simulator's settings), the meter's identity, the controller's version. Each session that
+opens the instruments writes one before its first step, so a journal alone (``--from-journal``,
+a resume with no step left) gives the FieldMap the attributes of the scan that made it: a
+rehearsal never reads as a real measurement. Version 2 has them; version 1 journals (none)
+are still read and resumed.
 """
 
 from __future__ import annotations
@@ -19,15 +27,19 @@ import json
 import math
 import os
 import zlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from hardware.errors import JournalError
 
 FORMAT = "raysim-scan-journal"
-VERSION = 1
+VERSION = 2
+#: versions read: 1 had no session lines
+READ_VERSIONS = (1, 2)
 
 
 @dataclass(frozen=True)
@@ -72,6 +84,24 @@ def _parse(line: bytes) -> dict[str, Any] | None:
 
 def read_journal(path: str | Path) -> tuple[dict[str, Any], list[Record], int]:
     """Read a journal: (header, complete records, byte length of the intact part)."""
+    contents = read_journal_sessions(path)
+    return contents.header, contents.records, contents.good
+
+
+class Contents(NamedTuple):
+    """A journal as read: its header, complete records, the byte length of the intact part,
+    the last session line's attributes ({} when none) and the line (1: the header) of each
+    record, which session lines move from its step + 2."""
+
+    header: dict[str, Any]
+    records: list[Record]
+    good: int
+    session: dict[str, Any]
+    lines: list[int]
+
+
+def read_journal_sessions(path: str | Path) -> Contents:
+    """:func:`read_journal` with the session lines' attributes and each record's line."""
     path = Path(path)
     try:
         data = path.read_bytes()
@@ -80,9 +110,12 @@ def read_journal(path: str | Path) -> tuple[dict[str, Any], list[Record], int]:
     lines = data.splitlines(keepends=True)
     if not lines or (header := _parse(lines[0])) is None or header.get("format") != FORMAT:
         raise JournalError(f"{path}: not a raysim scan journal (bad or missing header)")
-    if header.get("version") != VERSION:
-        raise JournalError(f"{path}: journal version {header.get('version')} is not {VERSION}")
+    if header.get("version") not in READ_VERSIONS:
+        raise JournalError(f"{path}: journal version {header.get('version')} is not one of "
+                           f"{', '.join(map(str, READ_VERSIONS))}")
     records: list[Record] = []
+    numbers: list[int] = []
+    session: dict[str, Any] = {}
     good = len(lines[0])
     for number, line in enumerate(lines[1:], start=2):
         body = _parse(line)
@@ -90,6 +123,10 @@ def read_journal(path: str | Path) -> tuple[dict[str, Any], list[Record], int]:
             if number == len(lines):
                 break  # a torn last line: the step it described was not completed
             raise JournalError(f"{path}: line {number} is damaged and complete records follow it")
+        if set(body) == {"session"} and isinstance(body["session"], dict):
+            session = body["session"]
+            good += len(line)
+            continue
         try:
             record = Record(n=body["n"], kind=body["kind"], i=body["i"], j=body["j"],
                             command=tuple(body["command"]), readback=tuple(body["readback"]),
@@ -103,8 +140,9 @@ def read_journal(path: str | Path) -> tuple[dict[str, Any], list[Record], int]:
             raise JournalError(f"{path}: line {number} holds step {record.n}, expected "
                                f"{len(records)} (records out of order or duplicated)")
         records.append(record)
+        numbers.append(number)
         good += len(line)
-    return header, records, good
+    return Contents(header, records, good, session, numbers)
 
 
 def _real(value: Any) -> bool:
@@ -202,6 +240,12 @@ class Journal:
         self._write(record.line())
         self.records.append(record)
 
+    def note_session(self, attrs: dict[str, Any]) -> None:
+        """Write a session line: what the FieldMap says of the instruments that take the
+        steps from here (flat attributes: strings and finite numbers), synced to disk."""
+        values = {k: v for k, v in attrs.items() if isinstance(v, str) or _real(v)}
+        self._write(_with_crc({"session": values}))
+
     def _write(self, blob: bytes) -> None:
         written = os.write(self._fd, blob)
         if written != len(blob):
@@ -232,6 +276,28 @@ def _locked(path: Path, flags: int) -> int:
         raise JournalError(f"{path}: another scan is writing this journal; wait for it to end, "
                            "or give another output") from None
     return fd
+
+
+@contextmanager
+def not_being_written(path: str | Path) -> Iterator[None]:
+    """Hold the journal at ``path`` still while it is read (a shared ``flock``: a scan cannot
+    start appending meanwhile); refuse one that a scan is writing (it holds the exclusive
+    lock): what is read would be a moment of a scan still going, and what is written from it
+    that scan's output. A missing or unreadable file is left to its reader to report."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise JournalError(f"{path}: a scan is writing this journal; wait for it to end "
+                               "(its FieldMap is written when it does)") from None
+        yield
+    finally:
+        os.close(fd)
 
 
 def _sync_dir(folder: Path) -> None:

@@ -27,7 +27,7 @@ from hardware.errors import JournalError, PlanError
 from hardware.instruments.motion import MotionController
 from hardware.instruments.power_meter import PowerMeter
 from hardware.interp import SphereField
-from hardware.journal import Journal, Record, read_journal
+from hardware.journal import Journal, Record, not_being_written, read_journal, read_journal_sessions
 from hardware.plan import REFERENCE, ScanPlan, w_to_dbm
 from hardware.rig import Rig
 from hardware.sim.rig import Faults, SimulatedRig
@@ -86,7 +86,7 @@ def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
     sim : simulator settings (default: the plan's ``[simulator]`` table).
     faults : faults the simulated instruments inject (tests).
     resume : continue the journal after its last complete step; without it an existing
-        journal with records is an error.
+        journal with records is an error, with it a missing one (or one holding no step).
     progress : ``progress(stage, fraction)`` after each step (:func:`hardware.acquire.step_progress`).
     rm : PyVISA resource manager (default: pyvisa-py).
     """
@@ -97,18 +97,21 @@ def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
     check_output(jpath, [("FieldMap the simulated rig scans", simulate)], PlanError)
     if resources and simulate is not None:
         raise PlanError("give either --resource or --simulate, not both")
+    if resume and not journal_records(jpath):
+        # starting afresh instead re-scanned everything (hours on a real rig) and left the
+        # real journal, wherever it was, orphaned
+        raise JournalError(f"no journal to resume at {jpath}; run without --resume to start the scan")
     settings = sim if sim is not None else plan.simulator
     steps = plan.steps()
     with _instrument_addresses(plan, resources, simulate, settings, faults) as (addr, sim_rig,
                                                                                  extra):
         decides = {k: v for k, v in extra.items() if k != "sim_field"}
         fingerprint = plan.fingerprint(decides)
-        held = journal_records(jpath)
-        if resume and held:
+        if resume:
             jr = Journal.resume(jpath, fingerprint, len(steps),
                                 also=(plan.fingerprint(decides, legacy=True),),
                                 plans=(plan.fingerprint(), plan.fingerprint(legacy=True)))
-        else:  # no journal, or one holding no step: nothing to resume, start afresh
+        else:  # not resuming: a journal holding no step is replaced, one with steps refused
             jr = Journal.create(jpath, fingerprint, len(steps), plan=plan.fingerprint())
         with jr:
             start = len(jr.records)
@@ -119,6 +122,10 @@ def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
                     try:
                         attrs["meter_idn"] = inst.meter.idn
                         attrs["motion_version"] = inst.motion.version
+                        # the journal alone must tell a rehearsal and the instruments
+                        # (--from-journal, a resume with no step left): hardware.journal
+                        jr.note_session({k: v for k, v in attrs.items()
+                                         if k != "journal_fingerprint"})
                         acquire(plan, inst, jr, progress=progress,
                                 before_step=sim_rig.set_sample if sim_rig else None)
                     finally:
@@ -163,13 +170,17 @@ def fieldmap_file_from_journal(plan: str | os.PathLike[str], output: str | os.Pa
                                rig: str | os.PathLike[str] | None = None,
                                journal: str | os.PathLike[str] | None = None) -> xr.Dataset:
     """``raysim scan --from-journal``: write the FieldMap of the journal as it stands (cells not
-    yet measured are NaN), without a rig."""
+    yet measured are NaN), without a rig; refused while a scan writes the journal."""
     from hardware.plan import load_plan
 
     scan_plan = load_plan(plan, rig=rig)
     _check_outputs(scan_plan, output, journal)
-    ds = fieldmap_from_journal(scan_plan, journal or journal_path(output))
-    fieldmaps.save(ds, output)
+    path = journal or journal_path(output)
+    # a scan writing the journal would have its partial map written over its own output (or
+    # over the finished file): refused while it holds the journal's lock
+    with not_being_written(path):
+        ds = fieldmap_from_journal(scan_plan, path)
+        fieldmaps.save(ds, output)
     return ds
 
 
@@ -193,22 +204,26 @@ def journal_records(path: str | os.PathLike[str]) -> int:
 
 def fieldmap_from_journal(plan: ScanPlan, path: str | os.PathLike[str],
                           attrs: Mapping[str, object] | None = None) -> xr.Dataset:
-    """The FieldMap of ``plan`` from a journal file alone (cells not yet measured are NaN)."""
-    header, records, _ = read_journal(path)
+    """The FieldMap of ``plan`` from a journal file alone (cells not yet measured are NaN), with
+    the attributes its last session line records (the simulator's, the instruments'
+    identities) under ``attrs``."""
+    header, records, _, session, lines = read_journal_sessions(path)
     if header.get("steps") != len(plan.steps()):
         raise JournalError(f"{path}: the journal has {header.get('steps')} steps, "
                            f"the plan {len(plan.steps())}")
-    check_journal_plan(plan, header, records, path)
+    check_journal_plan(plan, header, records, path, lines)
+    # the last session's instruments (hardware.journal), under what the caller knows now
     return build_fieldmap(plan, records, {"journal_fingerprint": header.get("fingerprint", ""),
-                                          **(attrs or {})})
+                                          **session, **(attrs or {})})
 
 
 def check_journal_plan(plan: ScanPlan, header: Mapping[str, Any], records: Sequence[Record],
-                       path: str | os.PathLike[str]) -> None:
+                       path: str | os.PathLike[str], lines: Sequence[int] = ()) -> None:
     """Refuse a journal that is not ``plan``'s: its header's plan fingerprint (journals written
     since it was recorded), and for every record the step's kind, cell and commanded axes (rad,
     to 1e-9), which the plan decides; so the readings of another grid, dish or frequency are
-    never written into this plan's cells."""
+    never written into this plan's cells. ``lines``: each record's line in the file (default
+    its step + 2, as in a journal without session lines)."""
     recorded = header.get("plan")
     if recorded and recorded not in (plan.fingerprint(), plan.fingerprint(legacy=True)):
         raise JournalError(f"{path}: the journal belongs to another plan (its plan fingerprint "
@@ -228,7 +243,8 @@ def check_journal_plan(plan: ScanPlan, header: Mapping[str, Any], records: Seque
         # hand-edited journal, whose mean and spread would be of other readings
         count = plan.reference_samples if step.kind == REFERENCE else plan.samples_per_point
         if len(record.power) != count:
-            raise JournalError(f"{path}: line {record.n + 2} (step {record.n}) holds "
+            line = lines[record.n] if lines else record.n + 2
+            raise JournalError(f"{path}: line {line} (step {record.n}) holds "
                                f"{len(record.power)} power readings, the plan takes {count}")
 
 
@@ -315,19 +331,27 @@ def _instrument_addresses(plan: ScanPlan, resources: Mapping[str, str] | None,
 def _check_coverage(plan: ScanPlan, ds: xr.Dataset, simulate: str | os.PathLike[str]) -> None:
     """Refuse a FieldMap to scan that does not hold the plan (:func:`check_map_holds_plan`)."""
     check_map_holds_plan(plan, fieldmaps.grid_of(ds), float(ds.attrs["frequency_hz"]), str(simulate),
-                         "simulate the scene on a sphere that holds the plan's grid, at its frequency")
+                         "simulate the scene on the rig's sphere (its radius) holding the plan's grid, at "
+                         "the plan's frequency")
 
 
 def check_map_holds_plan(plan: ScanPlan, grid: SphereGrid, frequency_hz: float, source: str,
                          remedy: str) -> None:
     """Refuse (PlanError) a map to scan, on ``grid`` at ``frequency_hz``, that was simulated at
-    another frequency or does not hold every direction the plan reads: beyond its cells the
+    another frequency or on a sphere of another radius than the rig's track (both to 1e-9
+    relative: float round trips pass) or does not hold every direction the plan reads: beyond its cells the
     simulated meter could only repeat the map's edge values (a map of theta 0..40 deg under a
     plan to 78 deg gave 108 cells of its 39 deg row, with nothing to tell them from readings).
     ``source`` names the map, ``remedy`` says what to do."""
     if not math.isclose(frequency_hz, plan.frequency_hz, rel_tol=1e-9):
-        raise PlanError(f"{source} is at {frequency_hz / 1e9:g} GHz, the plan reads at "
-                        f"{plan.frequency_hz / 1e9:g} GHz: {remedy}")
+        theirs, ours = distinct(frequency_hz / 1e9, plan.frequency_hz / 1e9)
+        raise PlanError(f"{source} is at {theirs} GHz, the plan reads at {ours} GHz: {remedy}")
+    # the map's intensities are on its sphere, (rho / R)^2 of the ideal: a map made at 3 m read
+    # by a 5 m track was labelled R = 5 and inverted 52 um RMS off a 36 um map, with no word
+    if not math.isclose(grid.radius, plan.rig.radius, rel_tol=1e-9):
+        theirs, ours = distinct(grid.radius, plan.rig.radius)
+        raise PlanError(f"{source} is on a sphere of radius {theirs} m, the rig's track has R = "
+                        f"{ours} m ([track] radius_m): {remedy}")
     steps = plan.steps()
     theta = np.array([step.theta for step in steps])
     phi = np.array([step.phi for step in steps])
@@ -343,6 +367,16 @@ def check_map_holds_plan(plan: ScanPlan, grid: SphereGrid, frequency_hz: float, 
                         f"{math.degrees(grid.phi_max):g} deg; the plan reads {int(outside.sum())} "
                         f"steps outside it (the first at theta {math.degrees(first.theta):g} deg, phi "
                         f"{math.degrees(first.phi):g} deg): {remedy}")
+
+
+def distinct(a: float, b: float) -> tuple[str, str]:
+    """``a`` and ``b`` written with the fewest significant digits (6 at least, 17 at most)
+    that tell them apart: '3 GHz, the plan 3 GHz' hid a plan at 3.0000001 GHz."""
+    for digits in range(6, 18):
+        first, second = f"{a:.{digits}g}", f"{b:.{digits}g}"
+        if first != second:
+            return first, second
+    return repr(a), repr(b)
 
 
 def _check_probe(plan: ScanPlan, ds: xr.Dataset, simulate: str | os.PathLike[str]) -> None:

@@ -30,7 +30,14 @@ from raysim.cli import (  # noqa: F401  (register commands)
     scenes,
     simulate,
 )
-from raysim.cli.common import app, error_line, interrupt_notes, reflow_help, say_error
+from raysim.cli.common import (
+    app,
+    error_line,
+    interrupt_notes,
+    nothing_to_resume,
+    reflow_help,
+    say_error,
+)
 from raysim.errors import RaysimError
 
 __all__ = ["app", "main"]
@@ -62,15 +69,16 @@ def _on_signal(signum: int, frame: object) -> None:
 _BLOCK_OPTIONS = ("--scheduler", "--workers", "--resume", "--block-size", "--threads")
 
 
-def interrupted_line(args: list[str], terminated: bool, notes: list[str] | None = None) -> str:
+def interrupted_line(args: list[str], terminated: bool, notes: list[str] | None = None,
+                     resumable: bool = True) -> str:
     """The one line of an interrupted command: what stopped (with the command's ``notes``),
-    and how to resume where it can."""
+    and how to resume where it can (``resumable=False``: the command kept nothing to resume)."""
     name = next((a for a in args if not a.startswith("-")), "")
     what = f"raysim {name}".strip() + (" stopped by SIGTERM" if terminated else " stopped")
     if notes:
         what += f" ({'; '.join(notes)})"
-    resumable = name in ("dataset", "scan") or (name == "simulate" and any(
-        a.split("=")[0] in _BLOCK_OPTIONS for a in args))
+    resumable = resumable and (name in ("dataset", "scan") or (name == "simulate" and any(
+        a.split("=")[0] in _BLOCK_OPTIONS for a in args)))
     return f"interrupted: {what}; resume with --resume" if resumable else f"interrupted: {what}"
 
 
@@ -83,6 +91,7 @@ def main(argv: list[str] | None = None) -> None:
     # what a command run before in this process (tests, the API) received and said is its own
     _received.clear()
     interrupt_notes.clear()
+    nothing_to_resume.clear()
     if argv is None:  # the real command (not a test calling main in its own process)
         signal.signal(signal.SIGTERM, _on_signal)
         signal.signal(signal.SIGINT, _on_signal)
@@ -135,5 +144,5 @@ def _interrupted(args: list[str], terminated: bool) -> None:
     signal while the line is printed changes nothing."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    say_error(interrupted_line(args, terminated, interrupt_notes), prefix="")
+    say_error(interrupted_line(args, terminated, interrupt_notes, not nothing_to_resume), prefix="")
     sys.exit(143 if terminated else 130)

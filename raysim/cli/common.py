@@ -51,12 +51,18 @@ def note(text: str) -> None:
 #: what the interrupted command adds to its one line ("12 of 40 steps are in J"), see
 #: :func:`raysim.cli.interrupted_line`
 interrupt_notes: list[str] = []
+#: set when the interrupted command has nothing to resume (a scan stopped before its first
+#: step keeps no journal): its line then does not say "resume with --resume"
+nothing_to_resume: list[bool] = []
 
 
-def note_interrupt(text: str) -> None:
+def note_interrupt(text: str, resumable: bool = True) -> None:
     """Add ``text`` to the line an interrupt (SIGINT, SIGTERM) ends the command with; the
-    command then lets the KeyboardInterrupt go on."""
+    command then lets the KeyboardInterrupt go on. ``resumable=False``: the command kept
+    nothing a ``--resume`` could continue, so the line does not offer one."""
     interrupt_notes.append(" ".join(text.split()))
+    if not resumable:
+        nothing_to_resume.append(True)
 
 
 def say_error(message: str, prefix: str = "error:") -> None:

@@ -44,7 +44,8 @@ def scan(
         None, "--resource", help="Instrument address ROLE=VISA, ROLE meter or motion (twice)."),
     simulate: Path | None = typer.Option(
         None, "--simulate", help="Scan this FieldMap with a simulated rig on loopback sockets."),
-    resume: bool = typer.Option(False, "--resume", help="Continue the journal of a stopped scan."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the journal of a stopped scan "
+                                "(refused when there is none)."),
     rig: Path | None = typer.Option(None, "--rig", help="Rig file (TOML) over the plan's."),
     journal: Path | None = typer.Option(None, "--journal", help="Journal file [OUTPUT.journal]."),
     from_journal: bool = typer.Option(
@@ -74,7 +75,7 @@ def scan(
     if from_journal:
         ds = fieldmap_file_from_journal(plan, output, rig=rig, journal=journal)
         say(f"wrote {output} from the journal: {ds.attrs['samples_measured']} of "
-            f"{ds.attrs['samples_expected']} samples")
+            f"{ds.attrs['samples_expected']} samples{_drift_note(ds.attrs)}")
         return
     options = {"seed": seed, "noise_db": noise_db, "drift_db": drift_db,
                "centre_offset": _vector3(centre_offset, "--centre-offset"), "time_scale": time_scale}
@@ -100,12 +101,22 @@ def scan(
     except KeyboardInterrupt:  # SIGINT or SIGTERM: the one interrupt line (raysim.cli.main)
         kept = Path(journal or journal_path(output))
         # before the first step the session removes the journal it made: say so, not "0 of 0"
-        note_interrupt(f"{done[0]} of {done[1]} steps are in {kept}" if kept.is_file() else
-                       f"no step taken, no journal kept at {kept}")
+        if kept.is_file():
+            note_interrupt(f"{done[0]} of {done[1]} steps are in {kept}")
+        else:  # nothing a --resume could continue (it would refuse): do not offer one
+            note_interrupt(f"no step taken, no journal kept at {kept}", resumable=False)
         raise
     ds = result.fieldmap
     say(f"wrote {result.output}: {ds.attrs['samples_measured']} samples, "
-        f"{result.steps_taken} of {result.steps_total} steps taken now (journal {result.journal})")
+        f"{result.steps_taken} of {result.steps_total} steps taken now (journal {result.journal})"
+        f"{_drift_note(ds.attrs)}")
+
+
+def _drift_note(attrs: dict) -> str:
+    """What the summary line adds when the drift correction was not the one asked for
+    (``drift_note``, :mod:`hardware.drift`): '' when it was."""
+    note = str(attrs.get("drift_note", ""))
+    return f"; drift: {note}" if note else ""
 
 
 @rig_app.command("park")

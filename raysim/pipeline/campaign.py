@@ -102,8 +102,8 @@ def run_campaign(scene_path: str | os.PathLike[str], plan_path: str | os.PathLik
                           f"D {scene.dish.diameter:g} m)")
     check_obstacles(scene, plan)
     check_map_holds_plan(plan, scene.sphere, scene.source.frequency_hz, f"the scene {scene_path}",
-                         "give the scene a [sphere] that holds the plan's grid, and the plan's "
-                         "frequency")
+                         "give the scene a [sphere] of the rig's radius that holds the plan's grid, "
+                         "and the plan's frequency")
     # the files the scene names (a map an earlier campaign measured) are inputs too: a
     # folder holding one would be replaced with the input inside it
     folder = output_folder(out_dir, [("scene", scene_path), *scene.inputs(), *plan.inputs()], FILES,

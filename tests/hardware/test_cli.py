@@ -144,6 +144,30 @@ def test_an_interrupt_before_the_first_step_says_no_journal_was_kept(tmp_path: P
         logging.disable(logging.NOTSET)  # the signal handler silences logging for the exit
     assert code == 130 and not Path(str(out) + ".journal").exists() and not out.exists()
     assert f"(no step taken, no journal kept at {out}.journal)" in err and "0 of 0" not in err
+    # nothing is there to resume (a --resume would be refused): the line must not offer one
+    assert "resume" not in error_line(err).replace("interrupted:", "")
+
+
+def test_resume_without_a_journal_is_refused(tmp_path: Path, raysim_main, fine_field: Path) -> None:
+    """QA: --resume with no journal at the path it resumes re-scanned everything from the
+    first step (hours on a real rig), leaving the real journal (given with --journal the
+    first time) orphaned. It is refused in one line before any instrument is opened; the
+    real journal resumes, and a journal holding only its header is nothing to resume either."""
+    plan = write_plan(tmp_path)
+    out, real = tmp_path / "s.nc", tmp_path / "elsewhere.journal"
+    args = ("scan", str(plan), "-o", str(out), "--simulate", str(fine_field))
+    assert raysim_main(*args, "--journal", str(real)).code == 0
+    out.unlink()
+    before = real.read_bytes()
+    code, _, err = raysim_main(*args, "--resume")
+    assert code == 2 and not out.exists() and not Path(f"{out}.journal").exists()
+    assert error_line(err) == (f"error: no journal to resume at {out}.journal; run without --resume "
+                               "to start the scan")
+    assert real.read_bytes() == before
+    header = before.splitlines(keepends=True)[0]
+    Path(f"{out}.journal").write_bytes(header)
+    assert raysim_main(*args, "--resume").code == 2
+    assert raysim_main(*args, "--journal", str(real), "--resume").code == 0 and out.exists()
 
 
 @pytest.mark.parametrize(("args", "message"), [
@@ -227,10 +251,33 @@ def test_from_journal_refuses_readings_no_meter_gives(tmp_path: Path, raysim_mai
     field = write_field(tmp_path / "field.nc", SphereGrid(R, 3, 6, 0.0, math.radians(60.0), 0.0, 2 * math.pi))
     scan(load_plan(plan), tmp_path / "scan.nc", simulate=field)
     journal = tmp_path / "scan.nc.journal"
+    # the step's line in the file: the session line (hardware.journal) comes before step 0
+    step, line = line - 2, line + 1
     _edit_journal(journal, line, power)
     out = tmp_path / "again.nc"
     code, _, err = raysim_main("scan", str(plan), "-o", str(out), "--journal", str(journal), "--from-journal")
     assert code == 2
     said = error_line(err)
-    assert f"{journal}: line {line} (step {line - 2})" in said and message in said
+    assert f"{journal}: line {line} (step {step})" in said and message in said
     assert not out.exists()
+
+
+def test_from_journal_is_refused_while_a_scan_writes_the_journal(tmp_path: Path, raysim_main,
+                                                                 fine_field: Path) -> None:
+    """QA: --from-journal run while a scan wrote d.nc's journal ignored the journal's lock and
+    wrote the live scan's output: a partial FieldMap over the finished file. It is refused in
+    one line while the lock is held, the file left as it was, and works once the scan ends."""
+    from hardware.journal import Journal
+
+    plan = write_plan(tmp_path)
+    out = tmp_path / "d.nc"
+    assert raysim_main("scan", str(plan), "-o", str(out), "--simulate", str(fine_field)).code == 0
+    before = out.read_bytes()
+    journal = Path(f"{out}.journal")
+    header = read_journal(journal)[0]
+    with Journal.resume(journal, header["fingerprint"], header["steps"]):  # a scan at work
+        code, _, err = raysim_main("scan", str(plan), "-o", str(out), "--from-journal")
+        assert code == 2 and out.read_bytes() == before
+        assert error_line(err) == f"error: {journal}: a scan is writing this journal; wait for it to end " \
+            "(its FieldMap is written when it does)"
+    assert raysim_main("scan", str(plan), "-o", str(out), "--from-journal").code == 0

@@ -137,4 +137,9 @@ def test_a_campaign_whose_scene_does_not_hold_the_plan_is_refused_before_simulat
     other.write_text(SCENE.replace("frequency_hz = 0.3e9", "frequency_hz = 1.2e9"))
     with pytest.raises(PlanError, match="is at 1.2 GHz, the plan reads at 0.3 GHz"):
         run_campaign(other, plan, tmp_path / "b")
-    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+    # QA: a scene on another sphere than the rig's track was scanned and labelled the track's R
+    wide = tmp_path / "wide.toml"
+    wide.write_text(SCENE.replace("radius_m = 10.0", "radius_m = 12.0"))
+    with pytest.raises(PlanError, match="radius 12 m, the rig's track has R = 10 m"):
+        run_campaign(wide, plan, tmp_path / "c")
+    assert not any((tmp_path / d).exists() for d in "abc")
