@@ -5,10 +5,12 @@ The arrays written when a store is created (the coordinates, ``seed``, ``split``
 attributes that describe its data (``diameter``, the sphere's edges, ...) are deterministic
 functions of the spec. Two checks use that:
 
-- a resume (:func:`check_store`, then :func:`repair`) refuses a store one of whose arrays is
-  missing or whose metadata cannot be read (a good sample's data are never reset on the word
-  of a listing), and rewrites from the spec whatever of the creation-time arrays and
-  attributes no longer matches it (nothing computed is lost: they are the spec's);
+- a resume (:func:`check_store`, then :func:`repair`) refuses a store one of whose arrays has
+  another shape, chunks or type than the spec's layout gives, rewrites the metadata of an array
+  whose ``zarr.json`` is missing or unreadable as the layout makes it (its chunks kept, then
+  verified: a good sample's data are never reset on the word of a listing), and rewrites from
+  the spec whatever of the creation-time arrays and attributes no longer matches it (nothing
+  computed is lost: they are the spec's);
 - readers (:func:`check_static`, :func:`read_verified`, :func:`read_ideals`), which have no
   spec, compare the creation-time arrays and attributes with the SHA-256 recorded in the
   store's ``static_checksums`` attribute when it was made (or last resumed), and every sample
@@ -114,55 +116,85 @@ def static_arrays(spec: DatasetSpec) -> dict[str, np.ndarray]:
 # --- a resume: refuse what cannot be trusted, rewrite what the spec gives --------------------------
 @dataclass
 class Repairs:
-    """What a resume rewrites from the spec: arrays (name -> values) and root attributes."""
+    """What a resume rewrites from the spec: arrays (name -> values), root attributes, and the
+    metadata (``zarr.json``) of arrays whose metadata is missing or unreadable."""
 
     arrays: dict[str, np.ndarray] = field(default_factory=dict)
     attributes: dict[str, Any] = field(default_factory=dict)
     array_attributes: dict[str, dict[str, Any]] = field(default_factory=dict)  # name -> its attributes
+    metadata: tuple[str, ...] = ()  # arrays whose zarr.json is rewritten from the layout
 
     @property
     def names(self) -> tuple[str, ...]:
         """What is rewritten, for the run's summary (attributes as ``attribute NAME``, an
-        array's own as ``NAME attributes``)."""
+        array's own as ``NAME attributes``, its lost ``zarr.json`` as ``NAME metadata``)."""
         attrs = [k for k in self.attributes if k not in ("spec_source", "spec_base")]
-        return (*sorted(self.arrays), *(f"{k} attributes" for k in sorted(self.array_attributes)),
+        return (*(f"{k} metadata" for k in self.metadata),
+                *sorted(k for k in self.arrays if k not in self.metadata),
+                *(f"{k} attributes" for k in sorted(self.array_attributes)),
                 *(f"attribute {k}" for k in attrs))
 
 
 def check_store(group: zarr.Group, path: str, spec: DatasetSpec,
                 static: dict[str, np.ndarray] | None = None) -> Repairs:
     """Refuse (DatasetError, one line naming the store and the array, nothing touched) a store
-    an array of the spec's layout is missing from, or whose metadata cannot be read or do not
-    match the layout; return the creation-time arrays and attributes to rewrite. ``static``:
-    :func:`static_arrays` of the spec, when the caller has them already."""
-    for name, array in layout(spec).items():
-        _check_array(group, path, name, array)
+    an array of which has metadata that do not match the spec's layout (another shape, chunks or
+    type: not an array this spec made); return what to rewrite from the spec: the arrays whose
+    metadata is missing or unreadable (:func:`restore_metadata`), the creation-time arrays and
+    the attributes that no longer match. ``static``: :func:`static_arrays` of the spec, when
+    the caller has them already."""
+    lost = tuple(name for name, array in layout(spec).items() if not _check_array(group, path, name, array))
     static = static_arrays(spec) if static is None else static
-    arrays = {name: values for name, values in static.items() if not _holds(group[name], values)}
-    return Repairs(arrays, _attribute_repairs(dict(group.attrs), spec), _array_attribute_repairs(group, spec))
+    arrays = {name: values for name, values in static.items()
+              if name in lost or not _holds(group[name], values)}
+    return Repairs(arrays, _attribute_repairs(dict(group.attrs), spec),
+                   _array_attribute_repairs(group, spec, lost), lost)
 
 
-def _array_attribute_repairs(group: zarr.Group, spec: DatasetSpec) -> dict[str, dict[str, Any]]:
+def restore_metadata(group: zarr.Group, spec: DatasetSpec, names: Sequence[str]) -> None:
+    """Write the ``zarr.json`` of the arrays ``names`` as the spec's layout makes it (the bytes
+    a new store holds), leaving their chunks: the data of each sample are then read again and
+    verified against its checksum, so one lost metadata file costs nothing that is intact, and
+    an array removed whole reads as its fill value, whose samples fail and are recomputed."""
+    from zarr.core.buffer import default_buffer_prototype
+    from zarr.core.sync import sync
+
+    specs = layout(spec)
+    scratch = zarr.open_group(zarr.storage.MemoryStore(), mode="w")
+    for name in names:
+        array = specs[name]
+        # the same call the store's creation made (store._fill), so the same document
+        made = scratch.create_array(name, shape=array.shape, chunks=array.chunks, dtype=array.dtype,
+                                    fill_value=array.fill, dimension_names=array.dims,
+                                    attributes=array.attrs)
+        document = made.metadata.to_buffer_dict(default_buffer_prototype())["zarr.json"]
+        sync((group.store_path / name / "zarr.json").set(document))
+
+
+def _array_attribute_repairs(group: zarr.Group, spec: DatasetSpec,
+                             lost: Sequence[str] = ()) -> dict[str, dict[str, Any]]:
     """The arrays whose own attributes are not the layout's (an ``add_offset`` or
-    ``scale_factor`` added, which xarray would apply on reading): name -> the layout's."""
+    ``scale_factor`` added, which xarray would apply on reading): name -> the layout's. The
+    ``lost`` arrays' metadata, attributes included, is rewritten whole."""
     return {name: array.attrs for name, array in layout(spec).items()
-            if _json(dict(group[name].attrs)) != _json(array.attrs)}
+            if name not in lost and _json(dict(group[name].attrs)) != _json(array.attrs)}
 
 
-def _check_array(group: zarr.Group, path: str, name: str, array: ArraySpec) -> None:
+def _check_array(group: zarr.Group, path: str, name: str, array: ArraySpec) -> bool:
+    """Whether the array's metadata can be read (False: missing or unreadable, for the resume
+    to rewrite from the layout); refuse one whose shape, chunks or type differ from it."""
     try:
         arr = group[name]
         meta = (tuple(arr.shape), tuple(arr.chunks), tuple(arr.metadata.dimension_names or ()), arr.dtype)
-    except Exception as exc:
-        raise DatasetError(f"{path}: its array {name!r} is missing or its metadata cannot be read "
-                           f"({type(exc).__name__}); the store was left as it is: restore the array, "
-                           "or make the dataset again at a new store path") from exc
+    except Exception:
+        return False
     want = np.dtype(array.dtype)
     same_type = np.dtype(meta[3]).kind in "TUO" if want.kind == "U" else np.dtype(meta[3]) == want
     if meta[:3] != (array.shape, array.chunks, array.dims) or not same_type:
         raise DatasetError(f"{path}: its array {name!r} does not have the shape, chunks or type its "
                            f"spec gives ({meta[0]} {meta[3]}, expected {array.shape} {want}); the "
                            "store was left as it is: make the dataset again at a new store path")
+    return True
 
 
 def _holds(arr: Any, values: np.ndarray) -> bool:
@@ -312,6 +344,34 @@ def open_arrays(group: zarr.Group, path: str, names: Sequence[str]) -> dict[str,
                                     f"read ({type(exc).__name__}); run `raysim dataset SPEC -o {path} "
                                     "--resume` to see what can be repaired") from exc
     return out
+
+
+#: the per-item records besides the data (one small chunk an item), which no checksum covers:
+#: :func:`raysim.dataset.reading.open_dataset` reads them through :class:`GuardedRecords`
+RECORDS = ("status", "error", "checksum", "seconds", "cpu_seconds", "finished",
+           "ideal_status", "ideal_checksum", "ideal_error")
+
+
+class GuardedRecords:
+    """A store's record array read through as it is stored, a chunk that does not decode raised
+    as CorruptStoreError naming the store, the array and the item (not zstd's RuntimeError), for
+    ``dask.array.from_array``: the records stay lazy, as the data arrays do (reading all of them
+    to check them would cost a file read per item and array when the store is opened)."""
+
+    def __init__(self, arr: Any, path: str, name: str) -> None:
+        self.arr, self.path, self.name = arr, path, name
+        self.shape, self.dtype, self.ndim = tuple(arr.shape), arr.dtype, len(arr.shape)
+
+    def __getitem__(self, key: Any) -> np.ndarray:
+        try:
+            return np.asarray(self.arr[key])
+        except Exception as exc:
+            first = key[0] if isinstance(key, tuple) and key else key
+            where = f" at {(self.arr.metadata.dimension_names or ('item',))[0]} {first.start or 0}" \
+                if isinstance(first, slice) else ""
+            raise CorruptStoreError(f"{self.path}: its array {self.name!r} cannot be read{where} (a "
+                                    f"chunk was damaged: {type(exc).__name__}); run `raysim dataset SPEC "
+                                    f"-o {self.path} --resume` with the store's spec to rewrite it") from exc
 
 
 def read_verified(arrays: dict[str, Any], path: str, indices: Sequence[int] | np.ndarray,

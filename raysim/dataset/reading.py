@@ -27,8 +27,10 @@ def open_dataset(store: str | Path) -> xr.Dataset:
 
     Use only samples with ``status == 1``; ``split == 1`` marks the validation samples. The
     coordinates, ``seed``, ``split`` and the attributes are checked against the checksums the
-    store recorded (CorruptStoreError); the per-sample arrays are read unverified (use
-    :func:`sample_fieldmap` or :class:`~raysim.dataset.loader.Loader`, which verify them).
+    store recorded (CorruptStoreError); a per-item record (``status``, ``seconds``, ...) whose
+    chunk does not decode raises CorruptStoreError when read; the per-sample data arrays are read
+    unverified (use :func:`sample_fieldmap` or :class:`~raysim.dataset.loader.Loader`, which
+    verify them).
     """
     path = str(store)
     group = open_readonly(path)
@@ -42,7 +44,23 @@ def open_dataset(store: str | Path) -> xr.Dataset:
         raise integrity.CorruptStoreError(f"{path}: the metadata of one of its arrays cannot be read "
                                           f"({type(exc).__name__}); {integrity.resume_hint(path)}") from exc
     names = [v for v in ds.data_vars if v.endswith(("_term_n", "_term_m"))]
-    return ds.set_coords(names)
+    return _guard_records(ds.set_coords(names), group, path)
+
+
+def _guard_records(ds: xr.Dataset, group, path: str) -> xr.Dataset:
+    """``ds`` with its record arrays (:data:`~raysim.dataset.integrity.RECORDS`) read through
+    :class:`~raysim.dataset.integrity.GuardedRecords`: a damaged chunk of one (which no
+    checksum covers) raises CorruptStoreError at ``.values``. xarray decodes nothing of them
+    (no fill value, offset or scale is applied to these types), so the values are the same."""
+    import dask.array as da
+
+    for name in integrity.RECORDS:
+        if name in ds.variables:
+            lazy = ds[name].data
+            guarded = da.from_array(integrity.GuardedRecords(group[name], path, name),
+                                    chunks=lazy.chunks, name=False, asarray=False, fancy=False)
+            ds[name] = ds[name].copy(data=guarded)
+    return ds
 
 
 def sample_fieldmap(ds: xr.Dataset, index: int, source: str = "clean") -> xr.Dataset:

@@ -46,6 +46,7 @@ class RunReport:
     ideal_failures: tuple[tuple[int, str], ...]  # (frequency index, reason)
     repaired: int = 0  # done samples (and ideal intensities) that failed verification: recomputed
     rewritten: tuple[str, ...] = ()  # creation-time arrays and attributes rewritten from the spec
+    cleared: tuple[tuple[str, int], ...] = ()  # (array, chunks): unreadable records of done items, reset
 
     @property
     def samples_per_second(self) -> float:
@@ -68,7 +69,14 @@ class RunReport:
         if self.ideal_failures:
             line += f"; the ideal intensity failed ({self.ideal_failures[0][1]})"
         if self.repaired:
-            line += f"; {self.repaired} done items failed verification and were recomputed"
+            one = self.repaired == 1
+            line += (f"; {self.repaired} done item{'' if one else 's'} failed verification and "
+                     f"{'was' if one else 'were'} recomputed")
+        if self.cleared:
+            line += ("; unreadable, rewritten as unknown (NaN, or no error text): "
+                     + ", ".join(f"{name} of {n} sample{'' if n == 1 else 's'}"
+                                 if not name.startswith("ideal_") else f"{name} of {n} frequenc"
+                                 f"{'y' if n == 1 else 'ies'}" for name, n in self.cleared))
         return line + self._rewritten_note()
 
     def _rewritten_note(self) -> str:
@@ -107,9 +115,9 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
     path = _store_path(store)
     zstore.remove_leftovers(path)
     group, created = _existing_store(path, spec, resume), False
-    repaired, rewritten = 0, ()
+    repaired, rewritten, cleared = 0, (), ()
     if group is not None:  # resume: check, then repair what the spec gives and recompute the rest
-        repaired, rewritten = _check_and_repair(group, path, spec)
+        repaired, rewritten, cleared = _check_and_repair(group, path, spec)
     if group is None:  # a new store: every sample and every frequency's ideal is pending
         pending, ideal_pending = np.arange(spec.samples), np.arange(len(spec.frequencies))
     else:
@@ -145,24 +153,31 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
         store=path, samples=spec.samples, done=int(np.sum(final == zstore.DONE)),
         failed=int(np.sum(final == zstore.FAILED)), computed=len(pending), skipped=skipped,
         workers=n_workers, seconds=time.perf_counter() - start, failures=tuple(failures[:20]),
-        ideal_failures=tuple(ideal_failures), repaired=repaired, rewritten=rewritten)
+        ideal_failures=tuple(ideal_failures), repaired=repaired, rewritten=rewritten, cleared=cleared)
 
 
-def _check_and_repair(group, path: str, spec: DatasetSpec) -> tuple[int, tuple[str, ...]]:
+def _check_and_repair(group, path: str, spec: DatasetSpec) \
+        -> tuple[int, tuple[str, ...], tuple[tuple[str, int], ...]]:
     """A resumed store checked before anything is written: every array of the spec's layout
-    present and readable (else refused, DatasetError), every done sample and ideal intensity
-    against its checksum. Then the creation-time arrays and attributes that no longer match
-    the spec are rewritten from it, and the samples that failed are made pending. Returns
-    (samples and ideals made pending, what was rewritten)."""
-    zstore.require_checksums(group, path)
+    of the layout's shape, chunks and type (else refused, DatasetError). Then the metadata of
+    the arrays whose ``zarr.json`` is missing or unreadable is rewritten from the layout (their
+    chunks kept), every done sample and ideal intensity is checked against its checksum, the
+    creation-time arrays and attributes that no longer match the spec are rewritten from it,
+    the samples that failed (or lost their marker) are made pending, and the records of done
+    items that no longer decode (times, error texts) are rewritten as unknown. Returns (samples
+    and ideals made pending, what was rewritten, (record array, chunks rewritten))."""
     static = integrity.static_arrays(spec)
     repairs = integrity.check_store(group, path, spec, static)
+    # a format-2 store has every array of its layout (check_format): one whose metadata was lost
+    # is the layout's, so it is restored and its chunks verified, never taken for an older store
+    integrity.restore_metadata(group, spec, repairs.metadata)
     names = integrity.spec_data_names(spec)
     # the spec's seeds, not the store's: a damaged seed array must not fail every sample
     bad, ideal_bad = zstore.verify(group, path, names, static["seed"])
     integrity.repair(group, repairs, spec)
     zstore.reset(group, bad, ideal_bad, names)
-    return len(bad) + len(ideal_bad), repairs.names
+    cleared = zstore.clear_unreadable_records(group)
+    return len(bad) + len(ideal_bad), repairs.names, tuple(cleared.items())
 
 
 SampleReport = Callable[[int, int, int], None]  # (done in the store, failed this run, total)

@@ -222,22 +222,30 @@ def check_format(path: str, attrs: Any) -> None:
 
 def status(group: zarr.Group) -> np.ndarray:
     """Per-sample status (PENDING, DONE, FAILED); an unreadable marker counts as pending."""
-    try:
-        return np.asarray(group["status"][...])
-    except Exception:  # a marker torn by a kill mid-write: read them one by one
-        arr = group["status"]
-        out = np.zeros(arr.shape[0], dtype=np.int8)
-        for i in range(arr.shape[0]):
-            try:
-                out[i] = arr[i]
-            except Exception:
-                out[i] = PENDING
-        return out
+    return _markers(group["status"])[0]
 
 
 def ideal_status(group: zarr.Group) -> np.ndarray:
-    """Status of the ideal intensity of each frequency."""
-    return np.asarray(group["ideal_status"][...])
+    """Status of the ideal intensity of each frequency; an unreadable marker counts as pending
+    (its ideal is computed again, as a sample's is)."""
+    return _markers(group["ideal_status"])[0]
+
+
+def _markers(arr: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(every marker of ``arr``, which of them do not decode): one read when all decode; else
+    one by one, an unreadable one (torn by a kill mid-write, garbled) read as PENDING."""
+    try:
+        values = np.asarray(arr[...])
+        return values, np.zeros(values.shape, dtype=bool)
+    except Exception:
+        values = np.zeros(arr.shape[0], dtype=np.int8)
+        unreadable = np.zeros(arr.shape[0], dtype=bool)
+        for i in range(arr.shape[0]):
+            try:
+                values[i] = arr[i]
+            except Exception:
+                values[i], unreadable[i] = PENDING, True
+        return values, unreadable
 
 
 def data_names(group: zarr.Group) -> list[str]:
@@ -262,19 +270,23 @@ def require_checksums(group: zarr.Group, path: str) -> None:
 
 def verify(group: zarr.Group, path: str, names: list[str],
            seeds: np.ndarray | None = None) -> tuple[list[int], list[int]]:
-    """The done samples, and the done ideal intensities, whose stored data do not match
-    their checksums (or do not decode); ``names``: the per-sample data arrays, as the spec's
+    """The samples, and the ideal intensities, to make pending again before a resume: the done
+    ones whose stored data do not match their checksums (or do not decode), and the ones whose
+    completion marker was lost (its chunk unreadable, or removed while the item's checksum,
+    written just before it, is there). ``names``: the per-sample data arrays, as the spec's
     layout gives them; ``seeds``: every sample's seed, as the spec gives them (default: the
     store's). A store that records no checksums, or whose bookkeeping cannot be read, is
     refused (DatasetError, one line naming it)."""
     try:
         require_checksums(group, path)
-        done = np.flatnonzero(status(group) == DONE)
-        sums = _read_each(group["checksum"], done)
+        marks, unreadable = _markers(group["status"])
+        sums = _read_each(group["checksum"], np.arange(len(marks)))
+        done = np.flatnonzero(marks == DONE)
         seeds = np.asarray(group["seed"][...]) if seeds is None else seeds
         arrays = {name: group[name] for name in names}
-        ideal_done = np.flatnonzero(ideal_status(group) == DONE)
-        ideal_sums = _read_each(group["ideal_checksum"], ideal_done)
+        ideal_marks, ideal_unreadable = _markers(group["ideal_status"])
+        ideal_sums = _read_each(group["ideal_checksum"], np.arange(len(ideal_marks)))
+        ideal_done = np.flatnonzero(ideal_marks == DONE)
         ideal_values = _read_each(group["intensity_ideal"], ideal_done)
     except DatasetError:
         raise
@@ -288,11 +300,45 @@ def verify(group: zarr.Group, path: str, names: list[str],
         for k, index in enumerate(batch.tolist()):
             values = {name: read[name][k] for name in names}
             if any(v is None for v in values.values()) or \
-                    sums[lo + k] != integrity_sample_checksum(values, index, int(seeds[index])):
+                    sums[index] != integrity_sample_checksum(values, index, int(seeds[index])):
                 bad.append(index)
-    ideal_bad = [int(f) for f, v, s in zip(ideal_done, ideal_values, ideal_sums, strict=True)
-                 if v is None or s != ideal_checksum(v, int(f))]
-    return bad, ideal_bad
+    ideal_bad = [int(f) for f, v in zip(ideal_done, ideal_values, strict=True)
+                 if v is None or ideal_sums[f] != ideal_checksum(v, int(f))]
+    return (sorted([*bad, *_lost_markers(marks, unreadable, sums)]),
+            sorted([*ideal_bad, *_lost_markers(ideal_marks, ideal_unreadable, ideal_sums)]))
+
+
+def _lost_markers(marks: np.ndarray, unreadable: np.ndarray, sums: list[Any]) -> list[int]:
+    """The pending items whose marker did not decode, or whose checksum is there although their
+    marker reads as pending (its chunk removed: a worker writes the checksum just before the
+    marker, and a reset clears the marker first, so only that narrow window of a kill leaves
+    the same): finished items whose marker was lost."""
+    return [i for i in np.flatnonzero(marks == PENDING).tolist()
+            if unreadable[i] or (sums[i] is not None and str(sums[i]) != "")]
+
+
+#: per-item bookkeeping a done item keeps but no checksum covers (how long, when, why it failed),
+#: with the fill value that a resume writes over a chunk of it that does not decode
+RUN_RECORDS = {"status": ("error", "seconds", "cpu_seconds", "finished"), "ideal_status": ("ideal_error",)}
+
+
+def clear_unreadable_records(group: zarr.Group) -> dict[str, int]:
+    """Rewrite, as the array's fill value, every chunk of :data:`RUN_RECORDS` of a done item
+    that does not decode (a done item's ``error`` is empty, its lost times unknown: NaN), so
+    that every reader can read the store again; the items' data, which their checksums vouch
+    for, are kept. Returns array name -> how many chunks were rewritten (the nonzero ones).
+    Pending items need nothing: their task rewrites their records."""
+    out = {}
+    for marker, names in RUN_RECORDS.items():
+        done = np.flatnonzero(_markers(group[marker])[0] == DONE)
+        for name in names:
+            arr = group[name]
+            lost = [int(i) for i, v in zip(done, _read_each(arr, done), strict=True) if v is None]
+            for i in lost:
+                arr[i] = arr.metadata.fill_value
+            if lost:
+                out[name] = len(lost)
+    return out
 
 
 def _read_each(arr: Any, indices: np.ndarray) -> list[Any]:
@@ -459,6 +505,7 @@ def exists(path: str) -> bool:
     return "://" not in path and Path(path).exists()
 
 
-__all__ = ["BOOKKEEPING", "DONE", "FAILED", "PENDING", "ArraySpec", "Writer", "checksum", "create",
-           "data_names", "exists", "ideal_status", "open_checked", "open_readonly", "remove_leftovers",
-           "require_checksums", "reset", "sample_checksum", "spec_attributes", "status", "verify", "versions"]
+__all__ = ["BOOKKEEPING", "DONE", "FAILED", "PENDING", "RUN_RECORDS", "ArraySpec", "Writer", "checksum",
+           "clear_unreadable_records", "create", "data_names", "exists", "ideal_status", "open_checked",
+           "open_readonly", "remove_leftovers", "require_checksums", "reset", "sample_checksum",
+           "spec_attributes", "status", "verify", "versions"]

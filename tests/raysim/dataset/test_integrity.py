@@ -121,28 +121,120 @@ def _unlink(name: str):
     return damage
 
 
-@pytest.mark.parametrize(("damage", "array"), [
-    (_unlink("intensity/zarr.json"), "intensity"), (_unlink("gravity_rms"), "gravity_rms"),
-    (_garble("deformation/zarr.json"), "deformation"), (_unlink("split/zarr.json"), "split")])
-def test_a_resume_refuses_a_store_missing_an_array_of_its_layout_and_touches_nothing(
-        copy, spec, inproc, damage, array):
+def _truncate(name: str, size: int = 50):
+    def damage(path: Path) -> None:
+        target = path / name
+        target.write_bytes(target.read_bytes()[:size])
+    return damage
+
+
+@pytest.mark.parametrize(("damage", "array", "computed"), [
+    (_unlink("intensity/zarr.json"), "intensity", 0), (_unlink("status/zarr.json"), "status", 0),
+    (_truncate("deformation/zarr.json"), "deformation", 0), (_garble("checksum/zarr.json"), "checksum", 0),
+    (_unlink("split/zarr.json"), "split", 0), (_unlink("ideal_status/zarr.json"), "ideal_status", 0),
+    (_unlink("gravity_rms"), "gravity_rms", 4)])
+def test_a_resume_restores_lost_array_metadata_from_the_layout(clean, copy, spec, inproc, damage, array,
+                                                               computed):
+    """An array's ``zarr.json`` lost (removed, truncated, garbled): the readers say to resume,
+    and the resume writes it again as the layout makes it, keeping the chunks, which verify,
+    so no sample is lost; an array removed whole reads as its fill value, and the samples it
+    held fail their checksums and are recomputed. The store is then the clean one bit for bit."""
     damage(copy)
+    for read in (lambda: Loader(str(copy), split="all"), lambda: open_dataset(copy)):
+        with pytest.raises(CorruptStoreError, match="--resume") as info:
+            read()
+        assert str(copy) in str(info.value) and f"'{array}'" in str(info.value)
+    report = generate(spec, copy, resume=True, scheduler=inproc)
+    assert f"{array} metadata" in report.rewritten and f"{array} metadata" in report.summary()
+    assert (report.computed, report.repaired) == (computed, computed)
+    assert_same_store(clean, copy)
+    assert _files(copy)[f"{array}/zarr.json"] == _files(clean)[f"{array}/zarr.json"]
+    loader = Loader(str(copy), split="all")
+    assert len(loader.indices) == spec.samples and sum(x.shape[0] for x, _ in loader) == spec.samples
+
+
+def test_a_resume_refuses_an_array_of_another_shape_and_touches_nothing(copy, spec, inproc):
+    """An array whose metadata reads but is not the layout's is no array this spec made: refused."""
+    meta = copy / "rms" / "zarr.json"
+    data = json.loads(meta.read_text())
+    data["shape"] = [spec.samples + 1]
+    meta.write_text(json.dumps(data))
     before = _files(copy)
-    with pytest.raises(DatasetError, match=f"its array '{array}' is missing or its metadata") as info:
+    with pytest.raises(DatasetError, match="its array 'rms' does not have the shape") as info:
         generate(spec, copy, resume=True, scheduler=inproc)
     assert str(copy) in str(info.value) and "\n" not in str(info.value)
-    assert _files(copy) == before  # no sample reset, no checksum erased
+    assert _files(copy) == before
 
 
-def test_the_cli_refuses_such_a_store_in_one_line(copy, spec, tmp_path):
+def test_the_cli_resume_restores_a_lost_array_metadata(clean, copy, spec, tmp_path):
     source = tmp_path / "small4.toml"
     source.write_text(spec.text)  # its scene is inline: the same spec from any folder
     (copy / "intensity" / "zarr.json").unlink()
-    before = _files(copy)
     result = run_cli("dataset", str(source), "-o", str(copy), "--resume", timeout=120)
-    lines = result.stderr.strip().splitlines()
-    assert result.returncode == 2 and len(lines) == 1 and "'intensity'" in lines[0], result.stderr
-    assert _files(copy) == before
+    assert result.returncode == 0 and "intensity metadata" in result.stdout + result.stderr, result.stderr
+    assert _files(copy)["intensity/zarr.json"] == _files(clean)["intensity/zarr.json"]
+    good = {k: v for k, v in _files(clean).items() if k.startswith("intensity/")}
+    assert {k: v for k, v in _files(copy).items() if k.startswith("intensity/")} == good  # none recomputed
+
+
+# --- B2: unreadable bookkeeping chunks ----------------------------------------------------------------
+def _chunk(path: Path, name: str, index: int) -> Path:
+    target = path / name / "c" / str(index)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    return target
+
+
+@pytest.mark.parametrize(("name", "index"), [("ideal_status", 0), ("status", 3), ("checksum", 1)])
+def test_a_garbled_marker_or_checksum_is_recomputed_and_counted(clean, copy, spec, inproc, name, index):
+    """Two junk bytes over a completion marker or a checksum: the readers say to resume (a
+    sample whose marker is unreadable reads as pending, which readers leave out), the resume
+    recomputes that one item (it refused the store over an ideal's marker), says "1 done item
+    ... was", and the store is the clean one bit for bit."""
+    _chunk(copy, name, index).write_bytes(b"zz")
+    if name != "status":
+        with pytest.raises(CorruptSampleError, match="--resume"):
+            list(Loader(str(copy), representation="fa_sphere", split="all"))
+    report = generate(spec, copy, resume=True, scheduler=inproc)
+    assert report.repaired == 1 and report.computed == (0 if name == "ideal_status" else 1)
+    assert "; 1 done item failed verification and was recomputed" in report.summary()
+    assert "nothing left to compute" not in report.summary()
+    assert_same_store(clean, copy)
+
+
+@pytest.mark.parametrize("name", ["ideal_status", "status"])
+def test_a_removed_marker_of_a_finished_item_is_recomputed_and_counted(clean, copy, spec, inproc, name):
+    """A done item's marker chunk removed (it reads as pending, its checksum is there): the
+    summary counts it, not "nothing left to compute"."""
+    _chunk(copy, name, 0).unlink()
+    report = generate(spec, copy, resume=True, scheduler=inproc)
+    assert report.repaired == 1 and "1 done item failed verification and was recomputed" in report.summary()
+    assert_same_store(clean, copy)
+
+
+@pytest.mark.parametrize(("name", "index", "fill"), [
+    ("seconds", 3, np.nan), ("cpu_seconds", 0, np.nan), ("finished", 2, np.nan), ("error", 1, ""),
+    ("ideal_error", 0, "")])
+def test_a_garbled_record_is_named_by_readers_and_rewritten_as_unknown(clean, copy, spec, inproc, name,
+                                                                         index, fill):
+    """A done item's time or error text that no longer decodes: open_dataset raises the
+    project's CorruptStoreError naming it (not zstd's RuntimeError); the resume rewrites it as
+    the fill value (NaN: the time is lost; a done item's error text is empty), keeps the
+    samples, says so, and everything else is the clean store's bit for bit."""
+    _chunk(copy, name, index).write_bytes(b"zzzz")
+    with pytest.raises(CorruptStoreError, match=f"'{name}' cannot be read at .* {index} .*--resume"):
+        open_dataset(copy)[name].load()
+    report = generate(spec, copy, resume=True, scheduler=inproc)
+    assert (report.computed, report.repaired) == (0, 0)
+    assert report.cleared == ((name, 1),) and f"{name} of 1 " in report.summary()
+    assert_same_store(clean, copy)
+    stored = open_dataset(copy)[name].values
+    reference = np.asarray(zarr.open_group(str(clean), mode="r")[name][...])
+    others = np.arange(len(stored)) != index
+    if name in PROVENANCE:
+        assert np.isnan(stored[index]) and np.array_equal(stored[others], reference[others])
+    else:
+        assert stored[index] == fill and np.array_equal(stored, reference)
+    assert generate(spec, copy, resume=True, scheduler=inproc).cleared == ()
 
 
 # --- C: readers verify every sample -------------------------------------------------------------------
