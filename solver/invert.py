@@ -174,8 +174,13 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     n_all = solved.data.n_rows
     clear = rows_clear_of_rim(scan.sphere, scan.F, scan.D, n_all, shift)
     if clear < n_all:
+        first = solved.history
         scan = scan.first_rows(clear)
         solved = _solve(scan, grid, gain, chosen, weighted, opts, progress)
+        # the first solve's model runs and time are the inversion's too (its misfits are not:
+        # they describe another map on other rows); refine_forward_runs counted only the second
+        solved.history.evaluations += first.evaluations
+        solved.history.seconds += first.seconds
     data, inverse, linear, setup = solved.data, solved.inverse, solved.linear, solved.setup
     delta, history = solved.delta, solved.history
     gn = None

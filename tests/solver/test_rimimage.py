@@ -67,7 +67,19 @@ def test_a_row_the_rim_image_crosses_is_left_out():
     phi = np.linspace(0.0, 2.0 * np.pi, 64, endpoint=False)
     x, y = 25.0 * np.cos(phi), 25.0 * np.sin(phi)
     targets = RimTargets(x, y, np.asarray(scene.deformation(x, y), dtype=np.float64))
-    surface = invert(simulate(scene, method="go"), rim=targets)
+    from solver.forward import GOForward
+
+    class Counting(GOForward):
+        """The GO model, counting its runs (the inversion solves twice here)."""
+
+        runs = 0
+
+        def __call__(self, *args, **kwargs):
+            Counting.runs += 1
+            return super().__call__(*args, **kwargs)
+
+    surface = invert(simulate(scene, method="go"), rim=targets, forward=Counting())
     assert surface.attrs["rows_dropped_at_rim"] == 1
+    assert surface.attrs["refine_forward_runs"] == Counting.runs >= 2 * 5  # both solves
     assert surface.attrs["theta_last_used_deg"] == pytest.approx(61.0)
     assert surface.attrs["rms_m"] < 2e-6
