@@ -62,7 +62,9 @@ def check_options(*, solver: str | None = None, N: int | None = None, refine: in
     if iterations is not None:
         _integer("the solver iterations (--iterations)", iterations, 1, MAX_ITERATIONS)
     if gain is not None and gain not in GAIN_MODES:
-        raise SolverError(f"unknown gain mode {gain!r}: choose one of {', '.join(GAIN_MODES)}")
+        # "none", the former name of "known", is still taken but no longer offered
+        offered = ", ".join(mode for mode in GAIN_MODES if mode != "none")
+        raise SolverError(f"unknown gain mode {gain!r}: choose one of {offered}")
     if model is not None and model not in MODELS:
         raise SolverError(f"unknown model {model!r}: choose one of {', '.join(MODELS)}")
     if refine_method is not None and refine_method not in REFINE_METHODS:
