@@ -166,7 +166,9 @@ def read_actuators(path: str | Path, layout) -> ActuatorLayout:
     if path.is_dir():
         raise ActuatorError(f"{path}: is a folder, give an actuator file (CSV or TOML)")
     try:
-        text = path.read_text(encoding="utf-8")
+        # utf-8-sig: a spreadsheet's "CSV UTF-8" starts with a byte-order mark, which made the
+        # first column "\ufeffid", refused as unknown under a name that printed as "id"
+        text = path.read_text(encoding="utf-8-sig")
     except OSError as exc:
         raise ActuatorError(f"{path}: {exc.strerror}") from exc
     except UnicodeDecodeError:
@@ -229,13 +231,18 @@ def _panel_ids(panels, where: str) -> list[int]:
     """Panel ids from a CSV cell ("3 4" or "3;4") or a TOML list of integers; booleans and
     fractional numbers are refused (``int(True)`` is panel 1, ``int(6.5)`` panel 6)."""
     if isinstance(panels, str):
-        return [int(p) for p in panels.replace(";", " ").split()]
-    if not isinstance(panels, list):
+        ids = [int(p) for p in panels.replace(";", " ").split()]
+    elif not isinstance(panels, list):
         raise ActuatorError(f"{where}: panels must be a list of panel ids, got {panels!r}")
-    bad = [p for p in panels if isinstance(p, bool) or not isinstance(p, int)]
-    if bad:
-        raise ActuatorError(f"{where}: panels must be integer panel ids, got {bad[0]!r}")
-    return list(panels)
+    else:
+        bad = [p for p in panels if isinstance(p, bool) or not isinstance(p, int)]
+        if bad:
+            raise ActuatorError(f"{where}: panels must be integer panel ids, got {bad[0]!r}")
+        ids = list(panels)
+    twice = sorted({p for p in ids if ids.count(p) > 1})
+    if twice:  # counted twice, a panel's 3 actuators read as "its 6 do not fix a panel shape"
+        raise ActuatorError(f"{where}: panel {twice[0]} is named twice in its panels")
+    return ids
 
 
 def _toml_rows(data: dict, path: Path) -> list:

@@ -298,3 +298,23 @@ def test_the_focal_length_comes_from_the_map_else_the_scene_else_a_note():
     assert focal_length_for(SimpleNamespace(attrs={}), scene) == (40.0, "")
     F_none, note = focal_length_for(SimpleNamespace(attrs={}), None)
     assert F_none is None and "no focal_length" in note and "axial RMS" in note
+
+
+def test_a_spreadsheets_byte_order_mark_reads_and_a_panel_named_twice_is_said(tmp_path):
+    """A CSV saved as "CSV UTF-8" starts with a byte-order mark: its first column read as
+    "\\ufeffid", refused as unknown under a name that printed as "id". A panel named twice in
+    one actuator's panels ("0;0") counted each actuator twice: "its 6 actuators do not fix a
+    panel shape" of a panel held by 3."""
+    acts = corners_layout(LAYOUT)
+    plain = _acts_csv(tmp_path / "plain.csv", acts, np.tile([-np.inf, np.inf], (acts.n_actuators, 1)))
+    marked = tmp_path / "marked.csv"
+    marked.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    a, b = read_actuators(plain, LAYOUT), read_actuators(marked, LAYOUT)
+    assert a.ids == b.ids and np.array_equal(a.xy, b.xy)
+    twice = tmp_path / "twice.csv"
+    lines = plain.read_text().splitlines()
+    first = lines[1].split(",")
+    first[3] = f"{first[3].split()[0]};{first[3].split()[0]}"
+    twice.write_text("\n".join([lines[0], ",".join(first), *lines[2:]]) + "\n")
+    with pytest.raises(ActuatorError, match=f"panel {first[3].split(';')[0]} is named twice"):
+        read_actuators(twice, LAYOUT)
