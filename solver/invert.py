@@ -193,7 +193,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     unseen = unobservable(grid, {"central": central.shape if central is not None else None,
                                  "delta_c": mode}, central.r_h if central is not None else None)
     std = None
-    if scan.intensity_std is not None and opts.uncertainty_samples > 0:
+    stated = scan.intensity_std is not None and np.any(np.isfinite(scan.intensity_std[:data.n_rows]))
+    if stated and opts.uncertainty_samples > 0:  # an all-NaN std states nothing (measured_fa)
         std = monte_carlo_std(scan, inverse, data, opts.uncertainty_samples, opts.seed, unseen)
         if central is not None:
             std = central.blank(grid, std)
@@ -421,7 +422,10 @@ def monte_carlo_std(scan: Scan, inverse: LinearInverse, data: MeasuredFA, sample
     central mode: :mod:`solver.unobservable`) removed as from the map.
     """
     rng = np.random.default_rng(seed)
-    sigma = np.where(np.isfinite(scan.intensity_std), scan.intensity_std, 0.0)
+    # a cell without a stated spread has the scan's noise, not none: NaN read as 0 on every
+    # other phi column made the stated spread 62 um where it is 93 um
+    typical = np.sqrt(data.noise_variance) * np.abs(np.nan_to_num(scan.intensity))
+    sigma = np.where(np.isfinite(scan.intensity_std), scan.intensity_std, typical)
     draws = []
     for _ in range(samples):
         noisy = scan.intensity + sigma * rng.standard_normal(sigma.shape)
