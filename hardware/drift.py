@@ -73,9 +73,7 @@ def drift(references: Sequence[Record], mode: str, window: int,
     corrects)."""
     index = np.array([r.n for r in references], dtype=np.float64)
     power = np.array([np.mean(r.power) for r in references])
-    own = reading_noise if reading_noise is not None and reading_noise > 0 else np.nan
-    sem = np.array([np.std(r.power, ddof=1) / math.sqrt(len(r.power)) if len(r.power) > 1
-                    else own * np.mean(r.power) for r in references])
+    sem = reference_noise(references, power, reading_noise)
     chi2 = reduced_chi2(power, sem)
     applied = mode
     if mode == "auto":
@@ -88,13 +86,11 @@ def drift(references: Sequence[Record], mode: str, window: int,
     fit, note = math.nan, ""
     if applied == "smooth" and min(window, index.size) >= 3:
         asked = min(window, index.size)
-        # the noise pooled over the references: one reference's own spread, from a couple of
-        # readings, can be tiny by chance (2 readings at 0.01 dB made quiet references miss a
-        # line by "450x their noise"), and the check would then follow noise, not drift
-        pooled = math.sqrt(float(np.mean((sem / power) ** 2))) * power
-        window, fit = widest_consistent(index, power, pooled, asked)
+        # with the pooled noise (reference_noise): a reference's own spread from 2 readings
+        # made quiet references miss a line by "450x their noise", and the check followed noise
+        window, fit = widest_consistent(index, power, sem, asked)
         if window < asked:
-            far = fit_chi2(index, power, pooled, asked)
+            far = fit_chi2(index, power, sem, asked)
             note = (f"line fits over {asked} references miss them by {math.sqrt(far):.3g}x their "
                     "noise (rms); " + ("followed the references (linear) instead" if window == 1
                                        else f"smoothed over {window} instead"))
@@ -185,6 +181,20 @@ def best_window(index: np.ndarray, power: np.ndarray, largest: int) -> int:
         if error < best_error * (1.0 - 1e-6):
             best, best_error = window, error
     return best
+
+
+def reference_noise(references: Sequence[Record], power: np.ndarray,
+                    reading_noise: float | None = None) -> np.ndarray:
+    """The standard error (W) of each reference's mean reading ``power``: one reading's relative
+    noise, pooled over the references of two or more readings (else ``reading_noise``, from
+    the scan's cells; NaN without either), over the square root of its count. Pooled, not each
+    reference's own: from 2 readings one reference's spread can be tiny by chance (a
+    chi-square of one degree of freedom), and a drift-free scan's references then scattered
+    "11 times their noise", so ``auto`` corrected noise."""
+    spread = [np.var(r.power, ddof=1) / np.mean(r.power) ** 2 for r in references if len(r.power) > 1]
+    own = reading_noise if reading_noise is not None and reading_noise > 0 else np.nan
+    relative = math.sqrt(float(np.mean(spread))) if spread else own
+    return np.array([relative * p / math.sqrt(len(r.power)) for r, p in zip(references, power, strict=True)])
 
 
 def reading_noise(samples: Sequence[Record], references: Sequence[Record]) -> float | None:

@@ -137,3 +137,16 @@ def test_smooth_follows_a_drift_its_line_cannot() -> None:
     # auto's leave-one-out choice gets the same check
     auto = drift(records(true, 2.3e-3, 16, seed=3), "auto", 9)
     assert np.max(np.abs(auto.gains - true / true[0])) < 5 * sem
+
+
+def test_auto_leaves_a_drift_free_scan_of_two_readings_a_reference_alone() -> None:
+    """Each reference's own spread from 2 readings is a chi-square of one degree of freedom:
+    some came out tiny, and the references of a drift-free scan scattered "11 times their
+    noise" about their mean (limit 2.4), so auto corrected the scan by its references' noise.
+    The noise is now pooled over the references; a drift 20 times the noise is still found."""
+    corrected = [drift(records(np.ones(30), 2e-3, 2, seed=s), "auto", 9).applied != "none"
+                 for s in range(20)]
+    assert sum(corrected) <= 2                         # the 3-sigma limit's false alarms
+    ramp = 1.0 + 0.01 * np.linspace(0.0, 1.0, 30)
+    moving = drift(records(ramp, 2e-3, 2, seed=3), "auto", 9)
+    assert moving.applied != "none" and np.allclose(moving.gains, ramp, atol=4e-3)
