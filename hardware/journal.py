@@ -16,7 +16,7 @@ must say of the instruments that took the steps after it: whether the rig was si
 the simulator's settings), the meter's identity, the controller's version. Each session that
 opens the instruments writes one before its first step, so a journal alone (``--from-journal``,
 a resume with no step left) gives the FieldMap the attributes of the scan that made it: a
-rehearsal never reads as a real measurement. Version 2 has them; version 1 journals (none)
+rehearsal never reads as a real measurement. Version 2 has them; version 1 journals (without)
 are still read and resumed.
 """
 
