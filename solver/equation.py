@@ -90,6 +90,19 @@ def noise_variance(fa: ArrayLike, n_rows: int) -> float:
     return min(estimates)
 
 
+def misfit_noise_rms(noise_variance: float, fa: ArrayLike, weight: ArrayLike | float,
+                     n_rows: int) -> float:
+    """RMS of the noise in a weighted FA misfit over the compared cells (the first ``n_rows``
+    rows, where ``fa`` and ``weight`` are finite): sqrt(v mean(weight^2)), v the relative
+    noise variance; 0 where nothing is compared or v is not above 0."""
+    fa = np.asarray(fa, dtype=np.float64)
+    w = np.broadcast_to(np.asarray(weight, dtype=np.float64), fa.shape)[:n_rows]
+    cells = np.isfinite(fa[:n_rows]) & np.isfinite(w)
+    if not cells.any() or not noise_variance > 0:
+        return 0.0
+    return float(np.sqrt(noise_variance * np.mean(w[cells] ** 2)))
+
+
 def stated_noise_variance(intensity: ArrayLike, intensity_std: ArrayLike, n_rows: int) -> float:
     """Relative variance v from a scan's own ``intensity_std``: mean of (std / I)^2."""
     i = np.asarray(intensity, dtype=np.float64)[:n_rows]

@@ -47,6 +47,7 @@ import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
 from raysim.progress import Progress
+from solver.equation import misfit_noise_rms
 from solver.errors import SolverError
 from solver.forward import ForwardModel, WaveForward, active_runner
 from solver.resample import modelled_rows
@@ -192,13 +193,14 @@ def refine_gauss_newton(delta0: NDArray[np.float64], fa_measured: NDArray[np.flo
     report_progress = progress or (lambda stage, fraction: None)
     start = time.perf_counter()
     I0 = model(scan.sphere, scan.F, scan.D, grid.x, grid.y, None)
+    compared = min(n_rows, modelled_rows(scan.sphere, scan.F, scan.D, grid.h))
     rows = np.zeros(fa_measured.shape, dtype=bool)
-    rows[:min(n_rows, modelled_rows(scan.sphere, scan.F, scan.D, grid.h))] = True
+    rows[:compared] = True
     rows &= np.isfinite(fa_measured) & np.isfinite(weight)
     fa = np.nan_to_num(fa_measured)
     w = np.nan_to_num(weight)
     report = GaussNewtonReport()
-    report.noise_rms = float(np.sqrt(noise_variance * np.mean(w[rows] ** 2)))
+    report.noise_rms = misfit_noise_rms(noise_variance, fa_measured, weight, compared)
 
     def floor_on(cells):
         """The discrepancy principle's bound on |r| over ``cells`` (module docstring)."""

@@ -52,7 +52,7 @@ from raysim.maps.sphere import SphereGrid
 from raysim.progress import Progress, silent, within
 from solver.aperture import ApertureGrid
 from solver.continuation import RimContinuation, rim_continuation
-from solver.equation import intensity_ratio_fa
+from solver.equation import intensity_ratio_fa, misfit_noise_rms
 from solver.forward import Forward, ForwardModel, as_model, go_forward
 from solver.resample import modelled_rows
 
@@ -180,7 +180,7 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
         return float(np.sqrt(np.nanmean(misfit[:n_rows] ** 2)))
 
     mask = grid.mask
-    floor = _noise_floor(noise_variance, fa_measured, w, n_rows)
+    floor = misfit_noise_rms(noise_variance, fa_measured, w, n_rows)
     delta = np.array(delta, dtype=np.float64, copy=True)
     gamma = 1.0
     misfit = misfit_of(delta, gamma, "starting map")
@@ -265,16 +265,6 @@ MAX_BACKTRACKS = 3
 #: misfit; on a 16-point grid, too coarse for the paper's surface, half a step removed 11 %, and
 #: the updates that followed took the map from 240 to 697 um RMS error (the linear answer stays)
 SUFFICIENT_DECREASE = 0.5
-
-
-def _noise_floor(noise_variance: float, fa: NDArray[np.float64], weight: NDArray[np.float64] | float,
-                 n_rows: int) -> float:
-    """RMS of the misfit's noise over the compared cells: sqrt(v mean(weight^2))."""
-    w = np.broadcast_to(weight, fa.shape)[:n_rows]
-    cells = np.isfinite(fa[:n_rows]) & np.isfinite(w)
-    if not cells.any() or not noise_variance > 0:
-        return 0.0
-    return float(np.sqrt(noise_variance * np.mean(w[cells] ** 2)))
 
 
 def _removed_share(before: float, now: float, floor: float = 0.0) -> float:
