@@ -348,8 +348,7 @@ def open_arrays(group: zarr.Group, path: str, names: Sequence[str]) -> dict[str,
 
 #: the per-item records besides the data (one small chunk an item), which no checksum covers:
 #: :func:`raysim.dataset.reading.open_dataset` reads them through :class:`GuardedRecords`
-RECORDS = ("status", "error", "checksum", "seconds", "cpu_seconds", "finished",
-           "ideal_status", "ideal_checksum", "ideal_error")
+RECORDS = (*sorted(BOOKKEEPING), "ideal_status", "ideal_checksum", "ideal_error")
 
 
 class GuardedRecords:
