@@ -29,6 +29,7 @@ from raysim.maps.surfacemap import surfacemap
 from raysim.progress import Progress
 from solver import boundary
 from solver.aperture import ApertureGrid, solver_grid
+from solver.budget import map_noise_rms
 from solver.central import CentralMode, central_mode_of, hole_radius
 from solver.equation import (
     debias,
@@ -66,10 +67,12 @@ from solver.options import (
     InvertOptions,
 )
 from solver.record import (
+    NOISE_WARNING_FLOOR,
     Outcome,
     accuracy_attrs,
     fit_attrs,
     hole_attrs,
+    noise_spread_attrs,
     rim_attrs,
     ring_attrs,
     surface_attrs,
@@ -205,6 +208,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         delta = central.blank(grid, delta)
     delta_c = removed.get("delta_c", 0.0)
     delta_out, coef = remove_terms(grid, delta, opts.terms, scan.F)
+    spread = (float(np.sqrt(np.nanmean(std**2))) if std is not None
+              else noise_spread(scan, inverse, data, opts, refined, unseen, central, delta_out))
     outcome = Outcome(scan, grid, inverse, linear, data, setup, history, weighted, coef,
                       gn.gain_factor if gn is not None else None, delta_c, mode)
     attrs = surface_attrs(opts, outcome)
@@ -212,6 +217,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     attrs.update(hole_attrs(hole))
     attrs.update(ring_attrs(scan))
     attrs.update(report_attrs(gn, why))
+    attrs.update(noise_spread_attrs(spread, std is not None, data, delta_out))
     if gn is not None and gn.misfit_rms:  # the map is Gauss-Newton's: its misfit says the fit
         attrs.pop("refine_warning", None)
         attrs.update(fit_attrs(data, gn.misfit_rms[-1]))
@@ -412,9 +418,50 @@ def truth_on_grid(truth, scan: Scan, grid: ApertureGrid) -> NDArray[np.float64] 
     return grid.masked(arr)
 
 
+def noise_spread(scan: Scan, inverse: LinearInverse, data: MeasuredFA, opts: InvertOptions,
+                 refined: bool, unseen: Unobservable | None, central: CentralMode | None,
+                 delta: NDArray[np.float64]) -> float:
+    """RMS (m) by which the scan's noise, estimated from the scan when no ``intensity_std`` is
+    stated (``data.noise_variance``), spreads the map ``delta`` (m); NaN when not measured.
+
+    The budget's operator (:func:`solver.budget.map_noise_rms`, on the cells that carry data)
+    screens: it assumes every sphere cell's noise averaged over its aperture footprint, which
+    an aperture grid coarser than 256 points does not do (the paper's dish: 1.8, 2.8 and 6 times
+    the budget at 96, 64 and 32 points), so it is scaled by 256 / N before the test. Where the
+    noise may matter the Monte Carlo of the stated case measures it, with the estimated noise
+    in every cell; clean data skip it (it costs about 1.8 s at 256 points).
+    """
+    if opts.uncertainty_samples <= 0 or not data.noise_variance > 0:
+        return float("nan")
+    used = np.isfinite(scan.intensity)
+    if scan.blocked is not None:
+        used &= ~scan.blocked
+    try:
+        budget = map_noise_rms(scan.sphere, scan.F, scan.D, data.noise_variance,
+                               not data.gain.estimated, refined, used, opts.terms)
+    except (SolverError, FieldMapError):  # a grid the budget does not read: measure it
+        budget = float("inf")
+    inside = delta[np.isfinite(delta)]
+    size = float(np.sqrt(np.mean(inside**2))) if inside.size else 0.0
+    if budget * max(1.0, BUDGET_GRID / inverse.grid.N) < NOISE_SCREEN * max(size, NOISE_WARNING_FLOOR):
+        return float("nan")
+    std = monte_carlo_std(scan, inverse, data, opts.uncertainty_samples, opts.seed, unseen)
+    if central is not None:
+        std = central.blank(inverse.grid, std)
+    return float(np.sqrt(np.nanmean(std**2)))
+
+
+#: the aperture grid from which on the budget's operator holds for the map's noise
+BUDGET_GRID = 256
+#: the share of the map's RMS the budget's (grid-scaled) noise must reach for the Monte Carlo
+#: to measure it: a fifth of the warning's share (record.NOISE_SHARE_WARNING)
+NOISE_SCREEN = 0.1
+
+
 def monte_carlo_std(scan: Scan, inverse: LinearInverse, data: MeasuredFA, samples: int,
                     seed: int, unseen: Unobservable | None = None) -> NDArray[np.float64]:
-    """Std (m) of the linear solution under Gaussian intensity noise of ``intensity_std``.
+    """Std (m) of the linear solution under Gaussian intensity noise of ``intensity_std``
+    (the noise estimated from the scan, ``data.noise_variance``, where it states none).
 
     The inversion is linear in FA and FA is smooth in the intensity, so the linear solve's
     spread is the refined map's spread to first order. Each draw gets the data's treatment:
@@ -425,7 +472,9 @@ def monte_carlo_std(scan: Scan, inverse: LinearInverse, data: MeasuredFA, sample
     # a cell without a stated spread has the scan's noise, not none: NaN read as 0 on every
     # other phi column made the stated spread 62 um where it is 93 um
     typical = np.sqrt(data.noise_variance) * np.abs(np.nan_to_num(scan.intensity))
-    sigma = np.where(np.isfinite(scan.intensity_std), scan.intensity_std, typical)
+    stated = (scan.intensity_std if scan.intensity_std is not None
+              else np.full_like(typical, np.nan))
+    sigma = np.where(np.isfinite(stated), stated, typical)
     draws = []
     for _ in range(samples):
         noisy = scan.intensity + sigma * rng.standard_normal(sigma.shape)

@@ -24,6 +24,7 @@ from solver import boundary, surface
 from solver.fit import panel_adjustments, write_panel_csv
 from solver.gauss_newton import GaussNewtonOptions
 from solver.invert import DEFAULT_N, DEFAULT_REFINE, DEFAULT_SOLVER, invert
+from solver.record import um_text
 
 
 def panel_layout_of(field: xr.Dataset):
@@ -159,5 +160,12 @@ def summary(result: xr.Dataset) -> list[str]:
         lines.append(f"noise: the scan's stated intensity_std spreads the map by "
                      f"{np.sqrt(np.nanmean(std**2)) * 1e6:.2f} um RMS (deformation_std, Monte "
                      "Carlo of the linear inversion)")
+    elif "noise_map_rms_m" in a:
+        db = 10.0 / math.log(10.0) * a["noise_relative_std"]
+        lines.append(f"noise: {db:.2g} dB per cell ({a['noise_source']}) spreads the map by "
+                     f"{um_text(a['noise_map_rms_m'])} um RMS (Monte Carlo of the linear "
+                     "inversion; no intensity_std stated)")
+    if "noise_warning" in a:
+        lines.append(f"WARNING: {a['noise_warning']}")
     lines.append(f"time {a['time_s']:.2f} s")
     return lines

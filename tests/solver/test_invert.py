@@ -182,6 +182,42 @@ def test_an_intensity_std_with_gaps_spreads_the_map_as_one_without(paper_field):
     assert nothing is None and none.attrs["noise_source"].startswith("estimated")
 
 
+def test_without_a_stated_std_the_noise_spread_is_predicted_and_a_noisy_map_is_flagged(
+        paper_field):
+    """With no intensity_std the map said nothing of the noise: 0.05 dB per reading at 0.9 F
+    on a 50 m dish made a map 572 um off a 200 um peak-to-peak surface, exit 0. The spread is
+    now measured by the Monte Carlo with the noise estimated in the scan, checked here against
+    the scatter of the inversion over independent noisy scans, and a map whose spread is more
+    than half its own RMS is flagged; clean data skip the Monte Carlo (the budget screens)."""
+    from solver.run import summary
+
+    grid = ApertureGrid(110.0, 96)
+    clean = invert(paper_field, N=96, refine_iterations=0, truth=None)
+    assert "noise_warning" not in clean.attrs and "noise_map_rms_m" not in clean.attrs
+
+    def noisy_map(db, seed):
+        field = paper_field.copy(deep=True)
+        i = field["intensity"].values
+        draw = np.random.default_rng(seed).standard_normal(i.shape)
+        field["intensity"] = (("theta", "phi"), i * 10 ** (db * draw / 10))
+        return invert(field, N=96, refine_iterations=0, truth=None)
+
+    maps = [noisy_map(0.01, seed) for seed in range(3)]
+    observed = np.sqrt(np.mean([metrics.rms(grid, m["deformation"].values
+                                             - clean["deformation"].values) ** 2 for m in maps]))
+    predicted = maps[0].attrs["noise_map_rms_m"]
+    assert maps[0].attrs["noise_source"].startswith("estimated")
+    assert 0.6 < predicted / observed < 1.6
+    assert "noise_warning" not in maps[0].attrs                  # 0.01 dB: about 90 of 330 um
+    (line,) = [t for t in summary(maps[0]) if t.startswith("noise: ")]
+    assert f"spreads the map by {predicted * 1e6:.2f} um RMS" in line
+
+    loud = noisy_map(0.1, 5)
+    assert loud.attrs["noise_map_rms_m"] > 0.5 * metrics.rms(grid, loud["deformation"].values)
+    assert any(t.startswith("WARNING: the readings' noise (0.1 dB per cell)")
+               for t in summary(loud))
+
+
 def test_bad_requests_raise_specific_errors(paper_field):
     with pytest.raises(SolverError, match="gain"):
         invert(paper_field, gain="sometimes")
