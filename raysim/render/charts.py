@@ -125,7 +125,17 @@ def field_cut(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200),
     bottom.set_ylabel("FA = I_ideal / I_def - 1")
     limit = symmetric_limit(ratio, 99.5)
     bottom.set_ylim(-1.3 * limit, 1.3 * limit)
-    bottom.set_xlabel("theta (deg) from -z at the focus; dashed: rim image")
+    # the rim image, where the scan covers it (a cut of a scan that stops short says so)
+    from raysim.maps.fieldmap import grid_of
+
+    rim = float(np.degrees(rim_theta(ds)))
+    grid = grid_of(ds)
+    covered = np.degrees(grid.theta_min) <= rim <= np.degrees(grid.theta_max)
+    if covered:
+        for ax in (top, bottom):
+            ax.axvline(rim, **RIM_STYLE)
+    bottom.set_xlabel("theta (deg) from -z at the focus; "
+                      + ("dashed: rim image" if covered else f"rim image at {rim:.2f}°, beyond the scan"))
     if bottom.get_legend_handles_labels()[0]:
         bottom.legend(fontsize=9, ncol=2)
     else:

@@ -121,7 +121,8 @@ def field_plotter(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = 
     margin = MARGIN * unit(size)
     title = field_title(ds, f"{what_of(q)} on the probe hemisphere").replace(" — ", "\n", 1)
     pixel_text(pl, vtk_text(title), (w / 2, h - margin), 30 * t, "title", "center", "top", w - 2 * margin)
-    notes = [f"colour: {vtk_text(q.label)}; grey: no value", *field_subtitle_lines(ds), f"reflector: {what}"]
+    notes = [f"colour: {vtk_text(q.label)}; grey: no value", *clipping_note(q),
+             *field_subtitle_lines(ds), f"reflector: {what}"]
     inset_w, _ = inset_size(size)
     pixel_text(pl, "\n".join(notes), (w - margin, margin), 19 * t, "notes", "right", "bottom",
                w - inset_w - 4 * margin, color="#202020")
@@ -132,6 +133,20 @@ def field_plotter(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = 
     return pl
 
 
+def clipping_note(q: Quantity) -> list[str]:
+    """A line saying how many cells lie beyond the colour scale and how far the values reach
+    (the bar ends at a percentile and clamps the rest to its end colours); none if no cell does."""
+    values = np.asarray(q.values, dtype=np.float64)
+    values = values[np.isfinite(values)]
+    lo, hi = q.clim
+    beyond = np.count_nonzero((values < lo) | (values > hi))
+    if not beyond:
+        return []
+    fmt = _fmt(q.clim)
+    return [f"{100 * beyond / values.size:.2g} % of the cells beyond the colour scale, shown in its "
+            f"end colours (values {fmt % values.min()} to {fmt % values.max()})"]
+
+
 def field_image(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = (1600, 1200),
                 inset: bool = True) -> np.ndarray:
     """The 3D FieldMap picture as an RGB array (height, width, 3): the close-up of
@@ -140,7 +155,7 @@ def field_image(ds: xr.Dataset, quantity: str = "fa", size: tuple[int, int] = (1
     pl = field_plotter(ds, quantity, size)
     image = np.array(backend.screenshot(pl, None))
     if inset:
-        for name in ("title", "notes", "labels", "bar_title"):
+        for name in ("title", "notes", "labels", "bar_title", "axes"):
             pl.remove_actor(name, render=False)
         pl.remove_scalar_bar(render=False)
         w, h = inset_size(size)
@@ -241,6 +256,12 @@ def _add_hemisphere(pl: Any, ds: xr.Dataset, q: Quantity, size: tuple[int, int],
     edge.translate((0.0, 0.0, float(ds.attrs["focal_length"]) - grid.radius * math.cos(grid.theta_max)),
                    inplace=True)
     pl.add_mesh(edge, color="#303030", line_width=max(1.0, 2.0 * unit(size)), name="hemisphere_edge")
+    if bar:  # the azimuth's axes where the edge crosses them (phi = 0 and 90 deg), as on the dish
+        rim = 1.08 * grid.radius * math.sin(grid.theta_max)
+        z = float(ds.attrs["focal_length"]) - grid.radius * math.cos(grid.theta_max)
+        pl.add_point_labels(np.array([[rim, 0.0, z], [0.0, rim, z]]), ["+x (phi 0°)", "+y (phi 90°)"],
+                            font_size=backend.points(19 * t), text_color="black", shape=None,
+                            show_points=False, always_visible=True, name="axes")
 
 
 def _add_focus_and_source(pl: Any, ds: xr.Dataset, F: float, R: float, D: float, u: float,
