@@ -112,7 +112,9 @@ class Loader:
     shuffle, seed : a new order every epoch (``seed`` and the epoch's number) or index order.
     normalise : standardise by the training split's :class:`Statistics`.
     fill : the value NaN becomes (after normalisation).
-    grid_n : N of ``fa_aperture`` (default: the stored deformation map's).
+    grid_n : N of the ``fa_aperture`` input (default: the stored deformation map's, so input
+        and target share a grid; another N resamples the input only, the target stays on the
+        store's grid).
     dtype : dtype of the arrays yielded.
     """
 

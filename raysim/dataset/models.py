@@ -109,7 +109,8 @@ class ZernikeSpectrum(ErrorModel):
 
     def variables(self, grid):
         return {"coefficient": Variable((f"{self.name}_term",), (len(self.terms),), "m",
-                                        "Zernike coefficient over the disk r <= D/2")}
+                                        "Zernike coefficient over the disk r <= D/2: the term's RMS "
+                                        "(Noll's normalisation; m < 0 sin, m >= 0 cos)")}
 
 
 @dataclass(frozen=True)
@@ -188,7 +189,8 @@ class RimAstigmatism(Deformation):
 
     ``amplitude`` A (m) is the peak value on the rim r = a (``radius``, m); ``exponent`` p >= 2
     (p = 2 is the harmonic Zernike astigmatism, which the intensity hardly sees; p > 2 bends
-    the surface more towards the rim); ``angle`` phi0 (rad) is the axis of the high side.
+    the surface more towards the rim); ``angle`` phi0 (rad) is the axis of cos 2(phi - phi0),
+    the high side where A > 0 (A takes either sign, so half the samples are low there).
     Its RMS over the disk r <= a is |A| / sqrt(2 (p + 1)).
     """
 
@@ -255,7 +257,8 @@ class GravityAstigmatism(ErrorModel):
     def variables(self, grid):
         return {"amplitude": Variable((), (), "m", "rim astigmatism: value on the rim at phi0"),
                 "exponent": Variable((), (), "1", "rim astigmatism: power p of r/a"),
-                "angle": Variable((), (), "rad", "rim astigmatism: axis phi0 of the high side")}
+                "angle": Variable((), (), "rad", "rim astigmatism: axis phi0 of cos 2(phi - phi0), the high "
+                                  "side where the amplitude is positive")}
 
 
 @lru_cache(maxsize=8)
