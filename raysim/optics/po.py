@@ -39,6 +39,7 @@ from raysim.optics.fast.chart import Domain
 from raysim.optics.fast.radiator import DEFAULT_TOL, make_radiator
 from raysim.optics.illumination import C0, ETA0, MU0, Illumination, Taper, incident_field
 from raysim.optics.radiator import CurrentElements, Radiator
+from raysim.optics.shadow_edge import lit_samples
 from raysim.progress import Progress
 from raysim.surface.mesh import Reflector
 from raysim.surface.quadrature import FaceQuadrature, plan
@@ -65,7 +66,8 @@ def po_elements(reflector: Reflector, wave: Illumination, quadrature: FaceQuadra
     """PO current elements of ``reflector`` under ``wave``, chunk by chunk.
 
     Yields Warp (9, N) float64 arrays on ``device`` in the :class:`Radiator` layout (electric
-    elements J dA, A m). Samples the BVH finds shadowed carry no current and are left out;
+    elements J dA, A m). Samples the BVH finds shadowed carry no current and are left out, and
+    a face a shadow's edge crosses is integrated over its lit part (:mod:`raysim.optics.shadow_edge`);
     ``taper(x, y)`` (optional, dimensionless) multiplies each sample's current. The lit side
     of each sample is its face's side towards the wave: the samples' vector areas point to the
     dish's front times a quadrature weight that can be negative (the circular segments cut
@@ -82,14 +84,14 @@ def po_elements(reflector: Reflector, wave: Illumination, quadrature: FaceQuadra
     v = reflector.vertices[reflector.faces]
     back_lit = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]) @ wave.k_hat > 0.0  # wave meets the back
     for samples in quadrature.chunks(chunk):
-        n = len(samples)
-        keep = bvh.lit(samples.facet, wave.k_hat, samples.face)
-        area = np.where(back_lit[samples.face[keep]][:, None], -samples.area[keep], samples.area[keep])
-        points = samples.points[keep]
+        # the lit samples, the faces a shadow's edge crosses cut along it (shadow_edge)
+        lit, n = lit_samples(quadrature, samples, bvh, wave.k_hat)
+        area = np.where(back_lit[lit.face][:, None], -lit.area, lit.area)
+        points = lit.points
         if taper is not None:
             area = area * np.asarray(taper(points[:, 0], points[:, 1]), dtype=np.float64)[:, None]
         stats.n_samples += n
-        stats.n_lit += int(keep.sum())
+        stats.n_lit += len(lit)
         m = len(points)
         if m == 0:
             continue

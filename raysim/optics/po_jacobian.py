@@ -36,6 +36,7 @@ from raysim.optics.bvh import ReflectorBVH
 from raysim.optics.fast.radiator import DEFAULT_TOL, make_radiator
 from raysim.optics.illumination import ETA0, Illumination
 from raysim.optics.radiator import PREFACTORS, Radiator
+from raysim.optics.shadow_edge import lit_samples
 from raysim.surface.mesh import Reflector
 from raysim.surface.quadrature import plan
 
@@ -81,9 +82,9 @@ def surface_elements(reflector: Reflector, wave: Illumination, samples_per_wavel
     back_lit = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]) @ wave.k_hat > 0.0
     parts = []
     for samples in quadrature.chunks():
-        keep = bvh.lit(samples.facet, wave.k_hat, samples.face)
-        flip = np.where(back_lit[samples.face[keep]], -1.0, 1.0)[:, None]
-        parts.append((samples.points[keep], samples.area[keep] * flip))
+        lit, _ = lit_samples(quadrature, samples, bvh, wave.k_hat)
+        flip = np.where(back_lit[lit.face], -1.0, 1.0)[:, None]
+        parts.append((lit.points, lit.area * flip))
     points = np.concatenate([p for p, _ in parts])
     area = np.concatenate([a for _, a in parts])
     phase = np.exp(-1j * wave.k * (points @ wave.k_hat))[:, None]

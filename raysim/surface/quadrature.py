@@ -97,13 +97,16 @@ class Samples:
 
     ``points`` (N, 3) lie on the smooth surface (or the facets); ``area`` (N, 3) are the vector
     area elements n dA (m^2), n towards the dish's front; ``facet`` (N, 3) are points on the
-    flat facets with the same footing, for the BVH's shadow test; ``face`` (N,) the face.
+    flat facets with the same footing, for the BVH's shadow test; ``face`` (N,) the face;
+    ``on_arcs``: the samples of the circular segments beyond the faces' chords (whole faces'
+    samples otherwise).
     """
 
     points: NDArray[np.float64]
     area: NDArray[np.float64]
     facet: NDArray[np.float64]
     face: NDArray[np.int64]
+    on_arcs: bool = False
 
     def __len__(self) -> int:
         return len(self.face)
@@ -245,7 +248,7 @@ class FaceQuadrature:
 
     def samples(self) -> Samples:
         """All samples at once (small plans and tests)."""
-        return _concat(list(self.chunks(max_points=1 << 62)))
+        return concatenated(list(self.chunks(max_points=1 << 62)))
 
     # --- faces -------------------------------------------------------------------------------
     def _face_samples(self, faces: NDArray[np.int64]) -> Samples:
@@ -268,7 +271,29 @@ class FaceQuadrature:
                 nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
                 points, area = facet, nrm * weight[:, None]
             parts.append(Samples(points, area, facet, face))
-        return _concat(parts)
+        return concatenated(parts)
+
+    def order_for(self, length: NDArray[np.float64]) -> NDArray[np.int64]:
+        """The conical rule's order for triangles of longest edge ``length`` (m, projected as
+        :attr:`edge_length`): the plan's, n = ceil(L / spacing) within [n_min, n_max]."""
+        return np.clip(np.ceil(length / self.spacing), self.n_min, self.n_max).astype(np.int64)
+
+    def at(self, face: NDArray[np.int64], bary: NDArray[np.float64],
+           share: NDArray[np.float64]) -> Samples:
+        """Samples at the barycentric points ``bary`` (N, 3) of faces ``face`` (N,), each
+        weighing ``share`` (N,) of its face's area, lifted as the faces' own samples are: the
+        samples of parts of faces (the lit part of a face an obstacle's shadow crosses)."""
+        refl = self.reflector
+        face = np.asarray(face, dtype=np.int64)
+        facet = np.einsum("nk,nkc->nc", bary, refl.vertices[refl.faces[face]])
+        weight = self.face_area[face] * share
+        if refl.surface is not None:
+            points, area = self._lift(facet[:, 0], facet[:, 1], face, weight)
+        else:
+            nrm = np.einsum("nk,nkc->nc", bary, refl.vertex_normals[refl.faces[face]])
+            nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+            points, area = facet, nrm * weight[:, None]
+        return Samples(points, area, facet, face)
 
     def _lift(self, x: NDArray, y: NDArray, face: NDArray, weight: NDArray) -> tuple[NDArray, NDArray]:
         """Points on the smooth surface over (x, y) and their vector areas for projected
@@ -314,8 +339,8 @@ class FaceQuadrature:
             on_chord = b[:, None, :] + xp[None, :, None] * (c - b)[:, None, :]
             inside = on_chord + 1e-3 * (opposite[:, None, :] - on_chord)
             facet = np.repeat(inside.reshape(-1, 3), len(xr), axis=0)
-            parts.append(Samples(points, area, facet, face))
-        return _concat(parts)
+            parts.append(Samples(points, area, facet, face, on_arcs=True))
+        return concatenated(parts)
 
 
 def _ranges(counts: NDArray[np.int64], max_points: int) -> Iterator[NDArray[np.int64]]:
@@ -330,11 +355,13 @@ def _ranges(counts: NDArray[np.int64], max_points: int) -> Iterator[NDArray[np.i
         start = stop
 
 
-def _concat(parts: list[Samples]) -> Samples:
+def concatenated(parts: list[Samples]) -> Samples:
+    """The samples of ``parts`` (at least one) as one set."""
     if len(parts) == 1:
         return parts[0]
     return Samples(*(np.concatenate([getattr(p, f) for p in parts])
-                     for f in ("points", "area", "facet", "face")))
+                     for f in ("points", "area", "facet", "face")),
+                   on_arcs=bool(parts) and all(p.on_arcs for p in parts))
 
 
 def plan(reflector: Reflector, wavelength: float, samples_per_wavelength: float) -> FaceQuadrature:
