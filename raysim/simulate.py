@@ -294,10 +294,12 @@ def _check_options(method: str, options: Options) -> None:
         raise RaysimError("--edges applies to --method po+ptd only")
     if options.edges is not None and options.edges not in ("rim", "all"):
         raise RaysimError(f"unknown edge set {options.edges!r}: use rim or all")
-    wave_only = options.total or options.save_field or options.samples_per_wavelength is not None
-    if method not in WAVE_METHODS and wave_only:
-        raise RaysimError("--total, --save-field and --samples-per-wavelength apply to --method po "
-                          "and po+ptd only")
+    if method not in WAVE_METHODS and (options.total or options.save_field):
+        # go+edge is a wave method too: it takes these two (not the quadrature's density)
+        raise RaysimError(f"--total and --save-field apply to the wave methods "
+                          f"({', '.join(WAVE_METHODS)}), not {method}")
+    if method not in WAVE_METHODS and options.samples_per_wavelength is not None:
+        raise RaysimError("--samples-per-wavelength applies to --method po and po+ptd only")
     if options.fresnel and method != "go+edge":
         raise RaysimError("--fresnel applies to --method go+edge only")
     if method == "go+edge" and options.samples_per_wavelength is not None:
