@@ -21,7 +21,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from raysim.optics.bvh import ReflectorBVH
-from raysim.surface.quadrature import FaceQuadrature, Samples, concatenated, conical_rule
+from raysim.surface.quadrature import (
+    FaceQuadrature,
+    Samples,
+    concatenated,
+    conical_rule,
+    lattice_rule,
+)
 
 #: a face the shadow's edge crosses is divided into four until its pieces are at most this
 #: share of the quadrature's spacing, then the edge is cut straight (the chord of a curved
@@ -109,12 +115,14 @@ def lit_part(quadrature: FaceQuadrature, faces: NDArray[np.int64], bvh: Reflecto
 def _rule_samples(q: FaceQuadrature, face: NDArray[np.int64], tri: NDArray[np.float64],
                   length: NDArray[np.float64]) -> tuple[Samples, NDArray[np.int64]]:
     """Samples of the sub-triangles ``tri`` (T, 3, 3, barycentric corners in their faces) by
-    the plan's rule for their size, and each sample's sub-triangle."""
-    order = q.order_for(length)
+    the plan's rule for their size ``length`` (m; a lattice of rules where one would need
+    more than n_max points along it), and each sample's sub-triangle."""
+    m, n = q.orders_for(length)
+    key = m * (q.n_max + 1) + n
     parts, owners = [], []
-    for n in np.unique(order):
-        sel = np.flatnonzero(order == n)
-        rule = conical_rule(int(n))
+    for value in np.unique(key):
+        sel = np.flatnonzero(key == value)
+        rule = lattice_rule(conical_rule(int(value % (q.n_max + 1))), int(value // (q.n_max + 1)))
         bary = np.einsum("pk,tkc->tpc", rule.bary, tri[sel]).reshape(-1, 3)
         share = (np.abs(np.linalg.det(tri[sel]))[:, None] * rule.weights[None, :]).reshape(-1)
         parts.append(q.at(np.repeat(face[sel], rule.size), bary, share))

@@ -203,9 +203,14 @@ class FaceQuadrature:
     @cached_property
     def orders(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """(m, n) per face: m-fold lattice of sub-triangles, conical rule of order n on each."""
-        need = np.ceil(self.edge_length / self.spacing)
+        return self.orders_for(self.edge_length)
+
+    def orders_for(self, length: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """(m, n) for triangles of longest edge ``length`` (m, projected as :attr:`edge_length`):
+        about one sample per ``spacing`` along it, n within [n_min, n_max] on an m-fold lattice."""
+        need = np.ceil(length / self.spacing)
         m = np.maximum(1, np.ceil(need / self.n_max)).astype(np.int64)
-        n = np.ceil(self.edge_length / (m * self.spacing))
+        n = np.ceil(length / (m * self.spacing))
         n = np.clip(n, self.n_min, self.n_max).astype(np.int64)
         return m, n
 
@@ -272,11 +277,6 @@ class FaceQuadrature:
                 points, area = facet, nrm * weight[:, None]
             parts.append(Samples(points, area, facet, face))
         return concatenated(parts)
-
-    def order_for(self, length: NDArray[np.float64]) -> NDArray[np.int64]:
-        """The conical rule's order for triangles of longest edge ``length`` (m, projected as
-        :attr:`edge_length`): the plan's, n = ceil(L / spacing) within [n_min, n_max]."""
-        return np.clip(np.ceil(length / self.spacing), self.n_min, self.n_max).astype(np.int64)
 
     def at(self, face: NDArray[np.int64], bary: NDArray[np.float64],
            share: NDArray[np.float64]) -> Samples:
