@@ -38,6 +38,11 @@ FINEST = 0.5
 LEVELS = (2, 6)
 #: bisection steps locating the edge along a sub-triangle's side (2^-20 of its length)
 BISECTIONS = 20
+#: with obstacles in the beam, points this share of the quadrature's spacing apart along each
+#: side of a face (and of its pieces) are tested besides its samples and corners: a leg's shadow
+#: narrower than the samples' spacing passed between them all (0.2 m legs on 1 m faces at
+#: 0.5 GHz, samples 0.33 m apart: kept or dropped whole, 0.53 % in intensity)
+SIDE_STEP = 0.25
 #: corners are tested this share of the way towards the sub-triangle's centroid, so a corner on
 #: a face's edge is still a point of its own face
 INSET = 1e-9
@@ -71,10 +76,11 @@ def crossed_faces(quadrature: FaceQuadrature, samples: Samples, lit: NDArray[np.
     if samples.on_arcs or not len(samples):
         return np.zeros(0, dtype=np.int64)
     faces, index = np.unique(samples.face, return_inverse=True)
-    corners = _corners_lit(quadrature, faces, np.broadcast_to(np.eye(3), (len(faces), 3, 3)),
-                           bvh, k_hat)
-    total = np.bincount(index, minlength=len(faces)) + 3
-    seen = np.bincount(index, weights=lit, minlength=len(faces)) + corners.sum(axis=1)
+    whole = np.broadcast_to(np.eye(3), (len(faces), 3, 3))
+    corners = _corners_lit(quadrature, faces, whole, bvh, k_hat)
+    side_seen, side_total = _sides_lit(quadrature, faces, whole, bvh, k_hat)
+    total = np.bincount(index, minlength=len(faces)) + 3 + side_total
+    seen = np.bincount(index, weights=lit, minlength=len(faces)) + corners.sum(axis=1) + side_seen
     return faces[(seen > 0) & (seen < total)]
 
 
@@ -93,9 +99,10 @@ def lit_part(quadrature: FaceQuadrature, faces: NDArray[np.int64], bvh: Reflecto
         samples, owner = _rule_samples(q, face, tri, q.edge_length[face] / 2**level)
         lit = bvh.lit(samples.facet, k_hat, samples.face)
         corners_lit = _corners_lit(q, face, tri, bvh, k_hat)
+        side_seen, side_total = _sides_lit(q, face, tri, bvh, k_hat)
         n = len(face)
-        seen = np.bincount(owner, weights=lit, minlength=n)
-        total = np.bincount(owner, minlength=n)
+        seen = np.bincount(owner, weights=lit, minlength=n) + side_seen
+        total = np.bincount(owner, minlength=n) + side_total
         all_lit = (seen == total) & corners_lit.all(axis=1)
         dark = (seen == 0) & ~corners_lit.any(axis=1)
         if all_lit.any():
@@ -135,6 +142,29 @@ def _corners_lit(q: FaceQuadrature, face: NDArray[np.int64], tri: NDArray[np.flo
     """(T, 3): whether the wave reaches each corner of each sub-triangle (just inside it)."""
     inset = (1.0 - INSET) * tri + INSET * tri.mean(axis=1, keepdims=True)
     return _lit_at(q, np.repeat(face, 3), inset.reshape(-1, 3), bvh, k_hat).reshape(-1, 3)
+
+
+def _sides_lit(q: FaceQuadrature, face: NDArray[np.int64], tri: NDArray[np.float64],
+               bvh: ReflectorBVH, k_hat: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
+    """(lit, tested) per sub-triangle: the points :data:`SIDE_STEP` of the spacing apart along
+    its sides, corners excluded (just inside it); none without obstacles in the beam, where
+    only the dish's own shadow has an edge, and it is broad."""
+    count = len(face)
+    if bvh.obstacles is None or not count:
+        return np.zeros(count), np.zeros(count, dtype=np.int64)
+    refl = q.reflector
+    corners = np.einsum("tkj,tjc->tkc", tri, refl.vertices[refl.faces[face]])   # (T, 3, 3) m
+    length = np.linalg.norm(corners[:, [1, 2, 0]] - corners, axis=2)            # (T, 3)
+    inner = np.maximum(np.ceil(length / (SIDE_STEP * q.spacing)) - 1, 0).astype(np.int64).ravel()
+    side = np.repeat(np.arange(3 * count), inner)
+    k = np.arange(len(side)) - np.repeat(np.cumsum(inner) - inner, inner)
+    t = ((k + 1) / (inner[side] + 1))[:, None]
+    start, end = tri.reshape(-1, 3)[side], tri[:, [1, 2, 0]].reshape(-1, 3)[side]
+    owner = side // 3
+    points = (1.0 - INSET) * (start + t * (end - start)) + INSET * tri.mean(axis=1)[owner]
+    lit = _lit_at(q, face[owner], points, bvh, k_hat)
+    return (np.bincount(owner, weights=lit, minlength=count),
+            np.bincount(owner, minlength=count))
 
 
 def _lit_at(q: FaceQuadrature, face: NDArray[np.int64], bary: NDArray[np.float64],
