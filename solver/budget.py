@@ -524,18 +524,3 @@ def noise_budget(sphere: SphereGrid, F: float, D: float, noise_db: float, readin
     return response.budget(noise_db, readings, gain_known, rim_targets, target_std, n_modes,
                            reference_samples)
 
-
-def map_noise_rms(sphere: SphereGrid, F: float, D: float, noise_variance: float,
-                  gain_known: bool, refined: bool, used: NDArray[np.bool_] | None = None,
-                  remove: Sequence[str] = ()) -> float:
-    """The RMS (m over the disk) by which readings of relative variance ``noise_variance`` per
-    cell spread the inverted map of a scan on ``sphere`` (F, D in m): the budget's readings
-    part of one reading per cell, delta_c taken as the map's (the refocus when ``refined``),
-    ``used`` and ``remove`` as in :func:`noise_response`. The inversion screens with it whether
-    the noise it estimates in a scan is worth its Monte Carlo (:func:`solver.invert.invert`)."""
-    if not noise_variance > 0:
-        return 0.0
-    response = noise_response(sphere, F, D, "refocus" if refined else "linear", None, used,
-                              remove)
-    return response.budget(math.sqrt(noise_variance) / DB, 1, gain_known).noise
-

@@ -29,7 +29,6 @@ from raysim.maps.surfacemap import surfacemap
 from raysim.progress import Progress
 from solver import boundary
 from solver.aperture import ApertureGrid, solver_grid
-from solver.budget import map_noise_rms
 from solver.central import CentralMode, central_mode_of, hole_radius
 from solver.equation import (
     debias,
@@ -209,7 +208,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     delta_c = removed.get("delta_c", 0.0)
     delta_out, coef = remove_terms(grid, delta, opts.terms, scan.F)
     spread = (float(np.sqrt(np.nanmean(std**2))) if std is not None
-              else noise_spread(scan, inverse, data, opts, refined, unseen, central, delta_out))
+              else noise_spread(scan, inverse, data, opts, unseen, central, delta_out))
     outcome = Outcome(scan, grid, inverse, linear, data, setup, history, weighted, coef,
                       gn.gain_factor if gn is not None else None, delta_c, mode)
     attrs = surface_attrs(opts, outcome)
@@ -419,42 +418,36 @@ def truth_on_grid(truth, scan: Scan, grid: ApertureGrid) -> NDArray[np.float64] 
 
 
 def noise_spread(scan: Scan, inverse: LinearInverse, data: MeasuredFA, opts: InvertOptions,
-                 refined: bool, unseen: Unobservable | None, central: CentralMode | None,
+                 unseen: Unobservable | None, central: CentralMode | None,
                  delta: NDArray[np.float64]) -> float:
     """RMS (m) by which the scan's noise, estimated from the scan when no ``intensity_std`` is
     stated (``data.noise_variance``), spreads the map ``delta`` (m); NaN when not measured.
 
-    The budget's operator (:func:`solver.budget.map_noise_rms`, on the cells that carry data)
-    screens: it assumes every sphere cell's noise averaged over its aperture footprint, which
-    an aperture grid coarser than 256 points does not do (the paper's dish: 1.8, 2.8 and 6 times
-    the budget at 96, 64 and 32 points), so it is scaled by 256 / N before the test. Where the
-    noise may matter the Monte Carlo of the stated case measures it, with the estimated noise
-    in every cell; clean data skip it (it costs about 1.8 s at 256 points).
+    :data:`SCREEN_DRAWS` draws of the Monte Carlo screen first (a rough figure: the spread
+    lies mostly in a few slow shapes); where they reach :data:`NOISE_SCREEN` of the map's RMS
+    the whole Monte Carlo of the stated case measures it, the estimated noise in every cell.
+    Clean data cost the two draws only (about 0.1 s at 256 points).
     """
     if opts.uncertainty_samples <= 0 or not data.noise_variance > 0:
         return float("nan")
-    used = np.isfinite(scan.intensity)
-    if scan.blocked is not None:
-        used &= ~scan.blocked
-    try:
-        budget = map_noise_rms(scan.sphere, scan.F, scan.D, data.noise_variance,
-                               not data.gain.estimated, refined, used, opts.terms)
-    except (SolverError, FieldMapError):  # a grid the budget does not read: measure it
-        budget = float("inf")
     inside = delta[np.isfinite(delta)]
     size = float(np.sqrt(np.mean(inside**2))) if inside.size else 0.0
-    if budget * max(1.0, BUDGET_GRID / inverse.grid.N) < NOISE_SCREEN * max(size, NOISE_WARNING_FLOOR):
+
+    def spread(samples: int) -> float:
+        std = monte_carlo_std(scan, inverse, data, samples, opts.seed, unseen)
+        if central is not None:
+            std = central.blank(inverse.grid, std)
+        return float(np.sqrt(np.nanmean(std**2)))
+
+    if spread(SCREEN_DRAWS) < NOISE_SCREEN * max(size, NOISE_WARNING_FLOOR):
         return float("nan")
-    std = monte_carlo_std(scan, inverse, data, opts.uncertainty_samples, opts.seed, unseen)
-    if central is not None:
-        std = central.blank(inverse.grid, std)
-    return float(np.sqrt(np.nanmean(std**2)))
+    return spread(opts.uncertainty_samples)
 
 
-#: the aperture grid from which on the budget's operator holds for the map's noise
-BUDGET_GRID = 256
-#: the share of the map's RMS the budget's (grid-scaled) noise must reach for the Monte Carlo
-#: to measure it: a fifth of the warning's share (record.NOISE_SHARE_WARNING)
+#: draws of the screen, and the share of the map's RMS their rough spread must reach for the
+#: whole Monte Carlo to measure it: a fifth of the warning's share (record.NOISE_SHARE_WARNING),
+#: room for the two draws' scatter
+SCREEN_DRAWS = 2
 NOISE_SCREEN = 0.1
 
 
