@@ -101,7 +101,7 @@ def test_scene_method_is_simulates_default():
     # the scene's method runs unless the call names another; po's checks then apply
     with pytest.raises(RaysimError, match=r"must lie in \(0, 20\]"):
         simulate(scene, samples_per_wavelength=0.0)
-    with pytest.raises(RaysimError, match="apply to --method po"):
+    with pytest.raises(RaysimError, match="applies to --method po"):
         simulate(scene, method="go", samples_per_wavelength=2.0)
 
 
