@@ -106,7 +106,9 @@ def test_shadowed_samples_carry_no_current():
     lit_area = np.hypot(src[3], src[6]).sum() * po.ETA0 / 2.0
     # the plate hides 16 m^2 of the disk and is lit over 16 m^2 itself
     disk_area = s.area[:, 2][s.face < len(faces) - 2].sum()
-    assert lit_area == pytest.approx(disk_area, rel=5e-3)  # the shadow edge cuts through faces
+    # the faces the shadow's edge crosses are integrated over their lit part
+    # (raysim.optics.shadow_edge): whole samples kept or dropped missed by up to 5e-3
+    assert lit_area == pytest.approx(disk_area, rel=1e-5)
     assert stats.n_lit < stats.n_samples
 
     def under(p, margin):
@@ -115,8 +117,11 @@ def test_shadowed_samples_carry_no_current():
     on_disk = src[2] == 0.0
     lit_disk = src[:3, on_disk].T
     assert not under(lit_disk, -0.05).any()
+    # every sample of a face the shadow does not reach is kept as the plan made it
     all_disk = s.points[s.face < len(faces) - 2]
-    assert (~under(lit_disk, 0.05)).sum() == (~under(all_disk, 0.05)).sum()
+    clear = all_disk[~under(all_disk, 0.6)]                   # beyond the faces the edge crosses
+    kept = lit_disk[~under(lit_disk, 0.6)]
+    assert len(kept) == len(clear)
 
 
 @pytest.mark.parametrize(("D", "F", "faces", "f_ghz"), [(110.0, 33.0, 5.0, 0.3), (110.0, 33.0, 5.0, 3.0),
