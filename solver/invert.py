@@ -71,6 +71,7 @@ from solver.record import (
     accuracy_attrs,
     fit_attrs,
     hole_attrs,
+    map_rms,
     noise_spread_attrs,
     rim_attrs,
     ring_attrs,
@@ -430,8 +431,7 @@ def noise_spread(scan: Scan, inverse: LinearInverse, data: MeasuredFA, opts: Inv
     """
     if opts.uncertainty_samples <= 0 or not data.noise_variance > 0:
         return float("nan")
-    inside = delta[np.isfinite(delta)]
-    size = float(np.sqrt(np.mean(inside**2))) if inside.size else 0.0
+    size = map_rms(delta)
 
     def spread(samples: int) -> float:
         std = monte_carlo_std(scan, inverse, data, samples, opts.seed, unseen)

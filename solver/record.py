@@ -213,16 +213,22 @@ def noise_spread_attrs(spread: float, stated: bool, data: MeasuredFA,
             "scan's stated intensity_std" if stated else
             f"readings' noise {data.noise_source}, the same in every cell"),
     }
-    inside = delta[np.isfinite(delta)]
-    size = float(np.sqrt(np.mean(inside**2))) if inside.size else 0.0
+    size = map_rms(delta)
     if spread > NOISE_SHARE_WARNING * max(size, NOISE_WARNING_FLOOR):
         db = 10.0 / np.log(10.0) * float(np.sqrt(data.noise_variance))  # as the budget's dB
+        share = f"{100 * spread / size:.0f} % of" if size > 0 else "more than"
         attrs["noise_warning"] = (
             f"the readings' noise ({db:.2g} dB per cell) alone spreads the map by "
-            f"{um_text(spread)} um RMS, {100 * spread / size:.0f} % of the map's own RMS "
+            f"{um_text(spread)} um RMS, {share} the map's own RMS "
             f"({um_text(size)} um): the map is mostly noise; average more readings per point "
             "(raysim budget gives how many a target RMS needs)")
     return attrs
+
+
+def map_rms(delta: NDArray[np.float64]) -> float:
+    """RMS (m) of a map over its finite cells; 0 where it has none."""
+    inside = delta[np.isfinite(delta)]
+    return float(np.sqrt(np.mean(inside**2))) if inside.size else 0.0
 
 
 def _delta_c_attrs(out: Outcome) -> dict[str, Any]:
