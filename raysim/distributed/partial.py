@@ -6,20 +6,24 @@
   is made of (to say what differs when a resume is refused), the grid's point count and the
   block size; one float64 array per part of the engine, ``(n_points, *tail)``, one block per
   chunk, so no two blocks share a chunk (a chunk torn by a kill fails its block's checksum);
-- ``context.json``: the context's attributes (the same from every worker), written before any
-  block's marker;
+- ``context.json``: the context's attributes (the same from every worker) and their SHA-256
+  with the run's fingerprint, written before any block's marker;
 - ``blocks/NNNNNN.json``: the completion marker of each block, written last (atomically, by
   rename) with the block's figures, the digest of the elements that made it, ``sha256`` (per
-  part, the SHA-256 of the block's float64 values in C order, as written) and ``count``, how
-  many times the block was computed and written (1; more only if two workers ran it at once,
-  which the FieldMap records as ``blocks_computed_twice``).
+  part, the SHA-256 of the run's fingerprint, the block's index, the part's name and its
+  float64 values in C order, as written: a block moved to another index or brought from
+  another run's store fails it) and ``count``, how many times the block was computed and
+  written (1; more only if two workers ran it at once, which the FieldMap records as
+  ``blocks_computed_twice``).
 
 A block whose marker exists is not computed again: a killed client or worker resumes from
 the markers, and a worker handed a block already marked (Dask rerunning a task whose result
 was lost with its worker) skips it. A resume first re-reads every marked block
 (:meth:`PartialStore.verify`): one that does not decode, has the wrong shape, or whose values
 do not match its checksum (a chunk file removed reads as NaN) loses its marker and its chunks
-and is computed again (:meth:`PartialStore.reset`).
+and is computed again (:meth:`PartialStore.reset`); a ``context.json`` that does not match its
+checksum is made again with one block. Arrays whose metadata (shape, chunks, type) differ from
+the store's layout are refused when the store opens.
 """
 
 from __future__ import annotations
@@ -39,7 +43,7 @@ import numpy as np
 from raysim.distributed.cluster import ClusterError
 from raysim.files import atomic_path
 
-FORMAT = 1
+FORMAT = 2  # 2: checksums bound to the run, the block and the part; context checksummed
 SUFFIX = ".partial.zarr"
 
 
@@ -113,6 +117,7 @@ class PartialStore:
         except (KeyError, TypeError, ValueError, OSError) as exc:
             raise ClusterError(f"{path}: its metadata cannot be read ({type(exc).__name__}: {exc}); "
                                "delete it to start again") from exc
+        store._check_layout()
         if fingerprint is not None and store.fingerprint != fingerprint:
             theirs = dict(group.attrs.get("fingerprint_parts", {}))
             ours = description or {}
@@ -120,6 +125,18 @@ class PartialStore:
             raise ClusterError(f"{path} holds blocks of another run (it differs in: "
                                f"{', '.join(differ) or 'its fingerprint'}): delete it to start again")
         return store
+
+    def _check_layout(self) -> None:
+        """Refuse arrays whose shape, chunks or type are not the layout's: values written
+        through edited metadata would come back as other numbers."""
+        for name, tail in self.parts.items():
+            array = self._array(name)
+            layout = ((self.n_points, *tail), (self.block_size, *tail), np.dtype(np.float64))
+            if (tuple(array.shape), tuple(array.chunks), np.dtype(array.dtype)) != layout:
+                raise ClusterError(
+                    f"{self.path}: its array {name!r} has shape {tuple(array.shape)}, chunks "
+                    f"{tuple(array.chunks)} and type {array.dtype}, not the store's "
+                    f"{layout[0]}, {layout[1]} and float64: delete it to start again")
 
     # --- blocks ------------------------------------------------------------------------------
     @property
@@ -163,7 +180,7 @@ class PartialStore:
                 raise ClusterError(f"block {index}: part {name!r} has shape {values.shape}, "
                                    f"expected {(hi - lo, *tail)}")
             self._array(name)[lo:hi] = values
-            sums[name] = checksum(values)
+            sums[name] = self._checksum(index, name, values)
         previous = self.marker(index)
         count = 1 + (int(previous["count"]) if previous else 0)
         _write_json(self._marker(index), {**record, "index": index, "count": count, "sha256": sums})
@@ -181,9 +198,12 @@ class PartialStore:
                 values = np.asarray(self._array(name)[lo:hi])
             except Exception:  # a truncated or garbled chunk: its codec's error
                 return False
-            if values.shape != (hi - lo, *tail) or checksum(values) != sums[name]:
+            if values.shape != (hi - lo, *tail) or self._checksum(index, name, values) != sums[name]:
                 return False
         return True
+
+    def _checksum(self, index: int, name: str, values: np.ndarray) -> str:
+        return checksum(values, f"{self.fingerprint}/{index}/{name}")
 
     def verify(self) -> list[int]:
         """The marked blocks that fail :meth:`intact` (and markers outside the grid), sorted."""
@@ -211,23 +231,35 @@ class PartialStore:
 
     # --- the context's attributes ------------------------------------------------------------
     def context(self) -> dict | None:
+        """The context's attributes; None while none are recorded or when they do not match
+        their checksum."""
         try:
-            return json.loads((self.path / "context.json").read_text())
-        except (FileNotFoundError, ValueError):
+            record = json.loads((self.path / "context.json").read_text())
+            attrs, sha = record["attrs"], record["sha256"]
+        except (FileNotFoundError, ValueError, KeyError, TypeError):
             return None
+        return attrs if isinstance(attrs, dict) and sha == self._context_sum(attrs) else None
 
     def set_context(self, attrs: dict) -> None:
         """Record the context's attributes once (every writer's are the same)."""
         if not (self.path / "context.json").is_file():
-            _write_json(self.path / "context.json", attrs)
+            _write_json(self.path / "context.json",
+                        {"attrs": attrs, "sha256": self._context_sum(attrs)})
+
+    def _context_sum(self, attrs: dict) -> str:
+        text = json.dumps(attrs, sort_keys=True, allow_nan=True, default=_plain)
+        return hashlib.sha256(f"{self.fingerprint}/context/{text}".encode()).hexdigest()
 
     def remove(self) -> None:
         shutil.rmtree(self.path, ignore_errors=True)
 
 
-def checksum(values: np.ndarray) -> str:
-    """SHA-256 (hex) of ``values`` as float64 in C order: what a marker records per part."""
-    return hashlib.sha256(np.ascontiguousarray(values, dtype=np.float64).tobytes()).hexdigest()
+def checksum(values: np.ndarray, label: str = "") -> str:
+    """SHA-256 (hex) of ``label`` (UTF-8, then a NUL) and ``values`` as float64 in C order:
+    what a marker records per part, labelled with the run, the block and the part."""
+    digest = hashlib.sha256(label.encode() + b"\0")
+    digest.update(np.ascontiguousarray(values, dtype=np.float64).tobytes())
+    return digest.hexdigest()
 
 
 def _write_json(path: Path, value: dict) -> None:

@@ -4,6 +4,7 @@ single-process FieldMap bit for bit whatever the split, resumable, and one-line 
 from __future__ import annotations
 
 import itertools
+import json
 import socket
 import subprocess
 import sys
@@ -237,6 +238,52 @@ def test_a_resume_brings_back_a_torn_context(scene, single, inproc, tmp_path):
     ds = simulate_blocks(scene, out, "po", scheduler=inproc, block_size=40, resume=True)
     assert_same_fieldmap(single["po"], ds)
     assert (ds.attrs["blocks_repaired"], ds.attrs["blocks_computed"]) == (1, 1)
+
+
+def test_a_resume_rebuilds_an_edited_context_and_recomputes_swapped_blocks(scene, single, inproc,
+                                                                           tmp_path):
+    """Files that parse but lie: context.json with another diameter and focal length (the
+    inversion reads them), and blocks 1 and 3 swapped, chunks and markers together (each
+    marker's checksum matches the values beside it). Their checksums are bound to the run,
+    the block and the part: all three are made again and the FieldMap is the single-process
+    one (before: the edited dish's attributes and other points' intensities, exit 0)."""
+    out = tmp_path / "field.nc"
+    job, description = scene_job(scene, "po", Options(), "cpu", 1, 40)
+    path = partial_path(out)
+    store = PartialStore.create(path, job.key, description, job.parts(), job.n_points, 40)
+    bounds = block_bounds(job.n_points, 40)
+    with connect(inproc) as cluster:
+        run_blocks(cluster.client, job, list(range(len(bounds))), bounds, store)
+    context = json.loads((path / "context.json").read_text())
+    context["attrs"]["diameter"] += 1.0
+    context["attrs"]["focal_length"] += 1.0
+    (path / "context.json").write_text(json.dumps(context))
+    one, three = _chunk_files(path, 1), _chunk_files(path, 3)
+    for a, b in [*zip(one, three, strict=True),
+                 (path / "blocks" / "000001.json", path / "blocks" / "000003.json")]:
+        a_bytes = a.read_bytes()
+        a.write_bytes(b.read_bytes())
+        b.write_bytes(a_bytes)
+    reopened = PartialStore.open(path)
+    assert reopened.context() is None and reopened.verify() == [1, 3]
+    ds = simulate_blocks(scene, out, "po", scheduler=inproc, block_size=40, resume=True)
+    assert_same_fieldmap(single["po"], ds)
+    assert ds.attrs["blocks_repaired"] == 2
+
+
+def test_a_partial_store_whose_array_type_was_edited_is_refused(scene, inproc, tmp_path):
+    """float64 made float32 in one part's metadata: the recomputed blocks would be stored
+    rounded (3e-6 off the single-process run, exit 0); the store is refused and kept."""
+    out = tmp_path / "field.nc"
+    job, description = scene_job(scene, "po", Options(), "cpu", 1, 40)
+    path = partial_path(out)
+    PartialStore.create(path, job.key, description, job.parts(), job.n_points, 40)
+    part = next(p for p in path.iterdir() if (p / "zarr.json").is_file())
+    meta = part / "zarr.json"
+    meta.write_text(meta.read_text().replace('"float64"', '"float32"'))
+    with pytest.raises(ClusterError, match="float32, not the store's") as info:
+        simulate_blocks(scene, out, "po", scheduler=inproc, block_size=40, resume=True)
+    assert "\n" not in str(info.value) and path.exists()
 
 
 def _write_bump(path: Path, amplitude_m: float, x0_m: float) -> None:
