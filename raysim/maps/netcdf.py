@@ -8,7 +8,9 @@ An operating-system failure names the target, never the temporary file.
 
 from __future__ import annotations
 
+import errno
 import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -63,8 +65,23 @@ def write_atomic(ds: xr.Dataset, path: str | os.PathLike[str],
     first (:func:`check_attrs`)."""
     check_attrs(ds, error)
     with atomic_path(path) as tmp:
-        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
+        try:
+            ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
+        except (RuntimeError, PermissionError) as exc:
+            # the NetCDF library reports a full disk as "NetCDF: HDF error" (RuntimeError), or
+            # as a permission error when not even its header fits: say what it most likely is
+            raise OSError(errno.ENOSPC if _nearly_full(tmp) else errno.EIO,
+                          "no space left on the device" if _nearly_full(tmp)
+                          else f"the NetCDF library could not write it ({exc})") from None
     return Path(path)
+
+
+def _nearly_full(path: Path) -> bool:
+    """Whether the file system holding ``path`` has less than 1 MiB free."""
+    try:
+        return shutil.disk_usage(path.parent).free < 2**20
+    except OSError:
+        return False
 
 
 def check_attrs(ds: xr.Dataset, error: type[Exception]) -> None:

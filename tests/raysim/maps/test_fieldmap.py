@@ -62,6 +62,32 @@ def test_write_is_atomic_and_keeps_the_old_file_on_failure(tmp_path: Path, monke
     assert [p.name for p in tmp_path.iterdir()] == ["f.nc"]  # no temporary left behind
 
 
+def test_a_full_disk_under_the_netcdf_library_is_an_os_error_naming_the_file(tmp_path: Path,
+                                                                             monkeypatch):
+    """netCDF4 reports a full disk as RuntimeError("NetCDF: HDF error"), which reached the
+    CLI as a 70-line traceback with exit 1: it is an OSError naming the file (one line, exit 2
+    in the CLI), the old map intact."""
+    import shutil
+    from collections import namedtuple
+
+    _, ds = small_map()
+    path = save(ds, tmp_path / "f.nc")
+    before = path.read_bytes()
+
+    def hdf_error(self, *args, **kwargs):
+        Path(args[0]).write_bytes(b"half a file")
+        raise RuntimeError("NetCDF: HDF error")
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", hdf_error)
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(2**21, 2**21 - 4096, 4096))
+    with pytest.raises(OSError, match="no space left on the device") as info:
+        save(ds, path)
+    assert str(path) in str(info.value)
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["f.nc"]
+
+
 @pytest.mark.parametrize(
     ("damage", "message"),
     [
