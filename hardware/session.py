@@ -212,6 +212,12 @@ def fieldmap_from_journal(plan: ScanPlan, path: str | os.PathLike[str],
         raise JournalError(f"{path}: the journal has {header.get('steps')} steps, "
                            f"the plan {len(plan.steps())}")
     check_journal_plan(plan, header, records, path, lines)
+    if header.get("version", 1) >= 2 and lines and lines[0] == 2:
+        # each session writes its line before its first step (hardware.journal): a step right
+        # after the header lost it, and a rehearsal would read as a measurement
+        raise JournalError(f"{path}: step {records[0].n} on line 2 has no session line before "
+                           "it (whether the rig was simulated, the meter's identity): the journal "
+                           "was cut or edited")
     # the last session's instruments (hardware.journal), under what the caller knows now
     return build_fieldmap(plan, records, {"journal_fingerprint": header.get("fingerprint", ""),
                                           **session, **(attrs or {})})

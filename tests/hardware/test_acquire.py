@@ -398,10 +398,16 @@ def test_a_journal_alone_gives_the_fieldmap_the_scans_attributes(tmp_path: Path)
         assert set(same(attrs)) == set(same(original))
         for key, value in same(original).items():
             assert np.array_equal(attrs[key], value, equal_nan=isinstance(value, float)), key
-    # a journal an earlier raysim wrote: no session line; it resumes and assembles as before
+    # the session line cut from this (version 2) journal: refused, not a measurement
     lines = journal.read_bytes().splitlines(keepends=True)
     old = [line for line in lines if not line.startswith(b'{"session"')]
     assert len(old) == len(lines) - 1
+    cut = tmp_path / "cut.journal"
+    cut.write_bytes(b"".join(old))
+    with pytest.raises(JournalError, match="no session line before it"):
+        fieldmap_file_from_journal(plan_path, tmp_path / "c.nc", journal=cut)
+    assert not (tmp_path / "c.nc").exists()
+    # a journal an earlier raysim wrote: no session line; it resumes and assembles as before
     header = {**read_journal(journal)[0], "version": 1}
     journal.write_bytes(_with_crc(header) + b"".join(old[1:]))
     assert read_journal(journal)[0]["version"] == 1
