@@ -23,10 +23,12 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import signal
 import socket
 import tempfile
+import threading
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 
 from raysim.errors import RaysimError
@@ -271,6 +273,70 @@ def atomic_path(path: str | os.PathLike[str], clean: bool = True) -> Iterator[Pa
     left beside it (:func:`remove_stale`).
     """
     path = Path(path)
+    tmp = _stage(path, clean)
+    try:
+        yield tmp
+        _flush(tmp)
+        _commit(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_together(writers: Mapping[str | os.PathLike[str], Callable[[Path], object]]) -> list[Path]:
+    """Write several files as one set: each ``writers[path](tmp)`` writes a temporary file
+    beside its ``path``; only when every one is written and flushed are they renamed onto
+    their paths, with SIGINT and SIGTERM held back meanwhile (raised once the set is in
+    place). A failure, a full disk or an interrupt leaves the previous files, all of them; only
+    a kill between two renames (microseconds) could mix the sets. Returns the paths."""
+    staged: list[tuple[Path, Path]] = []
+    try:
+        for path, write in writers.items():
+            path = Path(path)
+            staged.append((_stage(path, clean=True), path))
+            try:
+                write(staged[-1][0])
+                _flush(staged[-1][0])
+            except OSError as exc:
+                raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
+        with _signals_held():
+            for tmp, path in staged:
+                try:
+                    _commit(tmp, path)
+                except OSError as exc:
+                    raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
+    finally:
+        for tmp, _ in staged:
+            tmp.unlink(missing_ok=True)  # none left after the renames; all of them after a failure
+    return [path for _, path in staged]
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """SIGINT and SIGTERM recorded while the block runs and raised again after it, to the
+    handlers that were there. (A signal mask would not do: the kernel hands a process's
+    signal to any thread that does not block it, and Python then runs its handler in the main
+    thread at once.) Outside the main thread, where handlers cannot be set, nothing is held."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    held = (signal.SIGINT, signal.SIGTERM)
+    previous = {s: signal.signal(s, lambda signum, frame: pending.append(signum)) for s in held}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        for s in dict.fromkeys(pending):
+            signal.raise_signal(s)
+
+
+def _stage(path: Path, clean: bool) -> Path:
+    """A new empty temporary file beside ``path`` named for this writer (its folder made)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     if clean:
         remove_stale(path)
@@ -279,25 +345,25 @@ def atomic_path(path: str | os.PathLike[str], clean: bool = True) -> Iterator[Pa
     except OSError as exc:
         raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
     os.close(fd)
-    tmp = Path(name)
-    try:
-        yield tmp
-        os.chmod(tmp, new_file_mode())
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-        with contextlib.suppress(OSError):  # the rename itself on disk (not every FS allows it)
-            dir_fd = os.open(path.parent, os.O_RDONLY)
-            try:
-                os.fsync(dir_fd)
-            finally:
-                os.close(dir_fd)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    return Path(name)
+
+
+def _flush(tmp: Path) -> None:
+    """Give ``tmp`` a new file's mode and sync its contents to disk."""
+    os.chmod(tmp, new_file_mode())
+    with open(tmp, "rb+") as fh:
+        os.fsync(fh.fileno())
+
+
+def _commit(tmp: Path, path: Path) -> None:
+    """Rename ``tmp`` onto ``path`` and sync the rename itself where the file system allows."""
+    os.replace(tmp, path)
+    with contextlib.suppress(OSError):
+        dir_fd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dir_fd)
+        finally:
+            os.close(dir_fd)
 
 
 def probe_writable(folder: str | os.PathLike[str]) -> None:

@@ -22,13 +22,15 @@ import json
 import math
 import numbers
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from raysim.errors import RaysimError, SceneError
-from raysim.files import write_text
+from raysim.files import write_together
 from raysim.scene.scene import check_frequency
 from solver import surface
 from solver.actuators import DEFAULT_SCREWS, ActuatorLayout, corners_layout, read_actuators, screws_layout
@@ -212,11 +214,12 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
     texts = {"commands.csv": commands_csv(run, header), "commands.toml": commands_toml(run, header),
              "zernike.csv": zernike_csv(run, header),
              "summary.txt": "\n".join([SIGN.format(unit=unit), *summary_lines(run)]) + "\n"}
-    # every file is made before the first is written, so a failure leaves the folder as it was
-    out.mkdir(parents=True, exist_ok=True)
-    for name, text in texts.items():
-        write_text(out / name, text)
-    surface.save(residual, out / "residual.nc")
+    # one set: a failure, a full disk or an interrupt leaves the folder's previous files, all of
+    # them (a crew must never read commands beside another fit's residual and summary)
+    writers: dict[Path, Callable[[Path], object]] = {
+        out / name: partial(Path.write_text, data=text, encoding="utf-8") for name, text in texts.items()}
+    writers[out / "residual.nc"] = partial(surface.save, residual)
+    write_together(writers)
     run.files = [out / n for n in OUTPUTS]
     return run
 

@@ -39,6 +39,58 @@ def test_an_interrupted_write_leaves_the_previous_file_and_no_temporary(tmp_path
     assert _listing(tmp_path) == {"out.bin": b"new"}
 
 
+def test_a_set_of_files_is_replaced_whole_or_not_at_all(tmp_path, monkeypatch):
+    """QA: `raysim correct` wrote its five files one by one, so a SIGTERM or a full disk
+    midway left new commands beside the previous fit's residual and summary. A failure while
+    writing the third file leaves the old set; a SIGTERM arriving between two renames is
+    raised only once the whole new set is in place."""
+    import signal
+
+    from raysim import files
+
+    names = ("a.csv", "b.toml", "c.nc")
+    for name in names:
+        (tmp_path / name).write_text("old " + name)
+    old = _listing(tmp_path)
+
+    def writers(third):
+        return {tmp_path / n: (lambda p, n=n: p.write_text("new " + n)) for n in names[:2]} | {
+            tmp_path / names[2]: third}
+
+    def full(p):
+        p.write_text("half")
+        _disk_full()
+
+    with pytest.raises(OSError, match="No space left") as info:
+        files.write_together(writers(full))
+    assert info.value.filename == str(tmp_path / "c.nc")
+    assert _listing(tmp_path) == old  # no new file, no temporary
+
+    class Stopped(Exception):
+        pass
+
+    def stop(signum, frame):
+        raise Stopped
+
+    commit = files._commit
+    calls = []
+
+    def commit_then_signal(tmp, path):
+        commit(tmp, path)
+        calls.append(path)
+        if len(calls) == 1:
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        monkeypatch.setattr(files, "_commit", commit_then_signal)
+        with pytest.raises(Stopped):
+            files.write_together(writers(lambda p: p.write_text("new c.nc")))
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert _listing(tmp_path) == {n: ("new " + n).encode() for n in names}
+
+
 def test_render_on_a_full_disk_keeps_the_previous_picture(tmp_path, capfd, monkeypatch):
     grid = SphereGrid(3.0, 10, 20)
     t, _ = np.meshgrid(grid.theta, grid.phi, indexing="ij")
