@@ -72,16 +72,26 @@ def checksum(values: dict[str, np.ndarray], identity: str = "") -> str:
     return sha.hexdigest()
 
 
-def sample_checksum(values: dict[str, np.ndarray], index: int, seed: int) -> str:
+def binding(attrs: Any) -> str:
+    """What a store's checksums hash before the unit's own identity: since format 3 the spec's
+    fingerprint (``attrs``: the store's root attributes), so a sample copied in from a store
+    of another spec with the same seed fails; "" in format 2."""
+    made = attrs.get("raysim_dataset_format")
+    return f"store {attrs.get('fingerprint', '')}\n" if isinstance(made, int) and made >= 3 else ""
+
+
+def sample_checksum(values: dict[str, np.ndarray], index: int, seed: int, bound: str = "") -> str:
     """The checksum of sample ``index`` (whose seed is ``seed``) holding ``values``: its index
     and seed are hashed with its data, so a sample's chunks moved to another sample's place
-    (a bad merge or copy of stores) fail it, as a single damaged chunk does."""
-    return checksum(values, f"sample {int(index)} seed {int(seed)}\n")
+    (a bad merge or copy of stores) fail it, as a single damaged chunk does; ``bound``: the
+    store's :func:`binding`."""
+    return checksum(values, f"{bound}sample {int(index)} seed {int(seed)}\n")
 
 
-def ideal_checksum(values: np.ndarray, f_index: int) -> str:
-    """The checksum of the ideal intensity of frequency ``f_index`` (its index hashed too)."""
-    return checksum({"intensity_ideal": values}, f"frequency {int(f_index)}\n")
+def ideal_checksum(values: np.ndarray, f_index: int, bound: str = "") -> str:
+    """The checksum of the ideal intensity of frequency ``f_index`` (its index and the store's
+    :func:`binding` hashed too)."""
+    return checksum({"intensity_ideal": values}, f"{bound}frequency {int(f_index)}\n")
 
 
 def is_data(array: ArraySpec | Any, name: str) -> bool:
@@ -374,12 +384,12 @@ class GuardedRecords:
 
 
 def read_verified(arrays: dict[str, Any], path: str, indices: Sequence[int] | np.ndarray,
-                  names: list[str]) -> dict[str, np.ndarray]:
+                  names: list[str], bound: str = "") -> dict[str, np.ndarray]:
     """Every data array ``names`` of the samples ``indices`` (increasing; ``arrays`` from
     :func:`open_arrays`), each sample checked done and against its checksum: name -> values
     (len(indices), ...) in the stored dtype. All the arrays are read at once (Zarr's event
     loop), and the values hashed are the values returned. A sample that fails raises
-    CorruptSampleError naming the store and the sample."""
+    CorruptSampleError naming the store and the sample. ``bound``: the store's :func:`binding`."""
     idx = np.asarray(indices, dtype=np.int64)
     if not len(idx):
         return {name: np.empty((0, *arrays[name].shape[1:]), dtype=arrays[name].dtype) for name in names}
@@ -391,7 +401,7 @@ def read_verified(arrays: dict[str, Any], path: str, indices: Sequence[int] | np
         sample = {name: read[name][k] for name in names}
         stored, seed = read["checksum"][k], read["seed"][k]
         if stored is None or seed is None or any(v is None for v in sample.values()) \
-                or str(stored) != sample_checksum(sample, index, int(seed)):
+                or str(stored) != sample_checksum(sample, index, int(seed), bound):
             raise CorruptSampleError(f"{path}: sample {index}'s stored data do not match its checksum "
                                      f"(a chunk was removed or damaged); {resume_hint(path)}")
     return {name: np.stack(read[name]) for name in names}
@@ -439,7 +449,7 @@ def read_ideals(group: zarr.Group, path: str) -> tuple[np.ndarray, np.ndarray, n
                                 f"({type(exc).__name__}); {resume_hint(path)}") from exc
     read = _read_all(arrays, np.arange(arrays["intensity_ideal"].shape[0]))
     ok = np.array([s is not None and int(s) == _DONE and v is not None and c is not None
-                   and str(c) == ideal_checksum(v, f)
+                   and str(c) == ideal_checksum(v, f, binding(group.attrs))
                    for f, (s, c, v) in enumerate(zip(read["ideal_status"], read["ideal_checksum"],
                                                      read["intensity_ideal"], strict=True))], dtype=bool)
     shape = tuple(arrays["intensity_ideal"].shape[1:])

@@ -195,7 +195,8 @@ class Loader:
         order = np.argsort(idx, kind="stable")
         back = np.empty_like(order)
         back[order] = np.arange(len(idx))
-        values = integrity.read_verified(self._arrays, self.store, idx[order], self._names)
+        values = integrity.read_verified(self._arrays, self.store, idx[order], self._names,
+                                         integrity.binding(self.group.attrs))
         intensity = np.asarray(values[SOURCES[self.source]], dtype=np.float64)[back]
         target = np.asarray(values["deformation"], dtype=np.float64)[back]
         if self.representation == "intensity":

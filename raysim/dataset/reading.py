@@ -79,7 +79,8 @@ def sample_fieldmap(ds: xr.Dataset, index: int, source: str = "clean") -> xr.Dat
     sample = ds.isel(sample=index)
     number = int(sample["sample"].values)  # the sample's index in the store
     names = integrity.data_names(group, path)
-    values = integrity.read_verified(integrity.open_arrays(group, path, names), path, [number], names)
+    values = integrity.read_verified(integrity.open_arrays(group, path, names), path, [number], names,
+                                     integrity.binding(group.attrs))
     frequency = float(values["frequency_hz"][0])
     ideal = integrity.ideal_of(path, *integrity.read_ideals(group, path), frequency)
     from raysim.scene import scene_of

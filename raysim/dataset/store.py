@@ -51,6 +51,7 @@ import zarr
 from raysim.dataset.integrity import (
     BOOKKEEPING,
     CHECKED_ATTRS,
+    binding,
     checksum,
     ideal_checksum,
     listed_data_names,
@@ -61,7 +62,7 @@ from raysim.dataset.integrity import (
 from raysim.dataset.integrity import sample_checksum as integrity_sample_checksum
 from raysim.dataset.sampling import sample_seed
 from raysim.dataset.spec import DatasetError, DatasetSpec
-from raysim.dataset.store_layout import FORMAT, ArraySpec, layout
+from raysim.dataset.store_layout import FORMAT, READ_FORMATS, ArraySpec, layout
 from raysim.distributed.inputs import changed_inputs
 from raysim.version import VERSION_ATTR, __version__
 
@@ -211,12 +212,13 @@ def check_format(path: str, attrs: Any) -> None:
     raysim's (older: its checksums do not record which sample they are, so they cannot be
     verified as this one does) or none."""
     made = attrs.get("raysim_dataset_format")
-    if made == FORMAT:
+    if made in READ_FORMATS and not isinstance(made, bool):
         return
     if isinstance(made, int) and not isinstance(made, bool) and made >= 1:
         which = "an older" if made < FORMAT else "a newer"
         raise DatasetError(f"{path}: made by {which} raysim (dataset store format {made}, this raysim "
-                           f"reads format {FORMAT}): make the dataset again at a new store path")
+                           f"reads formats {', '.join(map(str, READ_FORMATS))}): make the dataset "
+                           "again at a new store path")
     raise DatasetError(f"{path}: not a raysim dataset store (format {FORMAT})")
 
 
@@ -258,7 +260,7 @@ def sample_checksum(group: zarr.Group, index: int, names: list[str] | None = Non
     """The checksum of sample ``index`` as stored (its data arrays and seed read back)."""
     names = data_names(group) if names is None else names
     values = {name: np.asarray(group[name][index]) for name in names}
-    return integrity_sample_checksum(values, index, int(group["seed"][index]))
+    return integrity_sample_checksum(values, index, int(group["seed"][index]), binding(group.attrs))
 
 
 def require_checksums(group: zarr.Group, path: str) -> None:
@@ -288,6 +290,7 @@ def verify(group: zarr.Group, path: str, names: list[str],
         ideal_sums = _read_each(group["ideal_checksum"], np.arange(len(ideal_marks)))
         ideal_done = np.flatnonzero(ideal_marks == DONE)
         ideal_values = _read_each(group["intensity_ideal"], ideal_done)
+        bound = binding(group.attrs)
     except DatasetError:
         raise
     except Exception as exc:
@@ -300,10 +303,10 @@ def verify(group: zarr.Group, path: str, names: list[str],
         for k, index in enumerate(batch.tolist()):
             values = {name: read[name][k] for name in names}
             if any(v is None for v in values.values()) or \
-                    sums[index] != integrity_sample_checksum(values, index, int(seeds[index])):
+                    sums[index] != integrity_sample_checksum(values, index, int(seeds[index]), bound):
                 bad.append(index)
     ideal_bad = [int(f) for f, v in zip(ideal_done, ideal_values, strict=True)
-                 if v is None or ideal_sums[f] != ideal_checksum(v, int(f))]
+                 if v is None or ideal_sums[f] != ideal_checksum(v, int(f), bound)]
     return (sorted([*bad, *_lost_markers(marks, unreadable, sums)]),
             sorted([*ideal_bad, *_lost_markers(ideal_marks, ideal_unreadable, ideal_sums)]))
 
@@ -387,6 +390,7 @@ class Writer:
 
     def __post_init__(self) -> None:
         self._arrays: dict[str, Any] = {}
+        self.bound = binding(self.group.attrs)  # what its checksums hash (its format's rule)
 
     def __getitem__(self, name: str) -> Any:
         if name not in self._arrays:
@@ -430,7 +434,7 @@ class Writer:
         if self.names is None:  # the same for every sample of the store
             self.names = data_names(self.group)
         values = {name: np.asarray(self[name][index]) for name in self.names}
-        self["checksum"][index] = integrity_sample_checksum(values, index, self._seed(index))
+        self["checksum"][index] = integrity_sample_checksum(values, index, self._seed(index), self.bound)
         self["status"][index] = DONE
 
     def _seed(self, index: int) -> int:
@@ -451,7 +455,7 @@ class Writer:
         if intensity is not None:
             self["intensity_ideal"][f_index] = intensity
             stored = np.asarray(self["intensity_ideal"][f_index])
-            self["ideal_checksum"][f_index] = ideal_checksum(stored, f_index)
+            self["ideal_checksum"][f_index] = ideal_checksum(stored, f_index, self.bound)
             self["ideal_status"][f_index] = DONE
         else:
             self["ideal_error"][f_index] = " ".join(reason.split())[:500]

@@ -15,8 +15,11 @@ from raysim.dataset.effects import PREFIX, VARIABLES
 from raysim.dataset.spec import DatasetSpec
 
 #: the store's format (attribute ``raysim_dataset_format``); 2: a sample's checksum hashes its
-#: index and seed with its data, an ideal intensity's its frequency's index (1 did not)
-FORMAT = 2
+#: index and seed with its data, an ideal intensity's its frequency's index (1 did not); 3: both
+#: hash the spec's fingerprint too, so a sample copied from a store of another spec fails
+FORMAT = 3
+#: the formats this raysim reads and resumes (each checked as its own format hashes)
+READ_FORMATS = (2, 3)
 _COORD_CHUNK = 65536
 
 

@@ -307,6 +307,59 @@ def test_a_sample_moved_to_another_sample_s_place_fails_its_checksum(clean, copy
     assert_same_store(clean, copy)
 
 
+def test_a_sample_copied_from_a_store_of_another_spec_fails_its_checksum(clean, copy, spec, inproc,
+                                                                        tmp_path):
+    """QA: a sibling store made from another spec with the same seed (another mesh
+    resolution) has the same samples' seeds and indices; sample 2's chunks (data, checksum,
+    status) copied from it into this store passed the resume (exit 0) and the readers. Since
+    format 3 the checksums hash the spec's fingerprint: refused, then recomputed."""
+    text = small_demo_text(samples=4, measurement=False).replace("resolution_m = 1.0", "resolution_m = 1.2")
+    other_spec = parse_spec(text, source="other.toml", base=ROOT / "scenes")
+    assert other_spec.fingerprint != spec.fingerprint
+    other = tmp_path / "other.zarr"
+    generate(other_spec, other, scheduler=inproc)
+    group = zarr.open_group(str(other), mode="r")
+    for name, arr in group.arrays():
+        if tuple(arr.metadata.dimension_names or ())[:1] != ("sample",) or arr.chunks[0] != 1:
+            continue
+        source, target = other / name / "c" / "2", copy / name / "c" / "2"
+        if target.is_dir():
+            shutil.rmtree(target)
+        elif target.exists():
+            target.unlink()
+        if source.is_dir():
+            shutil.copytree(source, target)
+        elif source.exists():
+            shutil.copyfile(source, target)
+    assert not np.array_equal(zarr.open_group(str(copy), mode="r")["intensity"][2],
+                              zarr.open_group(str(clean), mode="r")["intensity"][2])
+    with pytest.raises(CorruptSampleError, match="sample 2's stored data"):
+        sample_fieldmap(open_dataset(copy), 2)
+    report = generate(spec, copy, resume=True, scheduler=inproc)
+    assert (report.repaired, report.computed) == (1, 1)
+    assert_same_store(clean, copy)
+
+
+def test_a_format_2_store_is_still_read_and_resumed(clean, copy, spec, inproc):
+    """Stores made before the fingerprint joined the checksums (format 2) keep their weaker
+    checksums and stay readable and resumable: rewritten here as format 2 wrote them."""
+    from raysim.dataset import integrity
+
+    group = zarr.open_group(str(copy), mode="r+")
+    names = zstore.data_names(group)
+    for i in range(group["status"].shape[0]):
+        values = {name: np.asarray(group[name][i]) for name in names}
+        group["checksum"][i] = integrity.sample_checksum(values, i, int(group["seed"][i]))
+    for f in range(group["ideal_status"].shape[0]):
+        group["ideal_checksum"][f] = integrity.ideal_checksum(np.asarray(group["intensity_ideal"][f]), f)
+    group.attrs["raysim_dataset_format"] = 2
+    integrity.record_static(group, spec)  # what format-2 creation recorded with its format
+    assert len(list(Loader(str(copy), split="all", batch_size=4))) == 1
+    assert sample_fieldmap(open_dataset(copy), 1)["intensity"].shape == (20, 72)
+    report = generate(spec, copy, resume=True, scheduler=inproc)
+    assert report.repaired == 0 and report.computed == 0
+
+
 def test_a_store_of_the_previous_format_is_refused_in_one_line(copy, spec, inproc):
     """A store of format 1 (its checksums do not record which sample they are): readers and a
     resume refuse it in one line saying it comes from an older raysim, and touch nothing."""
