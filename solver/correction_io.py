@@ -31,6 +31,7 @@ import numpy as np
 
 from raysim.errors import RaysimError, SceneError
 from raysim.files import write_together
+from raysim.maps.surfacemap import HARMONIC_UNOBSERVABLE
 from raysim.scene.scene import check_frequency
 from solver import surface
 from solver.actuators import DEFAULT_SCREWS, ActuatorLayout, corners_layout, read_actuators, screws_layout
@@ -200,6 +201,7 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
     corr = correct(grid, smap["deformation"].values, layout, acts, terms, std, focal_length=F)
     if f_note:
         corr.notes.append(f_note)
+    corr.notes += map_caveats(smap.attrs, layout.n_panels)
     sigma_before, sigma_after = ruze_sigmas(corr)
     run = CorrectionRun(corr, acts, unit, freqs, ruze(sigma_before, freqs), ruze(sigma_after, freqs),
                         zernike_fit(grid, corr.before, zernike_order),
@@ -222,6 +224,33 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
     write_together(writers)
     run.files = [out / n for n in OUTPUTS]
     return run
+
+
+#: what raysim invert warned of in the map, repeated where the commands are read
+MAP_WARNINGS = ("noise_warning", "hole_warning", "ring_warning", "refine_warning")
+
+
+def map_caveats(attrs, n_panels: int) -> list[str]:
+    """What the SurfaceMap's ``attrs`` say the map may not hold, for the commands' summary:
+    ``raysim invert``'s warnings, a harmonic part taken as zero on the rim (no rim targets),
+    and, for GO data on ``n_panels`` > 1 panels, the panel pistons GO does not see. The
+    predicted residual is of the map, so it leaves all of these out: a map that is mostly noise
+    gave commands that made the dish worse (25 -> 32 um) beside a prediction of 47 -> 16 um."""
+    lines = [f"WARNING (the map's, from raysim invert): {attrs[key]}" for key in MAP_WARNINGS
+             if key in attrs]
+    if lines:
+        lines.append("the predicted residual is the map's and leaves out the map's own errors "
+                     "warned of above: the dish may end worse than predicted")
+    if attrs.get("harmonic_part") == HARMONIC_UNOBSERVABLE:
+        lines.append("the map's harmonic part (tilt, astigmatism, any r^n cos n phi) was "
+                     "UNOBSERVABLE and taken as zero on the rim (no rim targets): whatever the "
+                     "dish has of it is neither corrected nor in the predicted residual; invert "
+                     "with --rim targets to include it")
+    if attrs.get("data_method") == "go" and n_panels > 1:
+        lines.append("GO data do not see a panel's piston against its neighbours (docs/"
+                     "inversion.md): steps between panels are not in the map, so the commands "
+                     "neither correct them nor count them in the predicted residual")
+    return lines
 
 
 def ruze_sigmas(c: Correction) -> tuple[float, float]:

@@ -318,3 +318,29 @@ def test_a_spreadsheets_byte_order_mark_reads_and_a_panel_named_twice_is_said(tm
     twice.write_text("\n".join([lines[0], ",".join(first), *lines[2:]]) + "\n")
     with pytest.raises(ActuatorError, match=f"panel {first[3].split(';')[0]} is named twice"):
         read_actuators(twice, LAYOUT)
+
+
+def test_the_commands_summary_repeats_what_the_map_may_not_hold(paper_field, tmp_path):
+    """QA: a map `invert` flagged as mostly noise (and without rim targets, from GO data on a
+    panelled dish) got commands whose summary predicted 47 -> 16 um with no word, while the
+    commands made the true dish worse (25 -> 32 um). The summary now repeats the map's warning
+    and says what the prediction leaves out; a clean map gets no warning line."""
+    from solver.invert import invert
+
+    field = paper_field.copy(deep=True)
+    i = field["intensity"].values
+    draw = np.random.default_rng(3).standard_normal(i.shape)
+    field["intensity"] = (("theta", "phi"), i * 10 ** (0.1 * draw / 10))
+    noisy = invert(field, N=64, refine_iterations=0, truth=None)
+    assert "noise_warning" in noisy.attrs
+    clean = invert(paper_field, N=64, refine_iterations=0, truth=None)
+    scene = _scene(tmp_path)
+    lines = {}
+    for name, smap in (("noisy", noisy), ("clean", clean)):
+        surface.save(smap, tmp_path / f"{name}.nc")
+        run = run_correct(tmp_path / f"{name}.nc", tmp_path / name, scene=scene)
+        lines[name] = (tmp_path / name / "summary.txt").read_text().splitlines()
+        assert any("panel's piston" in t for t in lines[name]) and any(
+            "harmonic part" in t and "UNOBSERVABLE" in t for t in lines[name]), run
+    assert f"WARNING (the map's, from raysim invert): {noisy.attrs['noise_warning']}" in lines["noisy"]
+    assert not any(t.startswith("WARNING") for t in lines["clean"])
