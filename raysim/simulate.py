@@ -677,8 +677,9 @@ def mesh_size_warning(D: float, fix: str = "set dish.mesh_unit_m = 0.001") -> st
 
 def summary(ds: xr.Dataset) -> str:
     """One line: points, rays, time and power balance of a simulated FieldMap (and PO's
-    quadrature warning, the panel-gap edges' warning, a mesh file's departure from its ideal,
-    and a mesh file's dish too large for a dish in metres, where the map has them)."""
+    quadrature warning, the panel-gap edges' warning, why an asked-for Fresnel correction was
+    not applied, a mesh file's departure from its ideal, and a mesh file's dish too large for
+    a dish in metres, where the map has them)."""
     line = _engine_summary(ds)
     if "quadrature_warning" in ds.attrs:
         line += f"; WARNING: {ds.attrs['quadrature_warning']}"
@@ -687,6 +688,8 @@ def summary(ds: xr.Dataset) -> str:
                  "wide, and --edges all treats each gap edge as a lone half-plane, which "
                  "overstates gaps narrower than a wavelength (docs/engines.md)")
     size = mesh_size_warning(float(ds.attrs.get("diameter", 0.0)))
+    if str(ds.attrs.get("fresnel_correction", "")).startswith("none: "):
+        line += f"; --fresnel not applied: {ds.attrs['fresnel_correction'][6:]}"
     if "mesh_departure_rms_m" in ds.attrs and size:
         line += f"; WARNING: {size}"
     if "mesh_departure_rms_m" in ds.attrs:

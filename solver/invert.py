@@ -453,7 +453,13 @@ NOISE_SCREEN = 0.1
 
 def monte_carlo_std(scan: Scan, inverse: LinearInverse, data: MeasuredFA, samples: int,
                     seed: int, unseen: Unobservable | None = None) -> NDArray[np.float64]:
-    """Std (m) of the linear solution under Gaussian intensity noise of ``intensity_std``
+    """Std (m) of the linear solution over :func:`monte_carlo_draws`."""
+    return np.std(monte_carlo_draws(scan, inverse, data, samples, seed, unseen), axis=0, ddof=1)
+
+
+def monte_carlo_draws(scan: Scan, inverse: LinearInverse, data: MeasuredFA, samples: int,
+                      seed: int, unseen: Unobservable | None = None) -> NDArray[np.float64]:
+    """Linear solutions (samples, N, N) (m) under Gaussian intensity noise of ``intensity_std``
     (the noise estimated from the scan, ``data.noise_variance``, where it states none).
 
     The inversion is linear in FA and FA is smooth in the intensity, so the linear solve's
@@ -477,4 +483,4 @@ def monte_carlo_std(scan: Scan, inverse: LinearInverse, data: MeasuredFA, sample
         if unseen is not None:
             delta, _ = unseen.remove(inverse.grid, delta)
         draws.append(delta)
-    return np.std(np.stack(draws), axis=0, ddof=1)
+    return np.stack(draws)

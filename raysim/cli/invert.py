@@ -28,8 +28,8 @@ def invert_command(
     model: str | None = typer.Option(
         None, help="Forward model of the refinement: go, po, po+ptd or go+edge (default: the one "
                    "that made the data, its FieldMap method; go for a measured scan). Each PO "
-                   "iteration is a PO run: about a minute at 0.3 GHz on two cores, growing with "
-                   "f^2; go+edge (geometric wave plus rim diffraction) takes seconds, growing with f."),
+                   "iteration is a PO run: a few seconds at 0.3 GHz on the paper's dish on two "
+                   "cores, about f^2 log f beyond; go+edge (geometric wave plus rim diffraction) takes seconds, growing with f."),
     refine_method: str = typer.Option(
         "auto", "--refine-method",
         help="auto (the default: Gauss-Newton with the model's exact Jacobian where at least 20 "

@@ -119,3 +119,12 @@ n_phi = 8
     path = tmp_path / "small.nc"
     save(ds, path)
     assert load(path).attrs["method"] == "go+edge"
+    # asked for where it does not apply (QA: a mesh file took --fresnel without a word): the
+    # run goes on, and its summary line says why the correction was left out
+    from raysim.simulate import summary
+
+    off_axis = parse_scene(scene.text.replace("frequency_hz = 2e9", "frequency_hz = 2e9\nincidence_theta_deg = 0.2"))
+    skipped = simulate(off_axis, fresnel=True)
+    assert skipped.attrs["fresnel_correction"] == "none: the incident wave is not on the axis"
+    assert "; --fresnel not applied: the incident wave is not on the axis" in summary(skipped)
+    assert "--fresnel" not in summary(ds) and "--fresnel" not in summary(plain)
