@@ -31,7 +31,7 @@ import numpy as np
 
 from raysim.errors import RaysimError, SceneError
 from raysim.files import write_together
-from raysim.maps.surfacemap import HARMONIC_UNOBSERVABLE
+from raysim.maps.surfacemap import HARMONIC_UNOBSERVABLE, NOISE_DRAWS
 from raysim.scene.scene import check_frequency
 from solver import surface
 from solver.actuators import DEFAULT_SCREWS, ActuatorLayout, corners_layout, read_actuators, screws_layout
@@ -63,6 +63,8 @@ class CorrectionRun:
     zernike_after: list
     files: list[Path]
     focal_length: float | None = None
+    #: what the commands' std came from (the summary's words)
+    std_source: str = "std"
 
 
 def scene_for(surface_map, scene_path: str | os.PathLike[str] | None, source: str):
@@ -198,7 +200,9 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
     F, f_note = focal_length_for(smap, scene_obj)
     grid = surface.grid_of(smap)
     std = smap["deformation_std"].values if "deformation_std" in smap else None
-    corr = correct(grid, smap["deformation"].values, layout, acts, terms, std, focal_length=F)
+    draws = smap[NOISE_DRAWS].values if NOISE_DRAWS in smap else None
+    corr = correct(grid, smap["deformation"].values, layout, acts, terms, std, focal_length=F,
+                   noise_draws=draws)
     if f_note:
         corr.notes.append(f_note)
     corr.notes += map_caveats(smap.attrs, layout.n_panels)
@@ -206,6 +210,10 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
     run = CorrectionRun(corr, acts, unit, freqs, ruze(sigma_before, freqs), ruze(sigma_after, freqs),
                         zernike_fit(grid, corr.before, zernike_order),
                         zernike_fit(grid, corr.after, zernike_order), [], F)
+    if draws is not None and corr.command_std is not None:
+        run.std_source = f"noise draws ({len(draws)}, the inversion's Monte Carlo)"
+    elif corr.command_std is not None:
+        run.std_source = "std (points taken as independent: a floor for an inverted map)"
     header = header_lines(run, terms)
     attrs = {k: v for k, v in smap.attrs.items() if k not in ("rms_m", "rrms")}
     attrs.update(correction="predicted surface after the actuator commands",
@@ -367,8 +375,8 @@ def summary_lines(run: CorrectionRun) -> list[str]:
         known = c.command_std[np.isfinite(c.command_std)]
         if known.size:
             med, top = np.median(known) / scale, np.max(known) / scale
-            lines.append(f"command error from the map's std: median {med:.{DECIMALS[unit]}f} "
-                         f"{unit}, max {top:.{DECIMALS[unit]}f} {unit}")
+            lines.append(f"command error from the map's {run.std_source}: median "
+                         f"{med:.{DECIMALS[unit]}f} {unit}, max {top:.{DECIMALS[unit]}f} {unit}")
         if known.size < c.command_std.size:
             lines.append(f"{c.command_std.size - known.size} actuators have points of unknown "
                          "spread (deformation_std NaN) on their panels: their command error is "

@@ -195,12 +195,16 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     # delta_c and the central mode overlap on the annulus: removed by one joint fit
     unseen = unobservable(grid, {"central": central.shape if central is not None else None,
                                  "delta_c": mode}, central.r_h if central is not None else None)
-    std = None
+    std = noise_draws = None
     stated = scan.intensity_std is not None and np.any(np.isfinite(scan.intensity_std[:data.n_rows]))
-    if stated and opts.uncertainty_samples > 0:  # an all-NaN std states nothing (measured_fa)
-        std = monte_carlo_std(scan, inverse, data, opts.uncertainty_samples, opts.seed, unseen)
+    if stated and opts.uncertainty_samples > 1:  # an all-NaN std states nothing (measured_fa)
+        draws = monte_carlo_draws(scan, inverse, data, opts.uncertainty_samples, opts.seed, unseen)
+        # kept, less their mean, for the commands (solver.correction): the noise is correlated
+        # across the dish, which no per-point std carries
+        noise_draws = draws - draws.mean(axis=0)
         if central is not None:
-            std = central.blank(grid, std)
+            noise_draws = np.stack([central.blank(grid, d) for d in noise_draws])
+        std = np.std(noise_draws, axis=0, ddof=1)
     removed = {}
     if unseen is not None:
         delta, removed = unseen.remove(grid, delta)
@@ -232,7 +236,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         accuracy, truth_map = accuracy_attrs(grid, delta, delta_out, truth_map, opts.terms, unseen)
         attrs.update(accuracy)
     attrs["time_s"] = time.perf_counter() - start
-    return surfacemap(grid, delta_out, attrs, truth=truth_map, deformation_std=std)
+    return surfacemap(grid, delta_out, attrs, truth=truth_map, deformation_std=std,
+                      noise_draws=noise_draws)
 
 
 @dataclass(frozen=True)

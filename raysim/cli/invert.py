@@ -29,7 +29,8 @@ def invert_command(
         None, help="Forward model of the refinement: go, po, po+ptd or go+edge (default: the one "
                    "that made the data, its FieldMap method; go for a measured scan). Each PO "
                    "iteration is a PO run: a few seconds at 0.3 GHz on the paper's dish on two "
-                   "cores, about f^2 log f beyond; go+edge (geometric wave plus rim diffraction) takes seconds, growing with f."),
+                   "cores, about f^2 log f beyond; go+edge (geometric wave plus rim "
+                   "diffraction) takes seconds, growing with f."),
     refine_method: str = typer.Option(
         "auto", "--refine-method",
         help="auto (the default: Gauss-Newton with the model's exact Jacobian where at least 20 "

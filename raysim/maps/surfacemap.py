@@ -6,7 +6,10 @@ The contract the solver writes and the renderer, the hardware crew and the tests
 - coordinates ``x``, ``y``: aperture-plane cell centres (m), N each, over [-D/2, D/2];
 - ``deformation`` (y, x): delta along z (m), real, NaN outside the aperture r < D/2;
 - optional ``truth`` (y, x) and ``error`` = deformation - truth (m) when the truth is known,
-  ``deformation_std`` (y, x) (m) when the scan carried ``intensity_std``;
+  ``deformation_std`` (y, x) (m) when the scan carried ``intensity_std``, with
+  ``deformation_noise_draws`` (draw, y, x) (m, float32): the Monte Carlo's draws of the map's
+  noise whose spread ``deformation_std`` is, each less their mean (what :mod:`solver.correction`
+  propagates to the commands: the noise is correlated across the dish);
 - attributes: ``solver``, ``boundary`` (what the rim values were), ``harmonic_part``
   (``unobservable`` without rim targets, else ``fixed by rim targets``), ``removed_terms`` and
   a ``removed_<coefficient>`` per removed coefficient, ``rms_m`` and ``rrms`` when the truth is
@@ -32,6 +35,8 @@ from raysim.version import VERSION_ATTR, __version__
 REQUIRED_ATTRS = ("solver", "boundary", "harmonic_part", "removed_terms", "focal_length",
                   "diameter", "sphere_radius")
 OPTIONAL_VARS = ("truth", "error", "deformation_std")
+#: the Monte Carlo draws of the map's noise (draw, y, x), m, less their mean
+NOISE_DRAWS = "deformation_noise_draws"
 #: the two values of the ``harmonic_part`` attribute: without rim targets, and with them
 HARMONIC_UNOBSERVABLE = "unobservable"
 HARMONIC_FIXED = "fixed by rim targets"
@@ -40,13 +45,15 @@ LONG_NAMES = {
     "truth": "true surface deformation along z (same terms removed)",
     "error": "deformation - truth",
     "deformation_std": "standard deviation of deformation from the intensity noise",
+    NOISE_DRAWS: "Monte Carlo draws of the deformation's noise, less their mean",
 }
 
 
 def surfacemap(grid: ApertureGrid, deformation: np.ndarray, attrs: Mapping[str, Any], *,
-               truth: np.ndarray | None = None, deformation_std: np.ndarray | None = None
-               ) -> xr.Dataset:
-    """Assemble a SurfaceMap on the aperture ``grid`` (deformation, truth, std in m, (N, N)).
+               truth: np.ndarray | None = None, deformation_std: np.ndarray | None = None,
+               noise_draws: np.ndarray | None = None) -> xr.Dataset:
+    """Assemble a SurfaceMap on the aperture ``grid`` (deformation, truth, std in m, (N, N);
+    ``noise_draws`` (draws, N, N), m, the Monte Carlo's draws of the noise less their mean).
 
     ``attrs`` must hold at least :data:`REQUIRED_ATTRS`; values are flat numbers or strings.
     ``error`` is added when ``truth`` is given.
@@ -67,6 +74,15 @@ def surfacemap(grid: ApertureGrid, deformation: np.ndarray, attrs: Mapping[str, 
         if arr.shape != (grid.N, grid.N):
             raise SurfaceMapError(f"{name} has shape {arr.shape}, the grid is {(grid.N, grid.N)}")
         data_vars[name] = (dims, grid.masked(arr), {"units": "m", "long_name": LONG_NAMES[name]})
+    if noise_draws is not None:
+        draws = np.asarray(noise_draws)
+        check_real(draws, NOISE_DRAWS, "SurfaceMap", SurfaceMapError, "a deformation")
+        if draws.ndim != 3 or draws.shape[1:] != (grid.N, grid.N):
+            raise SurfaceMapError(f"{NOISE_DRAWS} has shape {draws.shape}, expected (draws, "
+                                  f"{grid.N}, {grid.N})")
+        masked = np.stack([grid.masked(d) for d in draws.astype(np.float64)]).astype(np.float32)
+        data_vars[NOISE_DRAWS] = (("draw", *dims), masked,
+                                  {"units": "m", "long_name": LONG_NAMES[NOISE_DRAWS]})
     coords = {
         "x": ("x", grid.x, {"units": "m", "long_name": "aperture-plane x (vertex frame)"}),
         "y": ("y", grid.y, {"units": "m", "long_name": "aperture-plane y (vertex frame)"}),
@@ -76,6 +92,8 @@ def surfacemap(grid: ApertureGrid, deformation: np.ndarray, attrs: Mapping[str, 
                  "Conventions": "CF-1.8", "grid_n": int(grid.N), "grid_step_m": float(grid.h)}
     all_attrs.update({k: _flat(v) for k, v in attrs.items()})
     ds = xr.Dataset(data_vars, coords=coords, attrs=all_attrs)
+    if NOISE_DRAWS in ds:  # float32 noise: compressed a little (about 8 MB at N = 256, 32 draws)
+        ds[NOISE_DRAWS].encoding.update(zlib=True, complevel=1)
     return validate(ds, "SurfaceMap")
 
 
@@ -91,8 +109,13 @@ def _flat(value: Any) -> Any:
 
 def canonical(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
     """``ds`` in canonical order: x, y ascending and dims (y, x) (a legal file may store either
-    coordinate descending, or the variables transposed)."""
-    return canonical_order(ds, ("y", "x"), "m", source, SurfaceMapError)
+    coordinate descending, or the variables transposed; the noise draws as (draw, y, x))."""
+    ds = canonical_order(ds, ("y", "x"), "m", source, SurfaceMapError)
+    if NOISE_DRAWS in ds.data_vars and ds[NOISE_DRAWS].dims != ("draw", "y", "x"):
+        if set(ds[NOISE_DRAWS].dims) != {"draw", "y", "x"}:
+            raise SurfaceMapError(f"{source}: variable '{NOISE_DRAWS}' must have dims (draw, y, x)")
+        ds[NOISE_DRAWS] = ds[NOISE_DRAWS].transpose("draw", "y", "x")
+    return ds
 
 
 def validate(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
@@ -123,6 +146,15 @@ def validate(ds: xr.Dataset, source: str = "SurfaceMap") -> xr.Dataset:
                                   "points without data)")
     if "deformation_std" in ds.data_vars and (ds["deformation_std"].values < 0).any():
         raise SurfaceMapError(f"{source}: variable 'deformation_std' holds negative values")
+    if NOISE_DRAWS in ds.data_vars:
+        draws = ds[NOISE_DRAWS]
+        if draws.attrs.get("units") != "m":
+            raise SurfaceMapError(f"{source}: variable '{NOISE_DRAWS}' must be in m, "
+                                  f"got {draws.attrs.get('units')!r}")
+        check_real(np.asarray(draws.values), NOISE_DRAWS, source, SurfaceMapError, "a deformation")
+        if np.isinf(draws.values).any() or draws.sizes["draw"] < 2:
+            raise SurfaceMapError(f"{source}: variable '{NOISE_DRAWS}' must hold at least 2 "
+                                  "finite draws (NaN marks points without data)")
     return ds
 
 

@@ -259,7 +259,7 @@ def test_the_command_error_is_in_the_unit_with_enough_digits(tmp_path):
     run = run_correct(_surface_file(tmp_path, delta, std), tmp_path / "out", scene=_scene(tmp_path),
                       unit="mm")
     text = (tmp_path / "out" / "summary.txt").read_text()
-    assert "command error from the map's std: median" in text and " um, max" not in text
+    assert "command error from the map's std (points taken as independent: a floor for an inverted map): median" in text and " um, max" not in text
     written = np.array([float(r["command_std_mm"]) for r in _rows(tmp_path / "out" / "commands.csv")])
     np.testing.assert_allclose(written * 1e-3, run.correction.command_std, atol=0.51e-10)
     assert np.all(written > 0)
