@@ -224,9 +224,8 @@ def test_a_partial_store_with_unreadable_metadata_is_refused_in_one_line(scene, 
     assert path.exists()  # never destroyed: the user decides
 
 
-def test_a_resume_brings_back_a_torn_context(scene, single, inproc, tmp_path):
-    """Every block done and intact, but context.json torn: one block is computed again (it
-    brings the context) and the FieldMap is the single-process one."""
+def _every_block_done(scene, inproc, tmp_path: Path) -> tuple[Path, Path]:
+    """(output, partial store) of the scene's PO run with every block of 40 points done."""
     out = tmp_path / "field.nc"
     job, description = scene_job(scene, "po", Options(), "cpu", 1, 40)
     path = partial_path(out)
@@ -234,6 +233,13 @@ def test_a_resume_brings_back_a_torn_context(scene, single, inproc, tmp_path):
     bounds = block_bounds(job.n_points, 40)
     with connect(inproc) as cluster:
         run_blocks(cluster.client, job, list(range(len(bounds))), bounds, store)
+    return out, path
+
+
+def test_a_resume_brings_back_a_torn_context(scene, single, inproc, tmp_path):
+    """Every block done and intact, but context.json torn: one block is computed again (it
+    brings the context) and the FieldMap is the single-process one."""
+    out, path = _every_block_done(scene, inproc, tmp_path)
     (path / "context.json").write_text('{"mesh": ')
     ds = simulate_blocks(scene, out, "po", scheduler=inproc, block_size=40, resume=True)
     assert_same_fieldmap(single["po"], ds)
@@ -247,13 +253,7 @@ def test_a_resume_rebuilds_an_edited_context_and_recomputes_swapped_blocks(scene
     marker's checksum matches the values beside it). Their checksums are bound to the run,
     the block and the part: all three are made again and the FieldMap is the single-process
     one (before: the edited dish's attributes and other points' intensities, exit 0)."""
-    out = tmp_path / "field.nc"
-    job, description = scene_job(scene, "po", Options(), "cpu", 1, 40)
-    path = partial_path(out)
-    store = PartialStore.create(path, job.key, description, job.parts(), job.n_points, 40)
-    bounds = block_bounds(job.n_points, 40)
-    with connect(inproc) as cluster:
-        run_blocks(cluster.client, job, list(range(len(bounds))), bounds, store)
+    out, path = _every_block_done(scene, inproc, tmp_path)
     context = json.loads((path / "context.json").read_text())
     context["attrs"]["diameter"] += 1.0
     context["attrs"]["focal_length"] += 1.0
