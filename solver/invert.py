@@ -121,7 +121,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         model keeps the ideal reflector's map, so passing one model to several inversions of
         one scan geometry computes it once.
     device : Warp device of the forward model (``cpu`` or ``cuda``).
-    uncertainty_samples : Monte Carlo draws for ``deformation_std`` (when intensity_std exists).
+    uncertainty_samples : Monte Carlo draws for ``deformation_std`` and ``deformation_noise_draws``
+        (when intensity_std exists; at least 2, 0 for none).
     seed : random seed of the Monte Carlo draws.
     max_harmonics : highest Fourier order of the rim fit.
     model : the refinement's forward model, one of :data:`solver.forward.MODELS` (``go``,
