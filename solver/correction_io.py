@@ -207,13 +207,11 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
         corr.notes.append(f_note)
     corr.notes += map_caveats(smap.attrs, layout.n_panels)
     sigma_before, sigma_after = ruze_sigmas(corr)
+    source = (f"noise draws ({len(draws)}, the inversion's Monte Carlo)" if draws is not None
+              else "std (points taken as independent: a floor for an inverted map)")
     run = CorrectionRun(corr, acts, unit, freqs, ruze(sigma_before, freqs), ruze(sigma_after, freqs),
                         zernike_fit(grid, corr.before, zernike_order),
-                        zernike_fit(grid, corr.after, zernike_order), [], F)
-    if draws is not None and corr.command_std is not None:
-        run.std_source = f"noise draws ({len(draws)}, the inversion's Monte Carlo)"
-    elif corr.command_std is not None:
-        run.std_source = "std (points taken as independent: a floor for an inverted map)"
+                        zernike_fit(grid, corr.after, zernike_order), [], F, source)
     header = header_lines(run, terms)
     attrs = {k: v for k, v in smap.attrs.items() if k not in ("rms_m", "rrms")}
     attrs.update(correction="predicted surface after the actuator commands",
@@ -241,7 +239,8 @@ MAP_WARNINGS = ("noise_warning", "hole_warning", "ring_warning", "refine_warning
 def map_caveats(attrs, n_panels: int) -> list[str]:
     """What the SurfaceMap's ``attrs`` say the map may not hold, for the commands' summary:
     ``raysim invert``'s warnings, a harmonic part taken as zero on the rim (no rim targets),
-    and, for GO data on ``n_panels`` > 1 panels, the panel pistons GO does not see. The
+    and, for a map from GO data or refined with GO on ``n_panels`` > 1 panels, the panel
+    pistons GO does not see. The
     predicted residual is of the map, so it leaves all of these out: a map that is mostly noise
     gave commands that made the dish worse (25 -> 32 um) beside a prediction of 47 -> 16 um."""
     lines = [f"WARNING (the map's, from raysim invert): {attrs[key]}" for key in MAP_WARNINGS
@@ -254,10 +253,11 @@ def map_caveats(attrs, n_panels: int) -> list[str]:
                      "UNOBSERVABLE and taken as zero on the rim (no rim targets): whatever the "
                      "dish has of it is neither corrected nor in the predicted residual; invert "
                      "with --rim targets to include it")
-    if attrs.get("data_method") == "go" and n_panels > 1:
-        lines.append("GO data do not see a panel's piston against its neighbours (docs/"
-                     "inversion.md): steps between panels are not in the map, so the commands "
-                     "neither correct them nor count them in the predicted residual")
+    if "go" in (attrs.get("data_method"), attrs.get("refine_model")) and n_panels > 1:
+        lines.append("GO does not see a panel's piston against its neighbours (docs/"
+                     "inversion.md): steps between panels are not in a map from GO data or "
+                     "refined with GO, so the commands neither correct them nor count them in "
+                     "the predicted residual")
     return lines
 
 
