@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 
 from raysim.errors import RaysimError, SceneError
 from raysim.maps.fieldmap import fieldmap
+from raysim.maps.sphere import theta_rim
 from raysim.methods import METHODS, WAVE_METHODS
 from raysim.optics import go
 from raysim.optics.fast import DEFAULT_TOL
@@ -677,9 +678,9 @@ def mesh_size_warning(D: float, fix: str = "set dish.mesh_unit_m = 0.001") -> st
 
 def summary(ds: xr.Dataset) -> str:
     """One line: points, rays, time and power balance of a simulated FieldMap (and PO's
-    quadrature warning, the panel-gap edges' warning, why an asked-for Fresnel correction was
-    not applied, a mesh file's departure from its ideal, and a mesh file's dish too large for
-    a dish in metres, where the map has them)."""
+    quadrature warning, the panel-gap edges' warning, a rim image beyond the hemisphere, why an
+    asked-for Fresnel correction was not applied, a mesh file's departure from its ideal, and
+    a mesh file's dish too large for a dish in metres, where the map has them)."""
     line = _engine_summary(ds)
     if "quadrature_warning" in ds.attrs:
         line += f"; WARNING: {ds.attrs['quadrature_warning']}"
@@ -688,6 +689,9 @@ def summary(ds: xr.Dataset) -> str:
                  "wide, and --edges all treats each gap edge as a lone half-plane, which "
                  "overstates gaps narrower than a wavelength (docs/engines.md)")
     size = mesh_size_warning(float(ds.attrs.get("diameter", 0.0)))
+    beyond = rim_beyond_hemisphere(ds.attrs)
+    if beyond:
+        line += f"; WARNING: {beyond}"
     if str(ds.attrs.get("fresnel_correction", "")).startswith("none: "):
         line += f"; --fresnel not applied: {ds.attrs['fresnel_correction'][6:]}"
     if "mesh_departure_rms_m" in ds.attrs and size:
@@ -696,6 +700,21 @@ def summary(ds: xr.Dataset) -> str:
         line += (f"; the mesh departs {ds.attrs['mesh_departure_rms_m'] * 1e6:.3g} um RMS along z "
                  "from its ideal (its deformation; a file not in the reflector frame adds to it)")
     return line
+
+
+def rim_beyond_hemisphere(attrs) -> str:
+    """What to say of a dish whose rim image, 2 atan(D / 4F) from the axis at the focus, lies
+    beyond theta = 90 deg (F/D below 0.25): no hemisphere scan sees its outer ring, and
+    ``raysim invert`` refuses a scan that stops short of the rim image; "" otherwise."""
+    try:
+        D, F = float(attrs["diameter"]), float(attrs["focal_length"])
+    except (KeyError, TypeError, ValueError):
+        return ""
+    if not (D > 0 and F > 0) or theta_rim(D, F) <= 0.5 * math.pi + 1e-12:
+        return ""
+    return (f"the rim image lies at {math.degrees(theta_rim(D, F)):.1f} deg from the axis, "
+            f"beyond the hemisphere (F/D {F / D:.3g}, below 0.25): no hemisphere scan sees the "
+            "dish's outer ring, and raysim invert refuses a scan short of the rim image")
 
 
 def _engine_summary(ds: xr.Dataset) -> str:

@@ -164,3 +164,32 @@ def test_an_ascii_terminal_gets_escapes_not_a_traceback(tmp_path: Path):
     assert run.returncode == 0, run.stderr
     assert (tmp_path / "dïsh µ.nc").is_file()
     assert "d\\xefsh \\xb5.nc" in run.stdout and "Traceback" not in run.stderr
+
+
+def test_a_dish_deeper_than_a_hemisphere_can_scan_is_said_so():
+    """QA: a dish of F/D 0.2 (rim image at 102.7 deg) simulated without a word while the
+    hemisphere missed a third of its power. GO's power on the hemisphere is the aperture's
+    share inside r(90 deg) = 2F, (4F/D)^2 = 0.64 of it; the summary warns, and a dish of F/D
+    0.3 (rim image 79.6 deg) gets no such line."""
+    from raysim.scene.scene import parse_scene
+    from raysim.simulate import simulate, summary
+
+    def scene(F):
+        return parse_scene(f"""name = "deep"
+[dish]
+diameter_m = 10.0
+focal_length_m = {F}
+resolution_m = 0.3
+[source]
+frequency_hz = 1e9
+[sphere]
+radius_m = 1.0
+n_theta = 30
+n_phi = 36
+""")
+
+    deep = simulate(scene(2.0))
+    assert deep.attrs["power_balance"] == pytest.approx((4 * 2.0 / 10.0) ** 2 - 1.0, abs=0.01)
+    assert "WARNING: the rim image lies at 102.7 deg from the axis, beyond the hemisphere" in summary(deep)
+    shallow = simulate(scene(3.0))
+    assert abs(shallow.attrs["power_balance"]) < 0.01 and "rim image" not in summary(shallow)
