@@ -448,8 +448,9 @@ def read_ideals(group: zarr.Group, path: str) -> tuple[np.ndarray, np.ndarray, n
         raise CorruptStoreError(f"{path}: its frequencies or ideal intensities cannot be read "
                                 f"({type(exc).__name__}); {resume_hint(path)}") from exc
     read = _read_all(arrays, np.arange(arrays["intensity_ideal"].shape[0]))
+    bound = binding(group.attrs)
     ok = np.array([s is not None and int(s) == _DONE and v is not None and c is not None
-                   and str(c) == ideal_checksum(v, f, binding(group.attrs))
+                   and str(c) == ideal_checksum(v, f, bound)
                    for f, (s, c, v) in enumerate(zip(read["ideal_status"], read["ideal_checksum"],
                                                      read["intensity_ideal"], strict=True))], dtype=bool)
     shape = tuple(arrays["intensity_ideal"].shape[1:])

@@ -70,9 +70,9 @@ def write_atomic(ds: xr.Dataset, path: str | os.PathLike[str],
         except (RuntimeError, PermissionError) as exc:
             # the NetCDF library reports a full disk as "NetCDF: HDF error" (RuntimeError), or
             # as a permission error when not even its header fits: say what it most likely is
-            raise OSError(errno.ENOSPC if _nearly_full(tmp) else errno.EIO,
-                          "no space left on the device" if _nearly_full(tmp)
-                          else f"the NetCDF library could not write it ({exc})") from None
+            if _nearly_full(tmp):
+                raise OSError(errno.ENOSPC, "no space left on the device") from None
+            raise OSError(errno.EIO, f"the NetCDF library could not write it ({exc})") from None
     return Path(path)
 
 
