@@ -207,8 +207,10 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
         corr.notes.append(f_note)
     corr.notes += map_caveats(smap.attrs, layout.n_panels)
     sigma_before, sigma_after = ruze_sigmas(corr)
-    source = (f"noise draws ({len(draws)}, the inversion's Monte Carlo)" if draws is not None
-              else "std (points taken as independent: a floor for an inverted map)")
+    under = ("the stated intensity_std" if smap.attrs.get("noise_source") == "intensity_std"
+             else "the noise estimated from the scan")
+    source = (f"noise draws ({len(draws)}, the inversion's Monte Carlo under {under})"
+              if draws is not None else "std (points taken as independent: a floor for an inverted map)")
     run = CorrectionRun(corr, acts, unit, freqs, ruze(sigma_before, freqs), ruze(sigma_after, freqs),
                         zernike_fit(grid, corr.before, zernike_order),
                         zernike_fit(grid, corr.after, zernike_order), [], F, source)
@@ -371,7 +373,11 @@ def summary_lines(run: CorrectionRun) -> list[str]:
                      f"RMS {c.path_rms_before / 1e-6:.2f} um before, {c.path_rms_after / 1e-6:.2f} um after")
     lines.append(f"commands: max |c| {np.max(np.abs(c.commands)) / scale:.{DECIMALS[unit] - 1}f} {unit}"
                  + (f", {c.clipped} at their range limit" if c.clipped else ""))
-    if c.command_std is not None:
+    if c.command_std is None:
+        lines.append("command error: not computed: the map carries no noise draws or std (raysim "
+                     "invert keeps them when the scan states intensity_std, or when the noise it "
+                     "estimates spreads the map by a tenth of the map's RMS or more)")
+    else:
         known = c.command_std[np.isfinite(c.command_std)]
         if known.size:
             med, top = np.median(known) / scale, np.max(known) / scale

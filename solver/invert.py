@@ -122,7 +122,8 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         one scan geometry computes it once.
     device : Warp device of the forward model (``cpu`` or ``cuda``).
     uncertainty_samples : Monte Carlo draws for ``deformation_std`` and ``deformation_noise_draws``
-        (when intensity_std exists; at least 2, 0 for none).
+        (under the stated intensity_std, or under the noise estimated from the scan where it
+        spreads the map by a tenth of its RMS or more; at least 2, 0 for none).
     seed : random seed of the Monte Carlo draws.
     max_harmonics : highest Fourier order of the rim fit.
     model : the refinement's forward model, one of :data:`solver.forward.MODELS` (``go``,
@@ -196,16 +197,6 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     # delta_c and the central mode overlap on the annulus: removed by one joint fit
     unseen = unobservable(grid, {"central": central.shape if central is not None else None,
                                  "delta_c": mode}, central.r_h if central is not None else None)
-    std = noise_draws = None
-    stated = scan.intensity_std is not None and np.any(np.isfinite(scan.intensity_std[:data.n_rows]))
-    if stated and opts.uncertainty_samples > 1:  # an all-NaN std states nothing (measured_fa)
-        draws = monte_carlo_draws(scan, inverse, data, opts.uncertainty_samples, opts.seed, unseen)
-        # kept, less their mean, for the commands (solver.correction): the noise is correlated
-        # across the dish, which no per-point std carries
-        noise_draws = draws - draws.mean(axis=0)
-        if central is not None:
-            noise_draws = np.stack([central.blank(grid, d) for d in noise_draws])
-        std = np.std(noise_draws, axis=0, ddof=1)
     removed = {}
     if unseen is not None:
         delta, removed = unseen.remove(grid, delta)
@@ -213,8 +204,22 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
         delta = central.blank(grid, delta)
     delta_c = removed.get("delta_c", 0.0)
     delta_out, coef = remove_terms(grid, delta, opts.terms, scan.F)
-    spread = (float(np.sqrt(np.nanmean(std**2))) if std is not None
-              else noise_spread(scan, inverse, data, opts, unseen, central, delta_out))
+    stated = scan.intensity_std is not None and np.any(np.isfinite(scan.intensity_std[:data.n_rows]))
+    spread = float("nan")
+    draws = None
+    if stated and opts.uncertainty_samples > 1:  # an all-NaN std states nothing (measured_fa)
+        draws = monte_carlo_draws(scan, inverse, data, opts.uncertainty_samples, opts.seed, unseen)
+    elif not stated:
+        draws = noise_screen(scan, inverse, data, opts, unseen, central, delta_out)
+    std = noise_draws = None
+    if draws is not None:
+        # kept, less their mean, for the commands (solver.correction): the noise is correlated
+        # across the dish, which no per-point std carries
+        noise_draws = draws - draws.mean(axis=0)
+        if central is not None:
+            noise_draws = np.stack([central.blank(grid, d) for d in noise_draws])
+        std = np.std(noise_draws, axis=0, ddof=1)
+        spread = float(np.sqrt(np.nanmean(std**2)))
     outcome = Outcome(scan, grid, inverse, linear, data, setup, history, weighted, coef,
                       gn.gain_factor if gn is not None else None, delta_c, mode)
     attrs = surface_attrs(opts, outcome)
@@ -222,7 +227,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     attrs.update(hole_attrs(hole))
     attrs.update(ring_attrs(scan))
     attrs.update(report_attrs(gn, why))
-    attrs.update(noise_spread_attrs(spread, std is not None, data, delta_out))
+    attrs.update(noise_spread_attrs(spread, bool(stated), data, delta_out))
     if gn is not None and gn.misfit_rms:  # the map is Gauss-Newton's: its misfit says the fit
         attrs.pop("refine_warning", None)
         attrs.update(fit_attrs(data, gn.misfit_rms[-1]))
@@ -424,30 +429,27 @@ def truth_on_grid(truth, scan: Scan, grid: ApertureGrid) -> NDArray[np.float64] 
     return grid.masked(arr)
 
 
-def noise_spread(scan: Scan, inverse: LinearInverse, data: MeasuredFA, opts: InvertOptions,
+def noise_screen(scan: Scan, inverse: LinearInverse, data: MeasuredFA, opts: InvertOptions,
                  unseen: Unobservable | None, central: CentralMode | None,
-                 delta: NDArray[np.float64]) -> float:
-    """RMS (m) by which the scan's noise, estimated from the scan when no ``intensity_std`` is
-    stated (``data.noise_variance``), spreads the map ``delta`` (m); NaN when not measured.
+                 delta: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """The Monte Carlo draws (samples, N, N) (m) of the map under the noise estimated from
+    the scan (no ``intensity_std`` stated: ``data.noise_variance``) where that noise spreads
+    the map ``delta`` (m) by a share worth measuring; None where it does not.
 
-    :data:`SCREEN_DRAWS` draws of the Monte Carlo screen first (a rough figure: the spread
-    lies mostly in a few slow shapes); where they reach :data:`NOISE_SCREEN` of the map's RMS
-    the whole Monte Carlo of the stated case measures it, the estimated noise in every cell.
-    Clean data cost the two draws only (about 0.1 s at 256 points).
+    :data:`SCREEN_DRAWS` draws first (a rough figure: the spread lies mostly in a few slow
+    shapes); where they reach :data:`NOISE_SCREEN` of the map's RMS the whole Monte Carlo of
+    the stated case measures it, the estimated noise in every cell, and its draws are the
+    map's (the commands' error comes from them). Clean data cost the two draws only (about
+    0.1 s at 256 points).
     """
-    if opts.uncertainty_samples <= 0 or not data.noise_variance > 0:
-        return float("nan")
-    size = map_rms(delta)
-
-    def spread(samples: int) -> float:
-        std = monte_carlo_std(scan, inverse, data, samples, opts.seed, unseen)
-        if central is not None:
-            std = central.blank(inverse.grid, std)
-        return float(np.sqrt(np.nanmean(std**2)))
-
-    if spread(SCREEN_DRAWS) < NOISE_SCREEN * max(size, NOISE_WARNING_FLOOR):
-        return float("nan")
-    return spread(opts.uncertainty_samples)
+    if opts.uncertainty_samples <= 1 or not data.noise_variance > 0:
+        return None
+    rough = monte_carlo_std(scan, inverse, data, SCREEN_DRAWS, opts.seed, unseen)
+    if central is not None:
+        rough = central.blank(inverse.grid, rough)
+    if np.sqrt(np.nanmean(rough**2)) < NOISE_SCREEN * max(map_rms(delta), NOISE_WARNING_FLOOR):
+        return None
+    return monte_carlo_draws(scan, inverse, data, opts.uncertainty_samples, opts.seed, unseen)
 
 
 #: draws of the screen, and the share of the map's RMS their rough spread must reach for the

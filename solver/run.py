@@ -155,7 +155,8 @@ def summary(result: xr.Dataset) -> list[str]:
                      f"removed: coefficient {a['removed_delta_c']:.3e} (an FA offset), "
                      f"{1e6 * a['removed_delta_c_centre_m']:.2f} um at the centre")
     lines.append(f"removed terms: {a['removed_terms']}; missing samples {a['samples_missing']}")
-    if "deformation_std" in result and np.any(np.isfinite(result["deformation_std"].values)):
+    kept = "deformation_std" in result and np.any(np.isfinite(result["deformation_std"].values))
+    if kept and a.get("noise_source") == "intensity_std":
         std = result["deformation_std"].values
         lines.append(f"noise: the scan's stated intensity_std spreads the map by "
                      f"{np.sqrt(np.nanmean(std**2)) * 1e6:.2f} um RMS (deformation_std, Monte "
@@ -164,7 +165,8 @@ def summary(result: xr.Dataset) -> list[str]:
         db = 10.0 / math.log(10.0) * a["noise_relative_std"]
         lines.append(f"noise: {db:.2g} dB per cell ({a['noise_source']}) spreads the map by "
                      f"{um_text(a['noise_map_rms_m'])} um RMS (Monte Carlo of the linear "
-                     "inversion; no intensity_std stated)")
+                     "inversion; no intensity_std stated" + ("; deformation_std and its draws "
+                                                             "kept" if kept else "") + ")")
     if "noise_warning" in a:
         lines.append(f"WARNING: {a['noise_warning']}")
     lines.append(f"time {a['time_s']:.2f} s")

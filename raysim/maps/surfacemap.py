@@ -6,7 +6,8 @@ The contract the solver writes and the renderer, the hardware crew and the tests
 - coordinates ``x``, ``y``: aperture-plane cell centres (m), N each, over [-D/2, D/2];
 - ``deformation`` (y, x): delta along z (m), real, NaN outside the aperture r < D/2;
 - optional ``truth`` (y, x) and ``error`` = deformation - truth (m) when the truth is known,
-  ``deformation_std`` (y, x) (m) when the scan carried ``intensity_std``, with
+  ``deformation_std`` (y, x) (m) when the scan carried ``intensity_std`` (or, without it,
+  when the noise estimated from the scan spreads the map by a tenth of its RMS or more), with
   ``deformation_noise_draws`` (draw, y, x) (m, float32): the Monte Carlo's draws of the map's
   noise whose spread ``deformation_std`` is, each less their mean (what :mod:`solver.correction`
   propagates to the commands: the noise is correlated across the dish);

@@ -152,3 +152,34 @@ def test_an_inverted_maps_command_error_follows_its_commands_scatter(paper_field
     scatter = np.std(commands, axis=0, ddof=1)
     assert 0.7 < np.median(scatter / from_draws) < 1.4
     assert np.median(scatter / independent) > 2.0   # the independent points: a floor (3.5)
+
+
+def test_a_map_whose_noise_was_estimated_carries_draws_for_the_command_error(paper_field):
+    """A scan that states no intensity_std had its map's noise measured by invert's Monte
+    Carlo (under the noise estimated from the scan) but the draws were dropped, so `correct`
+    gave no command error for the noisiest maps of all. They are kept now: with 0.01 dB per
+    reading unstated, the commands' error from them follows the scatter of the commands of
+    16 independently noisy scans, inverted the same way."""
+    from raysim.maps.surfacemap import NOISE_DRAWS
+    from solver.invert import invert
+
+    i = paper_field["intensity"].values
+    rng = np.random.default_rng(23)
+
+    def noisy():
+        field = paper_field.copy(deep=True)
+        field["intensity"] = (("theta", "phi"), i * 10 ** (0.01 * rng.standard_normal(i.shape) / 10))
+        return field
+
+    smap = invert(noisy(), N=GRID.N, refine_iterations=0, truth=None)
+    assert smap.attrs["noise_source"].startswith("estimated")
+    acts = corners_layout(LAYOUT)
+    from_draws = correct(GRID, smap["deformation"].values, LAYOUT, acts, TERMS,
+                         delta_std=smap["deformation_std"].values,
+                         noise_draws=smap[NOISE_DRAWS].values).command_std
+    commands = []
+    for _ in range(16):
+        m = invert(noisy(), N=GRID.N, refine_iterations=0, truth=None, uncertainty_samples=0)
+        commands.append(correct(GRID, m["deformation"].values, LAYOUT, acts, TERMS).commands)
+    scatter = np.std(commands, axis=0, ddof=1)
+    assert 0.6 < np.median(scatter / from_draws) < 1.6
