@@ -13,6 +13,7 @@ workers can import raysim and reach the store's path.
 
 from __future__ import annotations
 
+import errno
 import shutil
 import time
 import uuid
@@ -140,11 +141,14 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
                 _prepare_workers(cluster.client, threads, device)
                 _run(cluster.client, path, spec, device, pending, ideal_pending,
                      zstore.Writer(group), report, skipped, failures, ideal_failures)
-            except BaseException:
+            except BaseException as exc:
                 # a store this run created and that holds no finished sample is no store to
                 # resume: remove it, so that the same command can simply be run again
-                if created and np.all(zstore.status(group) == zstore.PENDING):
+                removed = created and np.all(zstore.status(group) == zstore.PENDING)
+                if removed:
                     shutil.rmtree(path, ignore_errors=True)
+                if isinstance(exc, OSError) and exc.errno in FULL_DISK:
+                    raise DatasetError(_full_disk_line(path, removed)) from exc
                 raise
     else:
         report(skipped, 0, spec.samples)
@@ -279,6 +283,19 @@ def _run(client, path: str, spec: DatasetSpec, device: str, pending: np.ndarray,
         else:
             failures.append((index, out["error"]))
         report(done, len(failures), spec.samples)
+
+
+#: errno values of a write the disk (or the user's quota) had no room for
+FULL_DISK = (errno.ENOSPC, errno.EDQUOT)
+
+
+def _full_disk_line(path: str, removed: bool) -> str:
+    """What a run stopped by a full disk says: the store, and how to go on."""
+    if removed:
+        return (f"{path}: no space left on the device before any sample was finished; the store "
+                "was removed: free space and run the same command again")
+    return (f"{path}: no space left on the device; the finished samples are kept and checked: "
+            "free space and run the same command with --resume to complete the store")
 
 
 def _existing_store(path: str, spec: DatasetSpec, resume: bool):

@@ -4,6 +4,7 @@ resumed, failures recorded, and a real distributed run (scheduler and worker pro
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import shutil
 import signal
@@ -224,6 +225,35 @@ def test_failed_samples_are_recorded_and_the_others_go_on(reference, spec, tmp_p
     monkeypatch.setattr(dataset_worker, "draw_sample", real)
     again = generate(spec, store, scheduler=inproc, resume=True)
     assert (again.done, again.failed, again.computed) == (spec.samples, 0, 2)
+    assert_same_store(reference, store)
+
+
+def test_a_full_disk_names_the_store_and_a_resume_completes_it(reference, spec, tmp_path, monkeypatch,
+                                                               inproc):
+    """QA: a disk that filled while a dataset was written ended in "No space left on device"
+    alone: not which store, nor that --resume completes it. The disk fills at sample 3 (its
+    write and its failure marker both fail, as they would); the run stops with one line naming
+    the store and --resume, the samples finished before are kept, and the resume on a freed
+    disk gives the uninterrupted store."""
+    real_draw, real_failed = dataset_worker.draw_sample, zstore.Writer.failed
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    def draw(spec_, index, seed=None):
+        if index >= 3:
+            full()
+        return real_draw(spec_, index, seed)
+
+    store = tmp_path / "full.zarr"
+    monkeypatch.setattr(dataset_worker, "draw_sample", draw)
+    monkeypatch.setattr(zstore.Writer, "failed", full)
+    with pytest.raises(DatasetError, match=r"full\.zarr: no space left on the device; .*--resume"):
+        generate(spec, store, scheduler=inproc)
+    assert 0 < int(np.sum(open_dataset(store)["status"].values == zstore.DONE)) < spec.samples
+    monkeypatch.setattr(dataset_worker, "draw_sample", real_draw)
+    monkeypatch.setattr(zstore.Writer, "failed", real_failed)
+    generate(spec, store, scheduler=inproc, resume=True)
     assert_same_store(reference, store)
 
 
