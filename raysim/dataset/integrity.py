@@ -153,12 +153,24 @@ def check_store(group: zarr.Group, path: str, spec: DatasetSpec,
     metadata is missing or unreadable (:func:`restore_metadata`), the creation-time arrays and
     the attributes that no longer match. ``static``: :func:`static_arrays` of the spec, when
     the caller has them already."""
-    lost = tuple(name for name, array in layout(spec).items() if not _check_array(group, path, name, array))
+    made = layout_metadata(spec)
+    lost = tuple(name for name, array in layout(spec).items()
+                 if not _check_array(group, path, name, array, made[name]))
     static = static_arrays(spec) if static is None else static
     arrays = {name: values for name, values in static.items()
               if name in lost or not _holds(group[name], values)}
     return Repairs(arrays, _attribute_repairs(dict(group.attrs), spec),
                    _array_attribute_repairs(group, spec, lost), lost)
+
+
+def layout_metadata(spec: DatasetSpec) -> dict[str, Any]:
+    """Each array's metadata (``zarr.json``) as the spec's layout makes it: the same call the
+    store's creation made (store._fill), in a scratch store, so the same document."""
+    specs = layout(spec)
+    scratch = zarr.open_group(zarr.storage.MemoryStore(), mode="w")
+    return {name: scratch.create_array(name, shape=a.shape, chunks=a.chunks, dtype=a.dtype,
+                                       fill_value=a.fill, dimension_names=a.dims,
+                                       attributes=a.attrs).metadata for name, a in specs.items()}
 
 
 def restore_metadata(group: zarr.Group, spec: DatasetSpec, names: Sequence[str]) -> None:
@@ -169,15 +181,11 @@ def restore_metadata(group: zarr.Group, spec: DatasetSpec, names: Sequence[str])
     from zarr.core.buffer import default_buffer_prototype
     from zarr.core.sync import sync
 
-    specs = layout(spec)
-    scratch = zarr.open_group(zarr.storage.MemoryStore(), mode="w")
+    if not names:
+        return
+    made = layout_metadata(spec)
     for name in names:
-        array = specs[name]
-        # the same call the store's creation made (store._fill), so the same document
-        made = scratch.create_array(name, shape=array.shape, chunks=array.chunks, dtype=array.dtype,
-                                    fill_value=array.fill, dimension_names=array.dims,
-                                    attributes=array.attrs)
-        document = made.metadata.to_buffer_dict(default_buffer_prototype())["zarr.json"]
+        document = made[name].to_buffer_dict(default_buffer_prototype())["zarr.json"]
         sync((group.store_path / name / "zarr.json").set(document))
 
 
@@ -190,9 +198,11 @@ def _array_attribute_repairs(group: zarr.Group, spec: DatasetSpec,
             if name not in lost and _json(dict(group[name].attrs)) != _json(array.attrs)}
 
 
-def _check_array(group: zarr.Group, path: str, name: str, array: ArraySpec) -> bool:
-    """Whether the array's metadata can be read (False: missing or unreadable, for the resume
-    to rewrite from the layout); refuse one whose shape, chunks or type differ from it."""
+def _check_array(group: zarr.Group, path: str, name: str, array: ArraySpec, made: Any) -> bool:
+    """Whether the array's metadata can be read and are the layout's ``made`` (False: missing,
+    unreadable, or another codec chain or fill value, for the resume to rewrite from the
+    layout; its attributes are compared on their own); refuse one whose shape, chunks or type
+    differ from it."""
     try:
         arr = group[name]
         meta = (tuple(arr.shape), tuple(arr.chunks), tuple(arr.metadata.dimension_names or ()), arr.dtype)
@@ -204,7 +214,15 @@ def _check_array(group: zarr.Group, path: str, name: str, array: ArraySpec) -> b
         raise DatasetError(f"{path}: its array {name!r} does not have the shape, chunks or type its "
                            f"spec gives ({meta[0]} {meta[3]}, expected {array.shape} {want}); the "
                            "store was left as it is: make the dataset again at a new store path")
-    return True
+    # a codec lost from zarr.json (the chunks still compressed) read every sample as garbage,
+    # recomputed them and wrote them on uncompressed: the layout's document is put back instead
+    return _document(arr.metadata) == _document(made)
+
+
+def _document(metadata: Any) -> str:
+    """An array's metadata as comparable text, its attributes left out."""
+    return json.dumps({k: v for k, v in metadata.to_dict().items() if k != "attributes"},
+                      sort_keys=True, default=str)
 
 
 def _holds(arr: Any, values: np.ndarray) -> bool:
@@ -299,6 +317,7 @@ def check_static(group: zarr.Group, path: str) -> None:
                                 f"since it was made; run `raysim dataset SPEC -o {path} --resume` "
                                 "with the store's spec to rewrite them")
     _check_array_attributes(group, path, sums["array_attributes"])
+    _check_codecs(group, path)
     for name, expected in sums["arrays"].items():
         try:
             actual = checksum({name: np.asarray(group[name][...])})
@@ -322,6 +341,26 @@ def _check_array_attributes(group: zarr.Group, path: str, expected: dict[str, An
             raise CorruptStoreError(f"{path}: its array {name!r} is missing, its metadata cannot be read "
                                     f"or its attributes (units, add_offset, ...) were changed since "
                                     f"it was made; {resume_hint(path)}")
+
+
+def _check_codecs(group: zarr.Group, path: str) -> None:
+    """Refuse a store an array of which is not stored as raysim writes it: the codec chain
+    (compression) and the rest of its ``zarr.json`` that Zarr derives from its shape, chunks,
+    type and fill value. A codec dropped from the file read every chunk as the wrong bytes (a
+    NumPy error from xarray, garbage elsewhere)."""
+    scratch = zarr.open_group(zarr.storage.MemoryStore(), mode="w")
+    try:
+        arrays = list(group.arrays())
+    except Exception as exc:
+        raise CorruptStoreError(f"{path}: the metadata of one of its arrays cannot be read "
+                                f"({type(exc).__name__}); {resume_hint(path)}") from exc
+    for name, arr in arrays:
+        m = arr.metadata
+        made = scratch.create_array(name, shape=arr.shape, chunks=arr.chunks, dtype=m.data_type,
+                                    fill_value=m.fill_value, dimension_names=m.dimension_names)
+        if _document(m) != _document(made.metadata):
+            raise CorruptStoreError(f"{path}: its array {name!r} is not stored as raysim writes it "
+                                    f"(its zarr.json's codecs were changed); {resume_hint(path)}")
 
 
 def listed_data_names(group: zarr.Group, path: str = "the store") -> list[str]:

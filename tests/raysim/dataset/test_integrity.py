@@ -128,14 +128,28 @@ def _truncate(name: str, size: int = 50):
     return damage
 
 
+def _codecs_lost(name: str):
+    """The compression codec dropped from the array's zarr.json (its chunks still compressed):
+    the metadata read, every chunk read as garbage, and the resume recomputed every sample and
+    wrote it uncompressed, leaving the metadata as it found it."""
+    def damage(path: Path) -> None:
+        meta = path / name / "zarr.json"
+        data = json.loads(meta.read_text())
+        data["codecs"] = [c for c in data["codecs"] if c["name"] == "bytes"]
+        meta.write_text(json.dumps(data))
+    return damage
+
+
 @pytest.mark.parametrize(("damage", "array", "computed"), [
+    (_codecs_lost("intensity"), "intensity", 0),
     (_unlink("intensity/zarr.json"), "intensity", 0), (_unlink("status/zarr.json"), "status", 0),
     (_truncate("deformation/zarr.json"), "deformation", 0), (_garble("checksum/zarr.json"), "checksum", 0),
     (_unlink("split/zarr.json"), "split", 0), (_unlink("ideal_status/zarr.json"), "ideal_status", 0),
     (_unlink("gravity_rms"), "gravity_rms", 4)])
 def test_a_resume_restores_lost_array_metadata_from_the_layout(clean, copy, spec, inproc, damage, array,
                                                                computed):
-    """An array's ``zarr.json`` lost (removed, truncated, garbled): the readers say to resume,
+    """An array's ``zarr.json`` lost (removed, truncated, garbled, its codecs changed): the
+    readers say to resume,
     and the resume writes it again as the layout makes it, keeping the chunks, which verify,
     so no sample is lost; an array removed whole reads as its fill value, and the samples it
     held fail their checksums and are recomputed. The store is then the clean one bit for bit."""
