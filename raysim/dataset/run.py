@@ -26,6 +26,7 @@ import numpy as np
 from raysim.dataset import integrity
 from raysim.dataset import store as zstore
 from raysim.dataset.spec import DatasetError, DatasetSpec, load_spec
+from raysim.dataset.store_layout import store_bytes
 from raysim.dataset.worker import DatasetWorkerPlugin, run_ideal, run_sample
 from raysim.distributed.cluster import connect, scheduler_address
 from raysim.progress import Progress
@@ -236,6 +237,21 @@ def check_run_options(spec: DatasetSpec, store: str | Path, *, workers: int | No
         probe_writable(where)
     except OSError as exc:
         raise DatasetError(f"{path}: cannot write in {where} ({exc.strerror})") from exc
+    if not path.exists():  # a new store: it must fit (a resume writes what its pending samples need)
+        _check_room(spec, path, where)
+
+
+def _check_room(spec: DatasetSpec, path: Path, where: Path) -> None:
+    """Refuse a new store that would not fit on its disk (:func:`store_bytes`, an upper
+    estimate): a 10-million-sample spec started computing toward 200 GB on a disk with 78 GB
+    free, to stop with a full disk hours later."""
+    need = store_bytes(spec)
+    free = shutil.disk_usage(where).free
+    if need > free:
+        raise DatasetError(f"{path}: the store would take up to {need / 1e9:.3g} GB ({spec.samples} "
+                           f"samples, {need / spec.samples / 1e6:.3g} MB each) and its disk has "
+                           f"{free / 1e9:.3g} GB free: make fewer samples or a coarser grid, or "
+                           "give a path on a larger disk")
 
 
 def _run(client, path: str, spec: DatasetSpec, device: str, pending: np.ndarray,

@@ -257,6 +257,35 @@ def test_a_full_disk_names_the_store_and_a_resume_completes_it(reference, spec, 
     assert_same_store(reference, store)
 
 
+def test_the_store_size_estimate_bounds_the_store_written(reference, spec):
+    """The estimate that refuses a store too large for its disk is an upper bound of what a
+    store takes (blocks on disk, as `du` counts them), and not far above it."""
+    from raysim.dataset.store_layout import store_bytes
+
+    on_disk = sum(p.stat().st_blocks * 512 for p in reference.rglob("*") if p.is_file())
+    assert on_disk <= store_bytes(spec) <= 2 * on_disk, (on_disk, store_bytes(spec))
+
+
+def test_a_store_too_large_for_its_disk_is_refused_before_any_work(spec, tmp_path, monkeypatch):
+    """QA: a 10-million-sample spec was accepted on a disk with 78 GB free for about 200 GB of
+    store, and started computing."""
+    from raysim.dataset import run as dataset_run
+    from raysim.dataset.run import check_run_options
+    from raysim.dataset.store_layout import store_bytes
+
+    real = shutil.disk_usage
+    need = store_bytes(spec)
+    store = tmp_path / "big.zarr"
+    monkeypatch.setattr(dataset_run.shutil, "disk_usage",
+                        lambda where: real(where)._replace(free=need - 1))
+    with pytest.raises(DatasetError, match=r"big\.zarr: the store would take up to .* GB free"):
+        check_run_options(spec, store)
+    assert not store.exists()
+    monkeypatch.setattr(dataset_run.shutil, "disk_usage",
+                        lambda where: real(where)._replace(free=need))
+    check_run_options(spec, store)
+
+
 def test_separate_scheduler_and_worker_with_a_worker_killed(reference, spec, tmp_path):
     """A `dask scheduler` and a `dask worker` process on loopback, the CLI as client; the
     worker process is killed after the first sample and its nanny restarts it: the store
