@@ -56,7 +56,9 @@ def check(
                                            help="Mesh only: metres per file unit (0.001 for a file "
                                                 "in millimetres; default 1)."),
     resolution: float | None = typer.Option(None, "--resolution",
-                                            help="Generated dish: GO triangle edge (m)."),
+                                            help="GO triangle edge (m) of a generated dish; on a mesh "
+                                                 "file, the GO rays' spacing on its faces (default "
+                                                 "0.15)."),
     json_path: str | None = json_option(),
 ) -> None:
     """Does GO hold for this dish at these frequencies? GO against PO + PTD or go+edge.

@@ -25,6 +25,7 @@ import numpy as np
 from raysim.dataset.memo import Memo, VertexFactors
 from raysim.dataset.spec import DatasetSpec
 from raysim.optics import go
+from raysim.simulate import go_subdivisions
 from raysim.surface.deformation import Deformation
 from raysim.surface.mesh import Reflector, paraboloid
 from raysim.surface.panels import PanelLayout
@@ -64,8 +65,8 @@ def go_setup(spec: DatasetSpec, device: str = "cpu") -> GOSetup:
         return _SETUPS[key]
     ideal = spec_reflector(spec)
     scene = spec.scene
-    tracer = go.Tracer(ideal, scene.sphere, scene.source.direction, scene.subdivisions, device,
-                       footprint_shortcut=True)
+    tracer = go.Tracer(ideal, scene.sphere, scene.source.direction, go_subdivisions(scene, ideal)[0],
+                       device, footprint_shortcut=True)
     setup = GOSetup(ideal, tracer, VertexFactors(ideal.vertices[:, 0], ideal.vertices[:, 1]))
     _SETUPS[key] = setup
     while len(_SETUPS) > _KEEP:
@@ -125,7 +126,7 @@ def wave_intensity(scene, reflector: Reflector, method: str, device: str = "cpu"
     source = scene.source
     wave = po.Illumination.plane_wave(source.frequency_hz, source.direction, source.e_hat)
     if method == "go+edge":
-        E = goedge.sphere_field(reflector, scene.sphere, wave, None, scene.subdivisions,
+        E = goedge.sphere_field(reflector, scene.sphere, wave, None, scene.subdivisions or 1,
                                 device=device).E
     elif method in ("po", "po+ptd"):
         E = po.sphere_field(reflector, scene.sphere, wave, po.DEFAULT_SAMPLES_PER_WAVELENGTH,

@@ -72,7 +72,8 @@ def check(source: str | os.PathLike[str], *, frequencies: list[float] | None = N
     refine_model : model of the wave-aware refinement: ``auto`` (the data's own), ``go+edge``,
         ``po``, ``po+ptd`` or ``none`` (not run).
     device : Warp device (``cpu``, ``cuda``) for every engine and model.
-    resolution : GO triangle edge (m) of a generated dish (default the scene's).
+    resolution : GO triangle edge (m) of a generated dish (default the scene's); on a mesh
+        file the GO rays' spacing on its faces (default 0.15 m).
     progress : ``progress(stage, fraction)``, over the whole check.
     radiator, radiator_tol : how PO + PTD sum their elements' fields, in the wave engine, the
         wave models of the inversions and the engine rule's cost (``fast`` or ``direct``; as

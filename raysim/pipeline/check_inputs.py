@@ -100,10 +100,11 @@ def load_dish(source: str | Path, *, sphere_radius: float | None = None,
     when it is not a dish: F / D outside 0.1 .. 5, or an RMS departure from the fit over 2 %
     of the dish's depth. ``sphere_radius`` (m) sets its probe sphere (default 0.3 F);
     ``mesh_unit`` (m per file unit, default 1) scales its coordinates; ``resolution`` (m) the
-    triangle edge of a generated GO mesh.
+    triangle edge of a generated GO mesh, or a mesh file's GO ray spacing.
     """
     if is_mesh(source):
-        return _mesh_dish(Path(source), sphere_radius, focal_length, unit=mesh_unit)
+        return _ray_spacing(_mesh_dish(Path(source), sphere_radius, focal_length, unit=mesh_unit),
+                            resolution)
     if sphere_radius is not None or focal_length is not None or mesh_unit is not None:
         raise CheckError("--sphere-radius, --focal-length and --mesh-unit apply to a mesh file; a "
                          "scene sets its own in [sphere] and [dish]")
@@ -112,8 +113,8 @@ def load_dish(source: str | Path, *, sphere_radius: float | None = None,
     scene = load_scene(find_input(source))
     if scene.dish.mesh is not None:
         # the dish comes from the scene (its frequency, sphere and deformation), on its mesh
-        return _mesh_dish(scene.dish.mesh, scene.sphere.radius, scene.dish.focal_length,
-                          scene=scene, source=source)
+        return _ray_spacing(_mesh_dish(scene.dish.mesh, scene.sphere.radius, scene.dish.focal_length,
+                                       scene=scene, source=source), resolution)
     if resolution is not None:
         if not (math.isfinite(resolution) and 0 < resolution <= scene.D / 8):
             raise CheckError(f"--resolution must lie in (0, D/8 = {scene.D / 8:g}] m, got {resolution:g}")
@@ -122,7 +123,20 @@ def load_dish(source: str | Path, *, sphere_radius: float | None = None,
     wave = replace(scene, dish=replace(scene.dish, resolution=face), subdivisions=1)
     return Dish(scene, wave, str(source), False,
                 notes=(f"wave engines on {face:g} m quadrature faces of the smooth surface, GO on "
-                       f"{scene.dish.resolution:g} m triangles x {scene.subdivisions} rays per edge",))
+                       f"{scene.dish.resolution:g} m triangles x {scene.subdivisions or 1} rays per edge",))
+
+
+def _ray_spacing(dish: Dish, resolution: float | None) -> Dish:
+    """A mesh file's dish with its GO rays ``resolution`` (m) apart on its faces (the
+    automatic lattice of :func:`raysim.simulate.go_subdivisions`, over a scene's stated
+    ``[go] subdivisions``); unchanged without one."""
+    if resolution is None:
+        return dish
+    if not (math.isfinite(resolution) and 0 < resolution <= dish.D / 8):
+        raise CheckError(f"--resolution must lie in (0, D/8 = {dish.D / 8:g}] m, got {resolution:g}")
+    go = replace(dish.go, subdivisions=None, ray_spacing=float(resolution))
+    return replace(dish, go=go, notes=(*dish.notes, f"GO rays about {resolution:g} m apart on the "
+                                       "mesh's faces (--resolution)"))
 
 
 def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None = None,

@@ -94,7 +94,13 @@ class Scene:
     deformation: Deformation
     source: Source
     sphere: SphereGrid
-    subdivisions: int = 1
+    #: GO rays per face edge; None: automatic (1 on a generated dish, whose triangles are
+    #: ``dish.resolution``; on a mesh file enough for rays about DEFAULT_RESOLUTION apart:
+    #: :func:`raysim.optics.go.mesh_subdivisions`)
+    subdivisions: int | None = None
+    #: the automatic lattice's ray spacing (m) on a mesh file (None: DEFAULT_RESOLUTION);
+    #: set by ``raysim check --resolution``, not by a scene file
+    ray_spacing: float | None = None
     text: str = ""
     path: Path | None = None
     method: str = "go"
@@ -227,7 +233,7 @@ def parse_scene(text: str, source: str = "scene", base: Path | None = None) -> S
     source_ = _source(top.sub("source", keys=TABLE_KEYS["source"]))
     sphere = _sphere(top.sub("sphere", keys=TABLE_KEYS["sphere"]), dish)
     go = top.sub("go", keys=TABLE_KEYS["go"])
-    subdivisions = go.integer("subdivisions", 1, lo=1, hi=16)
+    subdivisions = go.integer("subdivisions", None, lo=1, hi=16) if go.has("subdivisions") else None
     go.done()
     probe = probe_from_table(top.sub("probe", keys=TABLE_KEYS["probe"]))
     deformation = deformation_of(top.tables("deformation"), dish.diameter, dish.focal_length,
