@@ -14,8 +14,9 @@ rim's own diffraction, which no inversion uses, dominates. Relative figures are 
 - gap signature: the cells GO darkens (ideal cell mean over the smooth paraboloid's,
   :func:`raysim.maps.sphere.ideal_go_cell_mean`, below 99 % of that ratio's median over the
   usable cells: on a coarse grid every cell holds some gap) and the mean intensity there
-  relative to the median of its theta row, in GO and in the wave data: GO's lines are black,
-  the wave's are shallow dips spread over a Fresnel zone, or lost in its ripple.
+  relative to the median of its theta row (a ring gap's row, dark as a whole, relative to the
+  rows beside it), in GO and in the wave data: GO's lines are black, the wave's are shallow
+  dips spread over a Fresnel zone, or lost in its ripple.
 """
 
 from __future__ import annotations
@@ -100,11 +101,56 @@ def gap_signature(sphere: SphereGrid, D: float, F: float, ideal_go: NDArray,
     level = np.nanmedian(np.where(use, ratio, np.nan))  # the gaps' mean loss shifts every cell
     dark = use & (ratio < DARK * level)
 
+    ring = _ring_rows(dark, use)
+
     def dip(I: NDArray, where: NDArray[np.bool_], absolute: bool = False) -> float:
         with np.errstate(invalid="ignore", divide="ignore"):
-            rel = I / np.nanmedian(I, axis=1, keepdims=True) - 1.0
+            rel = I / _row_levels(I, use, ring) - 1.0
         rel = np.abs(rel) if absolute else rel
         return float(np.nanmean(rel[where])) if where.any() else math.nan
 
+    elsewhere = dip(ideal_wave, use & ~dark, absolute=True)
+    if ring.any():  # a ring's dip is against the rows beside it: so is the ripple it must beat
+        elsewhere = max(elsewhere, _row_scatter(ideal_wave, use, ring))
     return GapSignature(int(dark.sum()), int(use.sum()), dip(ideal_go, dark), dip(ideal_wave, dark),
-                        dip(ideal_wave, use & ~dark, absolute=True), dark)
+                        elsewhere, dark)
+
+
+#: a theta row whose usable cells are dark in at least this share is on a ring gap
+RING_SHARE = 0.5
+#: rows each side of a ring gap's row whose medians give its level
+RING_NEIGHBOURS = 3
+
+
+def _ring_rows(dark: NDArray[np.bool_], use: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """Theta rows (n_theta,) on a ring gap: most of their usable cells dark."""
+    n = use.sum(axis=1)
+    return (n > 0) & (dark.sum(axis=1) >= RING_SHARE * np.maximum(n, 1))
+
+
+def _row_levels(I: NDArray, use: NDArray[np.bool_], ring: NDArray[np.bool_]) -> NDArray:
+    """The level (n_theta, 1) each cell of ``I`` is compared with: its theta row's median,
+    which takes the wave's axisymmetric diffraction rings out of the comparison; on a ring
+    gap's row, where the whole row is dark, the median of the rows' medians within
+    :data:`RING_NEIGHBOURS` rows that are not (a ring gap's row measured against itself
+    showed no dip at all, in GO as in the wave: 'lost in the ripple' for a 30 % loss)."""
+    with np.errstate(invalid="ignore"):
+        rows = np.nanmedian(np.where(use, I, np.nan), axis=1)
+    level = rows.copy()
+    clear = np.flatnonzero(~ring & np.isfinite(rows))
+    for i in np.flatnonzero(ring):
+        near = clear[np.abs(clear - i) <= RING_NEIGHBOURS]
+        level[i] = np.median(rows[near]) if len(near) else np.nan
+    return level[:, None]
+
+
+def _row_scatter(I: NDArray, use: NDArray[np.bool_], ring: NDArray[np.bool_]) -> float:
+    """Mean |median of a row / median of its clear neighbours' medians - 1| over the rows off
+    the ring gaps: how far a row of ``I`` departs from the rows beside it with no gap at all
+    (the wave's diffraction rings), the yardstick of a ring gap's dip."""
+    with np.errstate(invalid="ignore"):
+        rows = np.nanmedian(np.where(use, I, np.nan), axis=1)
+    clear = np.flatnonzero(~ring & np.isfinite(rows))
+    out = [abs(rows[i] / np.median(rows[near]) - 1.0) for i in clear
+           if len(near := clear[(np.abs(clear - i) <= RING_NEIGHBOURS) & (clear != i)])]
+    return float(np.mean(out)) if out else math.nan

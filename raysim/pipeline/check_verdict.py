@@ -70,7 +70,8 @@ def gap_text(ds: xr.Dataset, i: int) -> str:
     share = 100 * dark / int(ds["gap_usable_cells"].values[i])
     return (f"; {name}: GO draws dark lines on {dark} cells ({share:.1f} %)"
             f" at {100 * float(ds['gap_go_dip'].values[i]):+.0f} %, the wave data dip "
-            f"{100 * wave_dip:+.2f} % there (elsewhere +-{100 * noise:.2f} %): {seen}")
+            f"{100 * wave_dip:+.2f} % there (elsewhere {100 * noise:.2f} % either way on average): "
+            f"{seen}")
 
 
 def summary_rows(ds: xr.Dataset) -> list[list[str]]:

@@ -324,3 +324,45 @@ def test_a_one_piece_mesh_has_its_dark_lines_called_facets_not_gaps():
 
     assert "the mesh's facets (one piece, no gaps): GO draws dark lines on 40 cells (10.0 %)" in clause(1)
     assert "the mesh's gaps: GO draws dark lines" in clause(30)
+
+
+def test_resolution_on_a_mesh_file_sets_its_go_ray_spacing(tmp_path):
+    """QA: `check my.stl --resolution 0.05` ran exactly as without it, exit 0 and no word (it
+    set a generated dish's triangles only). On a mesh file it sets GO's ray spacing, which
+    the automatic lattice then follows (rays per edge from the faces' edges over it)."""
+    from raysim.pipeline.check_inputs import CheckError, load_dish
+    from raysim.simulate import go_subdivisions
+    from raysim.surface.mesh import load_reflector
+
+    stl, _ = _panelled_stl(tmp_path)
+    plain = load_dish(stl, sphere_radius=1.0)
+    fine = load_dish(stl, sphere_radius=1.0, resolution=0.02)
+    assert fine.go.ray_spacing == 0.02 and "GO rays about 0.02 m apart" in " ".join(fine.notes)
+    reflector = load_reflector(stl)[0]
+    assert go_subdivisions(plain.go, reflector)[0] == 1      # 0.1 m triangles: as a scene's
+    assert go_subdivisions(fine.go, reflector)[0] >= 4
+    with pytest.raises(CheckError, match="--resolution must lie in"):
+        load_dish(stl, sphere_radius=1.0, resolution=5.0)
+
+
+def test_a_ring_gap_dips_against_the_rows_beside_it():
+    """QA: a dish with ring gaps was said to show GO's dark lines "at +0 %" and the wave data
+    "+0.00 %, lost in the ripple": each cell was compared with its own theta row's median, and
+    a ring gap darkens its whole row. Synthetic maps: GO's smooth cell means, two rows 30 %
+    darker; the wave the same with a 2 % ripple along theta and a 10 % dip on those rows."""
+    from raysim.pipeline.check_measures import gap_signature
+
+    D, F = 12.0, 4.8
+    sphere = SphereGrid(1.5, 45, 36)
+    th = sphere.theta_edges
+    smooth = ideal_go_cell_mean(th[:-1], th[1:], F, sphere.radius)[:, None] * np.ones((1, 36))
+    rows = np.zeros(45, bool)
+    rows[[12, 25]] = True
+    go = np.where(rows[:, None], 0.7, 1.0) * smooth
+    ripple = 1.0 + 0.02 * np.sin(np.arange(45) * 2.1)[:, None]
+    wave = np.where(rows[:, None], 0.9, 1.0) * ripple * smooth
+    sig = gap_signature(sphere, D, F, go, wave)
+    assert sig.dark[rows].all() and not sig.dark[~rows].any()
+    assert abs(sig.go_dip + 0.3) < 0.01, sig.go_dip
+    assert abs(sig.wave_dip + 0.1) < 0.03, sig.wave_dip
+    assert 0.005 < sig.wave_dip_elsewhere < 0.03                     # the ripple, row to row
