@@ -392,6 +392,32 @@ def test_a_dish_exported_as_a_solid_is_refused(tmp_path: Path):
     assert load_reflector(tmp_path / "front.ply")[1].n_panels == 1
 
 
+def test_a_patch_exported_twice_is_refused_and_a_panelled_dish_is_not(tmp_path: Path):
+    """QA: a 12 m dish with a copy of a 1.6 m patch 2 mm above it (panels overlapping at a
+    seam) loaded: it covers its footprint 1.02 times, under the two-layer test's bound, and the
+    shadow test's tolerance (1 mm plus the facets' sag) let both layers reflect, 1.8 % more
+    power on the sphere than falls on the aperture with the power balance at round-off. The
+    faces over the patch's area are now found under two faces (its area, from shapely's union
+    of the patch's triangles, independently), and refused; a dish of panels with gaps, whose
+    pieces never overlap, still loads."""
+    import trimesh
+
+    front = _sheet()
+    centres = front.triangles_center
+    near = np.hypot(centres[:, 0] - 2.0, centres[:, 1]) < 0.6
+    patch = trimesh.Trimesh(front.vertices + np.array([0.0, 0.0, 0.002]), front.faces[near], process=False)
+    patch.remove_unreferenced_vertices()
+    trimesh.util.concatenate([front, patch]).export(tmp_path / "seam.ply")
+    area = shapely.unary_union([shapely.Polygon(t[:, :2]) for t in patch.triangles]).area
+    with pytest.raises(MeshError, match=r"lie under two faces or more") as info:
+        load_reflector(tmp_path / "seam.ply")
+    stated = float(re.search(r"([0-9.]+) m\^2", str(info.value)).group(1))
+    assert abs(stated - area) < 0.05 * area, (stated, area)
+    panelled = paraboloid(10.0, 3.0, 0.3, PanelLayout((0.0, 2.5, 5.0), (6, 12), 0.02)).mesh
+    panelled.export(tmp_path / "panels.ply")
+    assert load_reflector(tmp_path / "panels.ply")[1].n_panels == 18
+
+
 def test_a_textured_or_rewritten_mesh_is_one_piece(tmp_path: Path):
     """A mesh whose every face has corners of its own (a textured OBJ: the corners differ by
     their texture coordinates; a CAD export: by rounding, 1e-7 m) loaded with each triangle a
