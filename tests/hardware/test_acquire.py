@@ -176,6 +176,34 @@ def test_fault_then_resume_equals_uninterrupted(tmp_path: Path) -> None:
     assert np.isfinite(whole["intensity"].values).all()
 
 
+def test_a_resume_with_another_power_meter_is_refused_the_same_one_resumes(tmp_path: Path) -> None:
+    """QA: a resume against another meter (other model and serial) was merged silently and the
+    FieldMap named only the second; each meter has its own gain, so the halves are not on
+    one scale. The same meter resumes, though at another address (each simulated rig here
+    listens on a new port) and with other firmware."""
+    from hardware.sim.instruments import METER_IDN
+
+    plan = load_plan(write_plan(tmp_path))
+    field = aligned_field(tmp_path)
+    out = tmp_path / "s.nc"
+    journal = tmp_path / "s.nc.journal"
+    with pytest.raises(InstrumentError, match="axis 2 stopped at"):
+        scan(plan, out, simulate=field, faults=Faults(stall_at_move=10))
+    before = journal.read_bytes()
+    other = "Keysight Technologies,N1914A,OTHER-SERIAL,B9"
+    with pytest.raises(JournalError) as info:
+        scan(plan, out, simulate=field, resume=True, faults=Faults(meter_idn=other))
+    message = str(info.value)
+    assert "\n" not in message and METER_IDN in message and other in message
+    assert journal.read_bytes() == before and not out.exists()
+    # the same model and serial number, its firmware updated: the same meter
+    maker, model, serial, _ = METER_IDN.split(",")
+    updated = f"{maker},{model},{serial},A9.99.99"
+    result = scan(plan, out, simulate=field, resume=True, faults=Faults(meter_idn=updated))
+    assert result.steps_taken == 22 - 4
+    assert result.fieldmap.attrs["meter_idn"] == updated
+
+
 def test_journal_guards(tmp_path: Path) -> None:
     plan = load_plan(write_plan(tmp_path, noise=0.01))
     field = aligned_field(tmp_path)
