@@ -97,6 +97,7 @@ def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
     check_output(jpath, [("FieldMap the simulated rig scans", simulate)], PlanError)
     if resources and simulate is not None:
         raise PlanError("give either --resource or --simulate, not both")
+    plan.check_tolerance()  # before any journal, instrument or motion
     if resume and not journal_records(jpath):
         # starting afresh instead re-scanned everything (hours on a real rig) and left the
         # real journal, wherever it was, orphaned

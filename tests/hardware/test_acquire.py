@@ -204,6 +204,37 @@ def test_a_resume_with_another_power_meter_is_refused_the_same_one_resumes(tmp_p
     assert result.fieldmap.attrs["meter_idn"] == updated
 
 
+@pytest.mark.parametrize("tolerance_deg", [10.0, 35.0])
+def test_a_move_tolerance_of_half_the_grid_step_or_more_is_refused_before_any_move(
+        tmp_path: Path, tolerance_deg: float) -> None:
+    """QA: a tolerance wider than half the grid step let a stalled move pass, its reading
+    stored in the wrong cell with exit 0. The plan's steps are 20 deg (theta) and 60 deg
+    (phi): half the smallest is 10 deg. Move 10 turns the track 60 deg for step 4 and stalls
+    30 deg short, which 35 deg passed."""
+    from hardware.sim.rig import SimulatedRig
+    from hardware.sim.settings import SimSettings
+
+    plan_path = write_plan(tmp_path)
+    rig_toml = tmp_path / "rig.toml"
+    rig_toml.write_text(rig_toml.read_text().replace("tolerance_deg = 0.001",
+                                                     f"tolerance_deg = {tolerance_deg}"))
+    plan = load_plan(plan_path)
+    out = tmp_path / "s.nc"
+    with SimulatedRig(plan.rig, SimSettings(time_scale=0.0),
+                      faults=Faults(stall_at_move=10)) as sim:
+        with pytest.raises(PlanError) as info:
+            scan(plan, out, resources=sim.resources)
+        assert sim.motion.moves == 0 and sim.meter.readings == 0
+    message = str(info.value)
+    assert "\n" not in message
+    assert f"tolerance_deg {tolerance_deg:g} deg" in message and "= 10 deg" in message
+    assert not out.exists() and not (tmp_path / "s.nc.journal").exists()
+    # just below half a step is accepted
+    rig_toml.write_text(rig_toml.read_text().replace(f"tolerance_deg = {tolerance_deg}",
+                                                     "tolerance_deg = 9.99"))
+    load_plan(plan_path).check_tolerance()
+
+
 def test_journal_guards(tmp_path: Path) -> None:
     plan = load_plan(write_plan(tmp_path, noise=0.01))
     field = aligned_field(tmp_path)
