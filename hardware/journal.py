@@ -173,10 +173,13 @@ def record_problem(record: Record) -> str:
 class Journal:
     """An open journal to append completed steps to. Use :meth:`create` or :meth:`resume`."""
 
-    def __init__(self, path: Path, fd: int, records: list[Record]) -> None:
+    def __init__(self, path: Path, fd: int, records: list[Record],
+                 session: dict[str, Any] | None = None) -> None:
         self.path = path
         self._fd = fd
         self.records = records
+        #: the last session line's attributes when resumed ({} for a new or version-1 journal)
+        self.session = dict(session or {})
 
     @classmethod
     def create(cls, path: str | Path, fingerprint: str, steps: int, plan: str = "") -> Journal:
@@ -218,7 +221,7 @@ class Journal:
         A torn last line is cut off first, so the next record starts on a fresh line.
         """
         path = Path(path)
-        header, records, good = read_journal(path)
+        header, records, good, session, _ = read_journal_sessions(path)
         if header.get("fingerprint") not in (fingerprint, *also) or header.get("steps") != steps:
             if plans and header.get("plan") in plans and header.get("steps") == steps:
                 raise JournalError(f"{path}: the journal was made with other settings of the "
@@ -230,7 +233,7 @@ class Journal:
         if os.fstat(fd).st_size != good:
             os.ftruncate(fd, good)
             os.fsync(fd)
-        return cls(path, fd, records)
+        return cls(path, fd, records, session)
 
     def append(self, record: Record) -> None:
         """Write one completed step and sync it to disk before returning."""

@@ -201,6 +201,23 @@ class ScanPlan:
         for step in self.steps():
             self.rig.axes(step.theta, step.phi)
 
+    def check_tolerance(self) -> None:
+        """Raise :class:`PlanError` unless the rig's move tolerance (rad) is below half the
+        plan's smallest grid step (rad), theta's or phi's (each axis moves by its step).
+
+        A move accepted up to half a step off its target reads the probe nearer the next
+        cell's centre than its own: with tolerance_deg 5 under 4 deg steps a move stalled
+        2 deg short was journaled into its cell, exit 0. A scan is refused before any motion;
+        a journal made already is still read (``--from-journal``).
+        """
+        step = min(self.grid.dtheta, self.grid.dphi)
+        if self.rig.tolerance >= 0.5 * step:
+            raise PlanError(f"the rig's tolerance_deg {math.degrees(self.rig.tolerance):g} deg "
+                            f"is not below half the plan's smallest grid step "
+                            f"({math.degrees(step):g} deg / 2 = {math.degrees(0.5 * step):g} "
+                            "deg): a move that far off its target would be stored in the wrong "
+                            f"cell; set [motion] tolerance_deg below {math.degrees(0.5 * step):g}")
+
 
 def _file_stamps(obstacles: tuple[Obstacle, ...]) -> tuple:
     """(path, size, mtime in ns) of each mesh obstacle's file: part of the caches' keys, so a

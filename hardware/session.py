@@ -97,6 +97,7 @@ def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
     check_output(jpath, [("FieldMap the simulated rig scans", simulate)], PlanError)
     if resources and simulate is not None:
         raise PlanError("give either --resource or --simulate, not both")
+    plan.check_tolerance()  # before any journal, instrument or motion
     if resume and not journal_records(jpath):
         # starting afresh instead re-scanned everything (hours on a real rig) and left the
         # real journal, wherever it was, orphaned
@@ -120,6 +121,7 @@ def scan(plan: ScanPlan, output: str | os.PathLike[str], *,
                 if start < len(steps):
                     inst = open_instruments(addr, plan.rig, rm)
                     try:
+                        check_same_meter(jr.session.get("meter_idn"), inst.meter.idn, jpath)
                         attrs["meter_idn"] = inst.meter.idn
                         attrs["motion_version"] = inst.motion.version
                         # the journal alone must tell a rehearsal and the instruments
@@ -164,6 +166,32 @@ def scan_files(plan: str | os.PathLike[str], output: str | os.PathLike[str], *,
                         "--time-scale) apply with --simulate only")
     return scan(scan_plan, output, resources=addresses, simulate=simulate, sim=settings,
                 resume=resume, journal=journal, progress=progress)
+
+
+def meter_identity(idn: str) -> tuple[str, str]:
+    """The (model, serial number) of an ``*IDN?`` answer (manufacturer, model, serial,
+    firmware), upper case; what is missing is ''. The manufacturer (Agilent became Keysight)
+    and the firmware may change on the same meter, and do not change its gain."""
+    fields = [f.strip().upper() for f in idn.split(",")]
+    fields += [""] * (3 - len(fields))
+    return fields[1], fields[2]
+
+
+def check_same_meter(recorded: object, idn: str, path: str | os.PathLike[str]) -> None:
+    """Refuse (:class:`JournalError`) to resume a journal whose steps another power meter read.
+
+    ``recorded``: the meter's ``*IDN?`` in the journal's last session line (None for a
+    journal without one: nothing to compare); ``idn``: the meter connected now. Each meter has
+    its own absolute gain, so readings of two meters are not on one scale. Only the model and
+    serial number are compared: the same meter at another address resumes.
+    """
+    if not isinstance(recorded, str) or not recorded:
+        return
+    if meter_identity(recorded) != meter_identity(idn):
+        raise JournalError(f"{path}: the journal's steps were read by the power meter "
+                           f"'{recorded}', this is '{idn}': another meter has its own gain, the "
+                           "two parts would not be on one scale; resume with the same meter, or "
+                           "start a new scan")
 
 
 def fieldmap_file_from_journal(plan: str | os.PathLike[str], output: str | os.PathLike[str], *,

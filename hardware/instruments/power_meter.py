@@ -1,9 +1,10 @@
 """Driver for a microwave power meter speaking the Keysight EPM N1913A / N1914A SCPI dialect.
 
 Commands used: ``*IDN?``, ``*RST``, ``*CLS``, ``*OPC?``, ``SENS:FREQ <Hz>``, ``UNIT:POW DBM``,
-``INIT:CONT OFF``, ``INIT``, ``FETC?`` and ``SYST:ERR?``. After every command and query the
-error queue is read until it answers ``+0,"No error"``; any entry stops the scan with a one-line
-:class:`InstrumentError`. Readings cross this boundary in dBm and leave it in W.
+``UNIT:POW?``, ``INIT:CONT OFF``, ``INIT``, ``FETC?`` and ``SYST:ERR?``. After every command and
+query the error queue is read until it answers ``+0,"No error"``; any entry stops the scan with a
+one-line :class:`InstrumentError`. The unit is read back after it is set: a meter left in W would
+otherwise give readings taken for dBm. Readings cross this boundary in dBm and leave it in W.
 """
 
 from __future__ import annotations
@@ -79,7 +80,22 @@ class PowerMeter(CheckedInstrument):
         self.check_errors(after="*RST")
         self.command(f"SENS:FREQ {frequency_hz:.6E}")
         self.command("UNIT:POW DBM")
+        self.check_unit("DBM")
         self.command("INIT:CONT OFF")
+
+    def check_unit(self, wanted: str) -> None:
+        """Read ``UNIT:POW?`` back; raise :class:`InstrumentError` unless it is ``wanted``.
+
+        An N191x answers ``DBM`` or ``W``. A meter that accepts ``UNIT:POW DBM`` without error
+        but keeps reading in W would pass every other check, its readings (e.g. 1E-05 W) then
+        taken for dBm: intensities wrong by orders of magnitude, with nothing said.
+        """
+        answer = self.query("UNIT:POW?")
+        unit = answer.strip().strip('"').upper()
+        if unit != wanted.upper():
+            who = f"power meter '{self.idn}'" if self.idn else "power meter"
+            raise InstrumentError(f"{who} at {self.link.resource} reports unit '{answer}' "
+                                  f"after 'UNIT:POW {wanted}': it does not read in {wanted}")
 
     def read_dbm(self) -> float:
         """Trigger one measurement and fetch it (dBm)."""

@@ -92,6 +92,10 @@ class VisaLink:
         except pyvisa.errors.VisaIOError as exc:
             self._broken = "a read timed out"
             if exc.error_code == pyvisa.constants.StatusCode.error_timeout:
+                if _peer_closed(self._inst):  # pyvisa-py reads an end of stream as silence
+                    self._broken = "it closed the connection"
+                    raise InstrumentError(f"{self.name} at {self.resource} closed the connection: "
+                                          f"no answer to '{command}'") from exc
                 raise InstrumentError(f"{self.name} at {self.resource} is silent: no answer to "
                                       f"'{command}' within {self.timeout_s:g} s") from exc
             raise self._error(f"gave no answer to '{command}'", exc) from exc
@@ -173,14 +177,34 @@ def _no_delay(inst: pyvisa.resources.Resource) -> None:
         return
     except Exception:  # pyvisa-py raises its own UnknownAttribute here
         pass
-    session = getattr(getattr(inst, "visalib", None), "sessions", {}).get(
-        getattr(inst, "session", None))
-    sock = getattr(session, "interface", None)
-    if isinstance(sock, socket.socket):
+    sock = _socket_of(inst)
+    if sock is not None:
         try:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         except OSError:
             pass
+
+
+def _socket_of(inst: pyvisa.resources.Resource) -> socket.socket | None:
+    """The TCP socket under a pyvisa-py SOCKET session (None for other backends)."""
+    session = getattr(getattr(inst, "visalib", None), "sessions", {}).get(
+        getattr(inst, "session", None))
+    sock = getattr(session, "interface", None)
+    return sock if isinstance(sock, socket.socket) else None
+
+
+def _peer_closed(inst: pyvisa.resources.Resource) -> bool:
+    """Whether the instrument closed its end of the connection (its process died, it was
+    switched off cleanly): the socket is at end of stream. Asked after a read timed out,
+    since pyvisa-py waits out the timeout on a closed socket as on a silent one; a peek
+    that does not block and takes nothing. False when it cannot tell (another backend)."""
+    sock = _socket_of(inst)
+    if sock is None:
+        return False
+    try:
+        return sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
+    except OSError:  # BlockingIOError: open with nothing to read; a reset: not a clean close
+        return False
 
 
 class CheckedInstrument:

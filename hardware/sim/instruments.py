@@ -4,7 +4,7 @@ Each model turns one received line into an answer (or none) the way the real ins
 dialect does, including its error queue, and knows nothing about sockets (see
 :mod:`hardware.sim.loopback`) or about the field it measures (see :mod:`hardware.sim.rig`).
 Faults for tests: a wrong identity, an error pushed into the meter's queue at a given reading,
-a move that stops short of its target.
+a meter that ignores ``UNIT:POW``, a move that stops short of its target.
 """
 
 from __future__ import annotations
@@ -42,11 +42,16 @@ def scpi_is(header: str, pattern: str) -> bool:
 
 @dataclass
 class PowerMeterModel:
-    """An N1913A answering SCPI; ``measure()`` gives the power at the sensor now (dBm)."""
+    """An N1913A answering SCPI; ``measure()`` gives the power at the sensor now (dBm).
+
+    ``fixed_unit`` ("DBM" or "W"), when set, is a faulty meter's unit whatever it is told:
+    it accepts ``UNIT:POW`` without error and keeps answering ``UNIT:POW?`` and ``FETC?`` in it.
+    """
 
     measure: Callable[[], float]
     idn: str = METER_IDN
     error_at_reading: int | None = None
+    fixed_unit: str | None = None
     frequency_hz: float = 50e6
     unit: str = "DBM"
     continuous: bool = True
@@ -80,7 +85,7 @@ class PowerMeterModel:
             else:
                 self.errors.append('-224,"Illegal parameter value"')
         elif scpi_is(header, "UNIT:POWer?"):
-            return self.unit
+            return self.fixed_unit or self.unit
         elif scpi_is(header, "INITiate:CONTinuous"):
             self.continuous = arg.upper() in ("ON", "1")
         elif scpi_is(header, "INITiate") or scpi_is(header, "INITiate:IMMediate"):
@@ -116,7 +121,7 @@ class PowerMeterModel:
         if self._value is None:
             self.errors.append('-230,"Data corrupt or stale"')
             return "+9.91E+37"
-        if self.unit == "W":
+        if (self.fixed_unit or self.unit) == "W":
             return f"{1e-3 * 10.0 ** (self._value / 10.0):+.9E}"
         return f"{self._value:+.9E}"
 

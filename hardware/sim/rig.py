@@ -37,7 +37,8 @@ class Faults:
     """Instrument faults to inject (tests): silence, identity, an error, a stalled move.
 
     ``meter_error_at_reading`` pushes an error into the meter's queue at that reading
-    (counting from 1); ``stall_at_move`` makes that move (from 1) stop halfway.
+    (counting from 1); ``meter_fixed_unit`` ("W" or "DBM") is the unit the meter stays in
+    whatever ``UNIT:POW`` sets; ``stall_at_move`` makes that move (from 1) stop halfway.
     """
 
     meter_silent: bool = False
@@ -45,6 +46,7 @@ class Faults:
     meter_idn: str = METER_IDN
     motion_version: str = ESP_VERSION
     meter_error_at_reading: int | None = None
+    meter_fixed_unit: str | None = None
     stall_at_move: int | None = None
 
 
@@ -79,7 +81,8 @@ class SimulatedRig:
                                   stall_at_move=faults.stall_at_move,
                                   version=faults.motion_version)
         self.meter = PowerMeterModel(self.power_dbm, idn=faults.meter_idn,
-                                     error_at_reading=faults.meter_error_at_reading)
+                                     error_at_reading=faults.meter_error_at_reading,
+                                     fixed_unit=faults.meter_fixed_unit)
         self._index = 0
         self._reading = 0
         silent = {"meter": faults.meter_silent, "motion": faults.motion_silent}

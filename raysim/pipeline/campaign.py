@@ -101,6 +101,7 @@ def run_campaign(scene_path: str | os.PathLike[str], plan_path: str | os.PathLik
                           f"is not the scene's dish (F {scene.dish.focal_length:g} m, "
                           f"D {scene.dish.diameter:g} m)")
     check_obstacles(scene, plan)
+    plan.check_tolerance()  # its scan would refuse it only after the scene was simulated
     check_map_holds_plan(plan, scene.sphere, scene.source.frequency_hz, f"the scene {scene_path}",
                          "give the scene a [sphere] of the rig's radius that holds the plan's grid, "
                          "and the plan's frequency")

@@ -176,6 +176,65 @@ def test_fault_then_resume_equals_uninterrupted(tmp_path: Path) -> None:
     assert np.isfinite(whole["intensity"].values).all()
 
 
+def test_a_resume_with_another_power_meter_is_refused_the_same_one_resumes(tmp_path: Path) -> None:
+    """QA: a resume against another meter (other model and serial) was merged silently and the
+    FieldMap named only the second; each meter has its own gain, so the halves are not on
+    one scale. The same meter resumes, though at another address (each simulated rig here
+    listens on a new port) and with other firmware."""
+    from hardware.sim.instruments import METER_IDN
+
+    plan = load_plan(write_plan(tmp_path))
+    field = aligned_field(tmp_path)
+    out = tmp_path / "s.nc"
+    journal = tmp_path / "s.nc.journal"
+    with pytest.raises(InstrumentError, match="axis 2 stopped at"):
+        scan(plan, out, simulate=field, faults=Faults(stall_at_move=10))
+    before = journal.read_bytes()
+    other = "Keysight Technologies,N1914A,OTHER-SERIAL,B9"
+    with pytest.raises(JournalError) as info:
+        scan(plan, out, simulate=field, resume=True, faults=Faults(meter_idn=other))
+    message = str(info.value)
+    assert "\n" not in message and METER_IDN in message and other in message
+    assert journal.read_bytes() == before and not out.exists()
+    # the same model and serial number, its firmware updated: the same meter
+    maker, model, serial, _ = METER_IDN.split(",")
+    updated = f"{maker},{model},{serial},A9.99.99"
+    result = scan(plan, out, simulate=field, resume=True, faults=Faults(meter_idn=updated))
+    assert result.steps_taken == 22 - 4
+    assert result.fieldmap.attrs["meter_idn"] == updated
+
+
+@pytest.mark.parametrize("tolerance_deg", [10.0, 35.0])
+def test_a_move_tolerance_of_half_the_grid_step_or_more_is_refused_before_any_move(
+        tmp_path: Path, tolerance_deg: float) -> None:
+    """QA: a tolerance wider than half the grid step let a stalled move pass, its reading
+    stored in the wrong cell with exit 0. The plan's steps are 20 deg (theta) and 60 deg
+    (phi): half the smallest is 10 deg. Move 10 turns the track 60 deg for step 4 and stalls
+    30 deg short, which 35 deg passed."""
+    from hardware.sim.rig import SimulatedRig
+    from hardware.sim.settings import SimSettings
+
+    plan_path = write_plan(tmp_path)
+    rig_toml = tmp_path / "rig.toml"
+    rig_toml.write_text(rig_toml.read_text().replace("tolerance_deg = 0.001",
+                                                     f"tolerance_deg = {tolerance_deg}"))
+    plan = load_plan(plan_path)
+    out = tmp_path / "s.nc"
+    with SimulatedRig(plan.rig, SimSettings(time_scale=0.0),
+                      faults=Faults(stall_at_move=10)) as sim:
+        with pytest.raises(PlanError) as info:
+            scan(plan, out, resources=sim.resources)
+        assert sim.motion.moves == 0 and sim.meter.readings == 0
+    message = str(info.value)
+    assert "\n" not in message
+    assert f"tolerance_deg {tolerance_deg:g} deg" in message and "= 10 deg" in message
+    assert not out.exists() and not (tmp_path / "s.nc.journal").exists()
+    # just below half a step is accepted
+    rig_toml.write_text(rig_toml.read_text().replace(f"tolerance_deg = {tolerance_deg}",
+                                                     "tolerance_deg = 9.99"))
+    load_plan(plan_path).check_tolerance()
+
+
 def test_journal_guards(tmp_path: Path) -> None:
     plan = load_plan(write_plan(tmp_path, noise=0.01))
     field = aligned_field(tmp_path)

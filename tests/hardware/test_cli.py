@@ -53,6 +53,10 @@ FAULTS = [
     (Faults(meter_silent=True), 0, r"power meter at TCPIP::127\.0\.0\.1::\d+::SOCKET is silent"),
     (Faults(motion_silent=True), 0, r"motion controller at .* is silent: no answer to 'VE\?'"),
     (Faults(meter_idn="Keysight Technologies,N9020A,1,1"), 0, "expected a Keysight N1913A"),
+    # accepts UNIT:POW DBM and reads on in W: refused before the first reading
+    (Faults(meter_fixed_unit="W"), 0,
+     r"power meter 'Keysight Technologies,N1913A,MY53100001,[^']*' at .* reports unit 'W' "
+     r"after 'UNIT:POW DBM'"),
     # two readings a step: the 7th reading belongs to step 3
     (Faults(meter_error_at_reading=7), 3, r"reports error -241,\"Hardware missing"),
 ]

@@ -40,6 +40,21 @@ def test_meter_setup_and_reading(rm: pyvisa.ResourceManager) -> None:
     meter.close()
 
 
+def test_a_meter_that_ignores_the_unit_it_is_told_is_refused(rm: pyvisa.ResourceManager) -> None:
+    # the meter takes UNIT:POW DBM without an error and reads on in W: its 1E-05 (W) would be
+    # taken for -0.00001 dBm, 20 dB from the -20 dBm it measures
+    meter = PowerMeter.open("TCPIP::watts.example::5025::SOCKET", rm=rm, timeout_s=0.5)
+    with pytest.raises(InstrumentError) as info:
+        meter.setup(3.0e8)
+    message = str(info.value)
+    assert "\n" not in message
+    assert "N1913A,MY00000044" in message and "reports unit 'W'" in message
+    assert "UNIT:POW DBM" in message
+    sent = [text for way, text in meter.link.transcript if way == ">"]
+    assert "FETC?" not in sent and "INIT" not in sent
+    meter.close()
+
+
 def test_meter_wrong_identity(rm: pyvisa.ResourceManager) -> None:
     with pytest.raises(InstrumentError, match=r"\*IDN\? answered 'Rohde&Schwarz,NRP2"):
         PowerMeter.open("TCPIP::other.example::5025::SOCKET", rm=rm, timeout_s=0.5)

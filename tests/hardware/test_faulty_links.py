@@ -26,6 +26,7 @@ class Server:
     connection."""
 
     FLOOD = object()
+    CLOSE = object()
 
     def __init__(self, answer: Callable[[str], object]) -> None:
         self.answer = answer
@@ -65,6 +66,8 @@ class Server:
                         continue
                     log.append(line)
                     reply = self.answer(line)
+                    if reply is Server.CLOSE:
+                        return  # the with block closes the connection: the peer reads EOF
                     try:
                         if reply is Server.FLOOD:
                             while not self._stop.is_set():
@@ -100,6 +103,23 @@ def test_an_answer_without_end_is_refused_at_once_not_read_until_memory_runs_out
         link.query("FETC?")
     assert time.monotonic() - start < 1.0
     with pytest.raises(InstrumentError, match="link unusable"):
+        link.query("FETC?")
+    link.close()
+
+
+def test_a_meter_that_closed_the_connection_is_not_called_silent(serve) -> None:
+    # QA: a meter whose process died mid-scan was reported "silent: no answer within 2 s"
+    server = serve(lambda line: Server.CLOSE if line == "FETC?" else None)
+    link = VisaLink(f"TCPIP::127.0.0.1::{server.port}::SOCKET", name="power meter", timeout_s=0.3)
+    with pytest.raises(InstrumentError) as info:
+        link.query("FETC?")
+    assert str(info.value) == (f"power meter at TCPIP::127.0.0.1::{server.port}::SOCKET closed "
+                               "the connection: no answer to 'FETC?'")
+    link.close()
+    # one that is connected and says nothing is still silent
+    quiet = serve(lambda line: None)
+    link = VisaLink(f"TCPIP::127.0.0.1::{quiet.port}::SOCKET", name="power meter", timeout_s=0.3)
+    with pytest.raises(InstrumentError, match=r"is silent: no answer to 'FETC\?' within 0\.3 s"):
         link.query("FETC?")
     link.close()
 

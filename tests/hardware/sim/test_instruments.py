@@ -44,6 +44,16 @@ def test_meter_transcript() -> None:
     assert meter.readings == 2
 
 
+def test_meter_reports_its_unit_and_a_faulty_one_keeps_its_own() -> None:
+    meter = PowerMeterModel(lambda: -20.0)
+    assert transcript(meter, ["UNIT:POW?", "UNIT:POW W", "UNIT:POW?", "*RST", "UNIT:POW?"]
+                      )[::2] == ["DBM", "W", "DBM"]
+    stuck = PowerMeterModel(lambda: -20.0, fixed_unit="W")
+    answers = transcript(stuck, ["UNIT:POW DBM", "SYST:ERR?", "UNIT:POW?", "INIT", "FETC?"])
+    assert answers[1] == NO_ERROR and answers[2] == "W"
+    assert float(answers[4]) == pytest.approx(1e-5, rel=1e-9)   # -20 dBm, in W
+
+
 def test_meter_error_at_reading() -> None:
     meter = PowerMeterModel(lambda: -30.0, error_at_reading=2)
     assert transcript(meter, ["INIT", "SYST:ERR?", "INIT", "SYST:ERR?"])[1::2] == [
