@@ -166,6 +166,7 @@ def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None
     if fit.rms > 0.02 * depth:
         raise CheckError(f"{path}: not a dish: it departs {fit.rms:.3g} m RMS from its best-fit "
                          f"paraboloid ({100 * fit.rms / depth:.0f} % of the dish's depth)")
+    _check_axis(path, loaded, fit)
     R = SPHERE_RADIUS_OF_F * fit.F if R is None else float(R)
     if not (math.isfinite(R) and 0 < R < fit.F):
         raise CheckError(f"--sphere-radius must lie in (0, F = {fit.F:.4g}) m, got {R:g}")
@@ -181,6 +182,28 @@ def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None
             "engine on that paraboloid plus the file's departure from it, piece by piece")
     return Dish(scene, scene, str(path if source is None else source), True, fit.rms, (note,),
                 _size_warning(D, scene=source is not None), int(ideal.n_panels))
+
+
+#: a mesh whose paraboloid about a tilted axis fits this much better than about z, with the axis
+#: more than MIN_TILT_DEG off, is a dish exported out of the reflector frame
+TILT_FIT_GAIN = 3.0
+MIN_TILT_DEG = 0.2
+
+
+def _check_axis(path: Path, loaded, fit) -> None:
+    """Refuse a mesh whose axis is tilted off +z: a check needs the dish in the reflector frame
+    (the sphere about the focus, the wave along the axis). A 12 m dish tilted 5 deg ran for
+    34 s and was refused as a scan that 'misses a whole region ... measure it'."""
+    from raysim.surface.mesh import axis_tilt
+
+    if fit.rms <= 0:
+        return
+    tilt, rms = axis_tilt(loaded.vertices)
+    if math.degrees(tilt) > MIN_TILT_DEG and TILT_FIT_GAIN * rms < fit.rms:
+        raise CheckError(f"{path}: its axis is tilted {math.degrees(tilt):.2f} deg from +z (a "
+                         f"paraboloid about the tilted axis fits it to {rms * 1e6:.3g} um RMS, one "
+                         f"about z to {fit.rms * 1e6:.3g} um): rotate the mesh into the reflector "
+                         "frame, its axis along +z, the wave's direction")
 
 
 def _size_warning(D: float, scene: bool) -> str:
