@@ -134,8 +134,7 @@ def _row_levels(I: NDArray, use: NDArray[np.bool_], ring: NDArray[np.bool_]) -> 
     gap's row, where the whole row is dark, the median of the rows' medians within
     :data:`RING_NEIGHBOURS` rows that are not (a ring gap's row measured against itself
     showed no dip at all, in GO as in the wave: 'lost in the ripple' for a 30 % loss)."""
-    with np.errstate(invalid="ignore"):
-        rows = np.nanmedian(np.where(use, I, np.nan), axis=1)
+    rows = _row_medians(I, use)
     level = rows.copy()
     clear = np.flatnonzero(~ring & np.isfinite(rows))
     for i in np.flatnonzero(ring):
@@ -148,9 +147,20 @@ def _row_scatter(I: NDArray, use: NDArray[np.bool_], ring: NDArray[np.bool_]) ->
     """Mean |median of a row / median of its clear neighbours' medians - 1| over the rows off
     the ring gaps: how far a row of ``I`` departs from the rows beside it with no gap at all
     (the wave's diffraction rings), the yardstick of a ring gap's dip."""
-    with np.errstate(invalid="ignore"):
-        rows = np.nanmedian(np.where(use, I, np.nan), axis=1)
+    rows = _row_medians(I, use)
     clear = np.flatnonzero(~ring & np.isfinite(rows))
     out = [abs(rows[i] / np.median(rows[near]) - 1.0) for i in clear
            if len(near := clear[(np.abs(clear - i) <= RING_NEIGHBOURS) & (clear != i)])]
     return float(np.mean(out)) if out else math.nan
+
+
+def _row_medians(I: NDArray, use: NDArray[np.bool_]) -> NDArray:
+    """Each theta row's median of ``I`` over its usable cells (n_theta,); NaN for a row with
+    none (beyond the rim image)."""
+    out = np.full(I.shape[0], np.nan)
+    for i in np.flatnonzero(use.any(axis=1)):
+        values = I[i, use[i]]
+        values = values[np.isfinite(values)]
+        if values.size:
+            out[i] = np.median(values)
+    return out
