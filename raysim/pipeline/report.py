@@ -179,22 +179,37 @@ def _check_writable(target: Path) -> None:
 
 @contextlib.contextmanager
 def staging(target: Path) -> Iterator[Path]:
-    """A temporary folder beside ``target`` that replaces it when the block completes."""
+    """A temporary folder beside ``target`` that replaces it when the block completes.
+
+    What ``target`` held at the start was accepted by the run's checks (nothing, or an earlier
+    run's files); anything added or changed in it while the run worked (a crew's notes.txt)
+    was deleted with the replaced folder, exit 0. Now ``target`` is left as it is and the result
+    kept beside it (:func:`_keep_result`), a RenderError naming both.
+    """
     import shutil
     import tempfile
 
-    from raysim.files import new_folder_mode, remove_stale, writer_prefix
+    from raysim.files import changed_since, folder_state, new_folder_mode, remove_stale, writer_prefix
 
     target.parent.mkdir(parents=True, exist_ok=True)
     remove_stale(target)  # what a killed run left (never a live run's staging folder)
+    before = folder_state(target)
     tmp = Path(tempfile.mkdtemp(prefix=writer_prefix(target), suffix=".tmp", dir=target.parent))
     old = target.with_name(f".{target.name}.old-{os.getpid()}")
     try:
         yield tmp
         os.chmod(tmp, new_folder_mode())  # mkdtemp's folder is private (0700)
+        if added := changed_since(target, before):
+            _keep_result(target, tmp, added)
         if target.exists():
             os.replace(target, old)
         os.replace(tmp, target)
+        # a file written between the look above and the rename went into the old folder: look
+        # again there (nothing writes to it by its name now) and undo the swap if one did
+        if added := changed_since(old, before):
+            os.replace(target, tmp)
+            os.replace(old, target)
+            _keep_result(target, tmp, added)
         shutil.rmtree(old, ignore_errors=True)
     except BaseException:
         # an interrupt between the two renames left the old folder hidden: put it back
@@ -202,6 +217,22 @@ def staging(target: Path) -> Iterator[Path]:
             os.replace(old, target)
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def _keep_result(target: Path, tmp: Path, added: list[str]) -> None:
+    """Keep the staged result ``tmp`` as ``TARGET.new`` (``TARGET.new-2``, ... when taken),
+    a name no later run removes, and refuse to replace ``target``, which gained ``added``
+    while the run worked."""
+    import itertools
+
+    for n in itertools.count(1):
+        kept = target.with_name(f"{target.name}.new" + (f"-{n}" if n > 1 else ""))
+        if not os.path.lexists(kept):
+            break
+    os.rename(tmp, kept)
+    more = f" and {len(added) - 1} more" if len(added) > 1 else ""
+    raise RenderError(f"{target}: {added[0]}{more} appeared in it during the run, so it was not "
+                      f"replaced; the result is in {kept}")
 
 
 def inversion() -> Callable[..., xr.Dataset]:
