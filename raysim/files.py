@@ -25,6 +25,7 @@ import os
 import shutil
 import signal
 import socket
+import stat
 import tempfile
 import threading
 import time
@@ -260,6 +261,35 @@ def remove_stale(path: str | os.PathLike[str]) -> None:
             else:
                 with contextlib.suppress(OSError):
                     stale.unlink()
+
+
+def folder_state(folder: str | os.PathLike[str]) -> dict[str, tuple[int, ...]]:
+    """What ``folder`` holds, to tell later whether anything was added or changed in it:
+    each entry's path relative to it, with (kind, inode, size, mtime in ns); empty for a
+    missing folder. A symbolic link counts as itself (it is not followed)."""
+    root = Path(folder)
+    state: dict[str, tuple[int, ...]] = {}
+    if not root.is_dir():
+        return state
+    for dirpath, dirnames, filenames in os.walk(root):
+        for name in (*dirnames, *filenames):
+            entry = Path(dirpath) / name
+            try:
+                st = entry.lstat()
+            except OSError:  # gone meanwhile: not there
+                continue
+            state[str(entry.relative_to(root))] = (st.st_mode >> 12, st.st_ino, st.st_size,
+                                                   st.st_mtime_ns)
+    return state
+
+
+def changed_since(folder: str | os.PathLike[str], before: dict[str, tuple[int, ...]]) -> list[str]:
+    """The entries of ``folder`` added or changed since :func:`folder_state` gave ``before``
+    (relative paths, sorted); a folder's own time changes with what it holds, so folders count
+    only as new ones."""
+    now = folder_state(folder)
+    return sorted(name for name, sig in now.items()
+                  if name not in before or (sig[0] != stat.S_IFDIR >> 12 and before[name] != sig))
 
 
 @contextlib.contextmanager

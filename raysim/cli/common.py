@@ -181,16 +181,39 @@ def output_path(path: Path, inputs: Iterable[tuple[str, str | os.PathLike[str] |
     return path
 
 
+def file_attrs(path: Path) -> dict[str, Any] | None:
+    """The global attributes of the NetCDF file ``path``, or None where it is not a readable
+    regular file: a look ahead of the command's own reader, which says in one line what is
+    wrong (a folder, a missing file, not NetCDF).
+
+    Only a regular file is opened, with the backends' warnings silenced: given a Zarr folder,
+    xarray printed a five-line RuntimeWarning before the reader's one line.
+    """
+    import warnings
+
+    import xarray as xr
+
+    if not Path(path).is_file():
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with xr.open_dataset(path) as ds:
+                return dict(ds.attrs)
+    except Exception:  # not a NetCDF file: its reader says so, in one line
+        return None
+
+
 def scene_inputs(field: Path) -> list[tuple[str, Path]]:
     """(what, path) of the files the scene recorded in the FieldMap ``field`` names
     (:func:`raysim.scene.scene.recorded_files`), for a command's output checks; nothing for a
     file that cannot be read as one (the command's own reading says what is wrong with it)."""
-    import xarray as xr
-
     from raysim.scene.scene import recorded_files
 
+    attrs = file_attrs(field)
+    if attrs is None:
+        return []
     try:
-        with xr.open_dataset(field) as ds:
-            return recorded_files(ds.attrs)
-    except Exception:  # not a FieldMap: its reader says so, in one line
+        return recorded_files(attrs)
+    except Exception:  # a scene the reader refuses, in one line
         return []

@@ -8,7 +8,16 @@ from pathlib import Path
 
 import typer
 
-from raysim.cli.common import app, note, output_file, output_path, progress_bar, say, scene_inputs
+from raysim.cli.common import (
+    app,
+    file_attrs,
+    note,
+    output_file,
+    output_path,
+    progress_bar,
+    say,
+    scene_inputs,
+)
 from raysim.cli.tables import check_json_path, json_option, json_to_stdout, write_json
 from raysim.optics.fast import DEFAULT_TOL
 
@@ -119,15 +128,12 @@ def _radiator_applies(field: Path, model: str | None, refine: int) -> None:
     accepted and did nothing, where simulate refuses them): the refinement's model is the one
     named, else the data's (its FieldMap's method). A FieldMap that cannot be read is left to
     the inversion's own message."""
-    import xarray as xr
-
     from solver.forward import model_for_method
 
-    try:
-        with xr.open_dataset(field) as ds:
-            method = str(ds.attrs.get("method", ""))
-    except Exception:  # the inversion says what is wrong with the file
+    attrs = file_attrs(field)
+    if attrs is None:  # the inversion says what is wrong with the file
         return
+    method = str(attrs.get("method", ""))
     name = "none (--refine 0)" if refine == 0 else (model or model_for_method(method))
     if name not in ("po", "po+ptd"):
         from solver.errors import SolverError

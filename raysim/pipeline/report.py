@@ -55,6 +55,7 @@ img { max-width: 100%; height: auto; box-sizing: border-box; border: 1px solid #
 figcaption { font-size: 0.95em; margin-top: 0.4em; }
 pre { background: #f5f5f5; padding: 1em; overflow-x: auto; }
 .limits { border-left: 4px solid #c0392b; padding: 0.3em 0 0.3em 0.8em; background: #fdf3f2; }
+.overrides { border-left: 4px solid #2c7fb8; padding: 0.3em 0 0.3em 0.8em; background: #f1f6fb; }
 </style>"""
 
 
@@ -179,22 +180,37 @@ def _check_writable(target: Path) -> None:
 
 @contextlib.contextmanager
 def staging(target: Path) -> Iterator[Path]:
-    """A temporary folder beside ``target`` that replaces it when the block completes."""
+    """A temporary folder beside ``target`` that replaces it when the block completes.
+
+    What ``target`` held at the start was accepted by the run's checks (nothing, or an earlier
+    run's files); anything added or changed in it while the run worked (a crew's notes.txt)
+    was deleted with the replaced folder, exit 0. Now ``target`` is left as it is and the result
+    kept beside it (:func:`_keep_result`), a RenderError naming both.
+    """
     import shutil
     import tempfile
 
-    from raysim.files import new_folder_mode, remove_stale, writer_prefix
+    from raysim.files import changed_since, folder_state, new_folder_mode, remove_stale, writer_prefix
 
     target.parent.mkdir(parents=True, exist_ok=True)
     remove_stale(target)  # what a killed run left (never a live run's staging folder)
+    before = folder_state(target)
     tmp = Path(tempfile.mkdtemp(prefix=writer_prefix(target), suffix=".tmp", dir=target.parent))
     old = target.with_name(f".{target.name}.old-{os.getpid()}")
     try:
         yield tmp
         os.chmod(tmp, new_folder_mode())  # mkdtemp's folder is private (0700)
+        if added := changed_since(target, before):
+            _keep_result(target, tmp, added)
         if target.exists():
             os.replace(target, old)
         os.replace(tmp, target)
+        # a file written between the look above and the rename went into the old folder: look
+        # again there (nothing writes to it by its name now) and undo the swap if one did
+        if added := changed_since(old, before):
+            os.replace(target, tmp)
+            os.replace(old, target)
+            _keep_result(target, tmp, added)
         shutil.rmtree(old, ignore_errors=True)
     except BaseException:
         # an interrupt between the two renames left the old folder hidden: put it back
@@ -202,6 +218,22 @@ def staging(target: Path) -> Iterator[Path]:
             os.replace(old, target)
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def _keep_result(target: Path, tmp: Path, added: list[str]) -> None:
+    """Keep the staged result ``tmp`` as ``TARGET.new`` (``TARGET.new-2``, ... when taken),
+    a name no later run removes, and refuse to replace ``target``, which gained ``added``
+    while the run worked."""
+    import itertools
+
+    for n in itertools.count(1):
+        kept = target.with_name(f"{target.name}.new" + (f"-{n}" if n > 1 else ""))
+        if not os.path.lexists(kept):
+            break
+    os.rename(tmp, kept)
+    more = f" and {len(added) - 1} more" if len(added) > 1 else ""
+    raise RenderError(f"{target}: {added[0]}{more} appeared in it during the run, so it was not "
+                      f"replaced; the result is in {kept}")
 
 
 def inversion() -> Callable[..., xr.Dataset]:
@@ -530,12 +562,63 @@ def _sentence(line: str) -> str:
     return line[:1].upper() + line[1:] + ("" if line.endswith(".") else ".")
 
 
+def scene_overrides(field: xr.Dataset) -> list[str]:
+    """What the FieldMap's data differ in from the scene text it records, one phrase each: the
+    sphere grid (cells in theta x phi), the frequency (GHz) and the method.
+
+    ``raysim simulate --n-theta 30 --n-phi 60`` (or ``--frequency``, ``--method``) records the
+    scene file as written; the report printed that text (n_theta = 90, n_phi = 360) beside
+    30 x 60 data. The FieldMap's coordinates and attributes are what ran, so they are compared
+    with the text's values (its defaults where it leaves a key out); where the text no longer
+    parses here (a file it names is absent), only the keys it writes are compared.
+    """
+    from raysim.scene.scene import scene_of
+
+    text = field.attrs.get("scene")
+    if not text:
+        return []
+    scene = scene_of(field)
+    said: tuple[object, object]  # the text's (n_theta, n_phi), None where unknown
+    if scene is not None:
+        said = (scene.sphere.n_theta, scene.sphere.n_phi)
+        said_frequency: object = scene.source.frequency_hz
+        said_method: object = scene.method
+    else:
+        import tomllib
+
+        try:
+            table = tomllib.loads(str(text))
+        except tomllib.TOMLDecodeError:
+            return []
+        sphere, source = table.get("sphere", {}), table.get("source", {})
+        said = (sphere.get("n_theta"), sphere.get("n_phi"))
+        said_frequency, said_method = source.get("frequency_hz"), table.get("method")
+    found = []
+    grid = (field.sizes.get("theta"), field.sizes.get("phi"))
+    if any(w is not None and w != g for w, g in zip(said, grid, strict=True)):
+        shown = " x ".join("?" if w is None else str(w) for w in said)
+        found.append(f"sphere grid {grid[0]} x {grid[1]} cells (theta x phi; the text says {shown})")
+    frequency = field.attrs.get("frequency_hz")
+    if (isinstance(frequency, (int, float)) and isinstance(said_frequency, (int, float))
+            and not np.isclose(float(frequency), float(said_frequency), rtol=1e-9, atol=0.0)):
+        found.append(f"frequency {float(frequency) / 1e9:.6g} GHz (the text says "
+                     f"{float(said_frequency) / 1e9:.6g} GHz)")
+    method = field.attrs.get("method")
+    if method is not None and said_method is not None and str(method) != str(said_method):
+        found.append(f"method {method} (the text says {said_method})")
+    return found
+
+
 def _page(field: xr.Dataset, surface: xr.Dataset | None, blocks: list[str], times: dict[str, float]) -> str:
     split = unseen_harmonic(surface) if surface is not None else None  # one fit for both uses
     rows = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>"
                    for k, v in numbers(field, surface, times, split))
     scene = field.attrs.get("scene")
-    scene_html = (f"<h2>Scene</h2><pre>{html.escape(str(scene))}</pre>" if scene else
+    overrides = scene_overrides(field)
+    overrides_html = (f'<p class="overrides"><strong>This run overrode the scene text:</strong> '
+                      f'{html.escape("; ".join(overrides))} (read from the FieldMap).</p>'
+                      if overrides else "")
+    scene_html = (f"<h2>Scene</h2><pre>{html.escape(str(scene))}</pre>{overrides_html}" if scene else
                   "<h2>Scene</h2><p>None: a measured scan, drawn from the FieldMap's attributes.</p>")
     name = html.escape(str(field.attrs.get("scene_name", "scan")))
     summary = html.escape(error_summary(surface) if surface is not None else "")

@@ -173,12 +173,42 @@ def surface_map(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200), text_scale
         ax.set_title(f"{name}: RMS {rms(values) * UM:.4g} µm, p-v {peak_to_peak(values) * UM:.4g} µm",
                      fontsize=11)
         if len(panels) == 1:
-            fig.colorbar(image, ax=ax, label=f"{name} delta along z (µm)", shrink=0.8)
+            bar = fig.colorbar(image, ax=ax, label=f"{name} delta along z (µm)", shrink=0.8)
+            centre_group(fig, [ax, bar.ax])
         else:
             bar = fig.colorbar(image, ax=ax, orientation="horizontal", label=f"{name} delta along z (µm)",
                                shrink=0.9, pad=0.08)
             bar.ax.xaxis.set_major_locator(MaxNLocator(nbins=4, steps=[1, 2, 2.5, 5, 10]))  # apart
     return fig
+
+
+def centre_group(fig: Any, axes: list[Any], pad: float = 0.02) -> None:
+    """Narrow the figure's layout to what ``axes`` (a map and its colour bar) take, centred.
+
+    An equal-aspect map in a picture wider than it needs is as high as the picture allows and
+    no wider; its colour bar pulls it to the right (matplotlib anchors the parent at the bar),
+    so a wide picture (1400 x 600 px) of a measured SurfaceMap, one panel, was two-thirds blank
+    on the left. Measured from a layout pass (text sizes included), then laid out again in a
+    frame of that width plus ``pad`` (a fraction of the picture's width) on each side, and the
+    frame moved by what is still uneven (the map keeps to the bar's side of its frame).
+    """
+    def extent() -> tuple[float, float]:  # the group's left and right edges (px)
+        fig.draw_without_rendering()
+        return (min(ax.get_tightbbox().x0 for ax in axes), max(ax.get_tightbbox().x1 for ax in axes))
+
+    engine = fig.get_layout_engine()
+    _, bottom, _, height = engine.get()["rect"]
+    width = fig.bbox.width
+    left, right = extent()
+    used = (right - left) / width + 2 * pad
+    if used >= 0.98:  # the group fills the picture already
+        return
+    x0 = (1.0 - used) / 2
+    engine.set(rect=(x0, bottom, used, height))
+    left, right = extent()
+    # a shift keeps the layout inside the frame as it is: move it by half the imbalance
+    x0 += ((width - right) - left) / 2 / width
+    engine.set(rect=(min(max(x0, 0.0), 1.0 - used), bottom, used, height))
 
 
 def surface_cut(ds: xr.Dataset, size: tuple[int, int] = (1600, 1200)) -> Any:

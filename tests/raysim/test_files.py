@@ -209,3 +209,69 @@ def test_a_later_run_puts_back_the_folder_a_killed_one_had_moved_aside(tmp_path)
     aside.mkdir()
     remove_stale(tmp_path / "out")
     assert not aside.exists() and (tmp_path / "out" / "report.html").read_text() == "old"
+
+
+def test_a_file_put_in_the_output_folder_during_the_run_is_kept(tmp_path):
+    """A crew's notes.txt written into the (accepted, empty) folder while the run worked was
+    deleted with the folder the result replaced, exit 0. Now the folder stays as it is, the
+    result waits beside it in out.new, and one error line names both."""
+    from raysim.render.backend import RenderError
+
+    target = tmp_path / "out"
+    target.mkdir()
+    with pytest.raises(RenderError, match=r"out: notes.txt appeared in it during the run, so it "
+                                          r"was not replaced; the result is in .*out\.new$"),\
+            staging(target) as tmp:
+        (tmp / "report.html").write_text("new")
+        (target / "notes.txt").write_text("crew notes")
+    assert (target / "notes.txt").read_text() == "crew notes"
+    assert sorted(p.name for p in target.iterdir()) == ["notes.txt"]
+    assert (tmp_path / "out.new" / "report.html").read_text() == "new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "out.new"]
+    # an earlier run's file edited meanwhile counts as well; the next result takes out.new-2
+    (target / "report.html").write_text("old")
+    with pytest.raises(RenderError, match=r"figures and 1 more appeared .*out\.new-2$"),\
+            staging(target) as tmp:
+        (tmp / "report.html").write_text("new")
+        (target / "report.html").write_text("edited by hand")
+        (target / "figures").mkdir()
+    assert (target / "report.html").read_text() == "edited by hand"
+    assert (tmp_path / "out.new-2" / "report.html").read_text() == "new"
+
+
+def test_an_earlier_runs_files_left_alone_are_replaced(tmp_path):
+    target = tmp_path / "out"
+    (target / "figures").mkdir(parents=True)
+    (target / "report.html").write_text("old")
+    (target / "figures" / "a.png").write_text("old")
+    with staging(target) as tmp:
+        (tmp / "report.html").write_text("new")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+    assert sorted(p.name for p in target.iterdir()) == ["report.html"]
+
+
+def test_a_file_written_just_before_the_swap_is_kept(tmp_path, monkeypatch):
+    """A file written after the last look and before the rename lands in the old folder: the
+    look there finds it and the swap is undone (the old folder was deleted with it)."""
+    import raysim.files
+    from raysim.render.backend import RenderError
+
+    target = tmp_path / "out"
+    target.mkdir()
+    real = raysim.files.changed_since
+    looks = []
+
+    def late(folder, before):
+        found = real(folder, before)
+        if not looks:  # the first look finds nothing, then the crew writes
+            (target / "late.txt").write_text("late")
+        looks.append(found)
+        return found
+
+    monkeypatch.setattr(raysim.files, "changed_since", late)
+    with pytest.raises(RenderError, match=r"late.txt appeared"), staging(target) as tmp:
+        (tmp / "report.html").write_text("new")
+    assert looks[0] == [] and looks[1] == ["late.txt"]
+    assert sorted(p.name for p in target.iterdir()) == ["late.txt"]
+    assert (tmp_path / "out.new" / "report.html").read_text() == "new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "out.new"]

@@ -143,3 +143,26 @@ def test_a_campaign_whose_scene_does_not_hold_the_plan_is_refused_before_simulat
     with pytest.raises(PlanError, match="radius 12 m, the rig's track has R = 10 m"):
         run_campaign(wide, plan, tmp_path / "c")
     assert not any((tmp_path / d).exists() for d in "abc")
+
+
+def test_a_file_written_into_the_output_folder_during_the_campaign_is_kept(inputs, tmp_path):
+    """QA: notes.txt written into the empty output folder 10 s into the run was deleted when
+    the result replaced the folder, exit 0. Now the command ends with one line naming where
+    the result is, status 2, and the notes and the result are both there."""
+    from raysim.render.backend import RenderError
+
+    scene, plan = inputs
+    out = tmp_path / "c"
+    out.mkdir()
+
+    def crew(stage: str, fraction: float) -> None:
+        if stage == "invert":
+            (out / "notes.txt").write_text("crew notes")
+
+    with pytest.raises(RenderError, match="notes.txt appeared in it during the run"):
+        run_campaign(scene, plan, out, rim=32, N=64, refine=1, progress=crew)
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+    assert (out / "notes.txt").read_text() == "crew notes"
+    kept = tmp_path / "c.new"
+    assert "campaign.txt" in {p.name for p in kept.iterdir()}
+    surfacemap.load(kept / "surface.nc")  # the result is whole

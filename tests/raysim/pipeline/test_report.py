@@ -392,3 +392,47 @@ def test_fig9_legend_hides_no_curve():
                                                               "G Laplacian(delta), true delta"}
         for ax in fig.axes:  # outside every plot: no stretch of a curve under it
             assert not box.overlaps(ax.get_window_extent(renderer))
+
+
+COARSE_SCENE = """
+name = "coarse"
+[dish]
+diameter_m = 110.0
+focal_length_m = 33.0
+resolution_m = 2.0
+[source]
+frequency_hz = 0.3e9
+[sphere]
+radius_m = 10.0
+n_theta = 45
+n_phi = 90
+"""
+
+
+@pytest.mark.parametrize("options, line", [
+    (["--n-theta", "12", "--n-phi", "24", "--frequency", "0.6e9"],
+     "This run overrode the scene text:</strong> sphere grid 12 x 24 cells (theta x phi; the text "
+     "says 45 x 90); frequency 0.6 GHz (the text says 0.3 GHz) (read from the FieldMap)."),
+    (["--n-theta", "12"], "sphere grid 12 x 90 cells (theta x phi; the text says 45 x 90) (read"),
+    ([], None),
+])
+def test_the_scene_section_names_what_simulate_overrode(raysim_cli, tmp_path, monkeypatch, options,
+                                                         line):
+    """QA: after simulate --n-theta 30 --n-phi 60 the report printed the scene text (90 x 360)
+    alone beside 30 x 60 data. The line under it is read from the FieldMap's grid and
+    attributes; a run that overrode nothing gets none."""
+    monkeypatch.setattr(report_module, "_figures", lambda field, surface: [
+        ("fig9_equation", "Fig. 9", np.full((90, 120, 3), 200, dtype=np.uint8))])
+    scene = tmp_path / "coarse.toml"
+    scene.write_text(COARSE_SCENE)
+    field = tmp_path / "fm.nc"
+    code, _, err = raysim_cli("simulate", scene, "-o", field, *options)
+    assert code == 0, err
+    code, _, err = raysim_cli("report", field, "-o", tmp_path / "rep", "--no-invert")
+    assert code == 0, err
+    page = (tmp_path / "rep" / "report.html").read_text(encoding="utf-8")
+    assert "n_theta = 45" in page  # the scene as written stays
+    if line is None:
+        assert "overrode" not in page
+    else:
+        assert line in page

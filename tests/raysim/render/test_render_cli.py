@@ -15,7 +15,8 @@ from raysim.maps.fieldmap import save
 from raysim.render import RenderError, parse_size, render
 from raysim.render.backend import colour_count
 from raysim.surface.deformation import GaussianBumps
-from tests.cli import run_in_process
+from tests.cli import Result, run_in_process
+from tests.cli import run_cli as run_cli_process
 from tests.examples import equation_fieldmap, surfacemap
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -127,3 +128,44 @@ def test_missing_egl_is_one_clear_error_not_a_crash(monkeypatch):
         monkeypatch.undo()
         backend.egl_available.cache_clear()
     assert backend.egl_available()
+
+
+@pytest.fixture(scope="module")
+def zarr_folder(tmp_path_factory):
+    """A Zarr store without consolidated metadata: xarray warned (five lines) on opening it."""
+    import xarray as xr
+
+    store = tmp_path_factory.mktemp("store") / "w1.zarr"
+    xr.Dataset({"intensity": (("theta", "phi"), [[1.0, 2.0]])},
+               coords={"theta": [10.0], "phi": [0.0, 90.0]}).to_zarr(store, consolidated=False)
+    return store
+
+
+@pytest.mark.parametrize("command", [
+    ["render", "-o", "{out}/x.png"],
+    ["report", "-o", "{out}/rep", "--grid", "16", "--refine", "0"],
+    ["invert", "-o", "{out}/s.nc", "--grid", "16", "--refine", "0"],
+    ["invert", "-o", "{out}/s.nc", "--radiator", "fast", "--model", "po"],
+    ["correct", "-o", "{out}/corr"],
+    ["scan", "scan_demo", "-o", "{out}/scan.nc", "--simulate"],
+])
+@pytest.mark.parametrize("what", ["zarr", "empty", "missing"])
+def test_a_folder_or_missing_map_gets_its_one_line_and_nothing_before(raysim_cli, zarr_folder,
+                                                                      tmp_path, command, what):
+    """Every command that reads a FieldMap or SurfaceMap: stderr is the reader's one line (a
+    Zarr folder was opened before the folder check, and xarray printed five lines first)."""
+    given = {"zarr": zarr_folder, "empty": tmp_path / "empty.nc", "missing": tmp_path / "no.nc"}[what]
+    if what == "empty":
+        given.mkdir()
+    out = tmp_path / "out"
+    args = [a.format(out=out) for a in command]
+    # the map is the command's argument, or the value of its last option (scan --simulate)
+    args = [*args, str(given)] if args[-1].startswith("--simulate") else [args[0], str(given), *args[1:]]
+    # a subprocess for the Zarr store: in this process pytest takes xarray's warning for itself
+    code, stdout, stderr = run_cli_process(*args) if what == "zarr" else raysim_cli(*args)
+    assert code == 2, stderr
+    line = Result(code, stdout, stderr).error()  # exactly one line on stderr
+    assert line.startswith(f"error: {given}: is a folder, give a " if what != "missing" else
+                           f"error: {given}: no such file"), line
+    # nothing written (render makes the output's folder before it reads: that stays empty)
+    assert not out.exists() or not any(p.is_file() for p in out.rglob("*"))

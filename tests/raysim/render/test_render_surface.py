@@ -137,3 +137,30 @@ def test_text_scale_enlarges_the_text_not_the_picture(with_truth):
     assert heights[1.7] == pytest.approx(1.7 * heights[1.0], rel=0.1)
     with pytest.raises(backend.RenderError):
         backend.figure((2400, 1000), text_scale=0.0)
+
+
+@pytest.mark.parametrize("size", [(1400, 600), (2400, 600), (1600, 1200)])
+def test_a_map_without_truth_is_one_panel_centred_in_the_picture(size):
+    """A measured SurfaceMap (no truth, no error): one image panel holding the map, and the
+    picture's content centred (the one panel was pushed to the right edge of a wide picture,
+    its left two-thirds blank)."""
+    ds = bump_map(15.0, -10.0)
+    assert "truth" not in ds and "error" not in ds
+    fig = charts.surface_map(ds, size)
+    image = backend.figure_image(fig)
+    maps = [ax for ax in fig.axes if ax.collections and ax.get_label() != "<colorbar>"]
+    assert len(maps) == len(surface_panels(ds)) == 1
+    assert np.isfinite(maps[0].collections[0].get_array()).sum() > 1000  # not an empty panel
+    # below the titles, the columns that hold anything but white: as much blank either side
+    body = image[int(0.15 * size[1]):]
+    columns = np.nonzero((body < 230).any(axis=-1).any(axis=0))[0]
+    left, right = columns[0], size[0] - 1 - columns[-1]
+    assert abs(left - right) < 0.04 * size[0], (left, right)
+
+
+def test_truth_recovered_error_fill_three_image_panels(with_truth):
+    fig = charts.surface_map(with_truth, (2400, 1000))
+    maps = [ax for ax in fig.axes if ax.collections and ax.get_label() != "<colorbar>"]
+    assert len(maps) == 3
+    for ax in maps:
+        assert np.isfinite(np.ma.filled(ax.collections[0].get_array(), np.nan)).sum() > 1000
