@@ -744,12 +744,60 @@ def summary(ds: xr.Dataset) -> str:
         line += f"; --fresnel not applied: {ds.attrs['fresnel_correction'][6:]}"
     if "mesh_departure_rms_m" in ds.attrs and size:
         line += f"; WARNING: {size}"
+    for warning in ray_optics_warnings(ds.attrs):
+        line += f"; WARNING: {warning}"
     if "go_lattice" in ds.attrs:
         line += f"; {ds.attrs['go_lattice']}"
     if "mesh_departure_rms_m" in ds.attrs:
         line += (f"; the mesh departs {ds.attrs['mesh_departure_rms_m'] * 1e6:.3g} um RMS along z "
                  "from its ideal (its deformation; a file not in the reflector frame adds to it)")
     return line
+
+
+#: GO and go+edge: a dish fewer wavelengths across than this, or a sphere fewer focal-spot
+#: widths (lambda F / D) in radius than this, is said to be outside their reach
+MIN_GO_WAVELENGTHS = 10.0
+MIN_GO_SPOTS = 10.0
+#: share of the lit power that may miss the sphere's cells before the summary says so
+MISSED_POWER_SHARE = 0.01
+
+
+def ray_optics_warnings(attrs) -> list[str]:
+    """What a GO or go+edge FieldMap (``attrs``) should say of its own validity, each a
+    phrase: a dish a few wavelengths across (a 10 m dish at 50 MHz, 1.7 wavelengths, ran all
+    four engines without a word); a sphere so near the focus that it lies in the focal spot's
+    region, where GO's rays converge to a caustic (R = 1 mm: GO peaked at 2.7e7 where PO gives
+    2.2e3; at 4 spot widths GO was 0.5 to 24 times PO ring by ring); go+edge with
+    obstacles, whose shadows on the dish carry no edge term (14 % RMS from PO + PTD outside
+    the blocked cells in a QA case, 0.2 % without the obstacle); and GO power that missed the
+    sphere's cells (off-axis incidence: 47 % at 24 deg, shown only as the power balance)."""
+    method = attrs.get("method")
+    if method not in ("go", "go+edge"):
+        return []
+    out = []
+    try:
+        f, D, F, R = (float(attrs[k]) for k in ("frequency_hz", "diameter", "focal_length",
+                                                "sphere_radius"))
+    except (KeyError, TypeError, ValueError):
+        f = D = F = R = math.nan
+    wavelength = 299_792_458.0 / f if f > 0 else math.nan
+    if D / wavelength < MIN_GO_WAVELENGTHS:
+        out.append(f"the dish is {D / wavelength:.3g} wavelengths across: {method} needs a dish many "
+                   "wavelengths across; compare with --method po+ptd")
+    spot = wavelength * F / D
+    if R / spot < MIN_GO_SPOTS:
+        out.append(f"the sphere's radius is {R / spot:.3g} focal-spot widths (lambda F / D = "
+                   f"{spot:.3g} m): within a few widths of the focus the rays converge toward a "
+                   f"caustic that {method} does not resolve (a QA run: GO 0.5 to 24 times PO ring "
+                   "by ring at 4 widths); compare with --method po+ptd")
+    if method == "go+edge" and str(attrs.get("obstacles", "none")) not in ("", "none"):
+        out.append("go+edge gives the obstacles' shadows on the dish no edge term: near their "
+                   "images the field departs from PO + PTD (docs/engines.md)")
+    balance = attrs.get("power_balance")
+    if method == "go" and isinstance(balance, (int, float)) and balance < -MISSED_POWER_SHARE:
+        out.append(f"{-100 * float(balance):.3g} % of the lit power misses the sphere's cells "
+                   "(rays beyond its theta and phi range)")
+    return out
 
 
 def rim_beyond_hemisphere(attrs) -> str:

@@ -193,3 +193,33 @@ n_phi = 36
     assert "WARNING: the rim image lies at 102.7 deg from the axis, beyond the hemisphere" in summary(deep)
     shallow = simulate(scene(3.0))
     assert abs(shallow.attrs["power_balance"]) < 0.01 and "rim image" not in summary(shallow)
+
+
+def test_go_says_when_the_dish_or_the_sphere_is_out_of_its_reach():
+    """QA: a 10 m dish at 50 MHz (1.7 wavelengths) and a sphere of 1 mm about the focus (GO's
+    caustic: a peak of 2.7e7 where PO gives 2.2e3) ran GO without a word. The summary now
+    gives the dish in wavelengths, D f / c, and the sphere's radius in focal-spot widths,
+    lambda F / D, where they are small; a large dish and sphere get neither line."""
+    from raysim.scene.scene import parse_scene
+    from raysim.simulate import simulate, summary
+
+    def run(f, R):
+        return summary(simulate(parse_scene(f"""name = "reach"
+[dish]
+diameter_m = 10.0
+focal_length_m = 4.0
+resolution_m = 0.3
+[source]
+frequency_hz = {f}
+[sphere]
+radius_m = {R}
+n_theta = 12
+n_phi = 12
+""")))
+
+    c = 299_792_458.0
+    small = run(0.25e9, 1.0)
+    assert f"the dish is {10.0 * 0.25e9 / c:.3g} wavelengths across" in small
+    assert f"the sphere's radius is {1.0 / (c / 0.25e9 * 4.0 / 10.0):.3g} focal-spot widths" in small
+    large = run(3e9, 3.0)
+    assert "wavelengths across" not in large and "focal-spot widths" not in large
