@@ -20,9 +20,10 @@ the cell over its area, relative to the incident intensity.
 
 Obstacles in the beam (``Reflector.obstacles``, :mod:`raysim.optics.blockage`): a ray is
 blocked when an obstacle crosses its incident leg (from up-beam to its hit) or its reflected
-leg (from the hit to where it enters the sphere), and a tube with a blocked ray carries no
-power. What the blocked tubes would have brought each cell gives its blocked share
-(:attr:`GOResult.blocked_share`).
+leg (from the hit to where it enters the sphere). A tube whose rays are all blocked carries no
+power, one a shadow's edge crosses the share of its sub-rays that pass
+(:data:`SHADOW_EDGE_ORDER`). What the obstacles take from the tubes gives each cell its
+blocked share (:attr:`GOResult.blocked_share`).
 """
 
 from __future__ import annotations
@@ -352,14 +353,22 @@ class Tracer:
         blocked_np = removed = None
         if self.bvh.obstacles is not None:
             report("obstacles", 0.55)
-            blocked_np = self._blocked(hits, lit_np, ok_np, chart.numpy(), focus)
-            tube_blocked = blocked_np[lattice.tubes].any(axis=1)
-            tube_lit &= ~tube_blocked
-            # what the blocked tubes would have brought, for the cells' blocked share
-            gone = np.flatnonzero(tube_blocked & ok_np[lattice.tubes].all(axis=1))
+            chart_np = chart.numpy()
+            blocked_np = self._blocked(hits, lit_np, ok_np, chart_np, focus)
+            corners = blocked_np[lattice.tubes]
+            reached = ok_np[lattice.tubes].all(axis=1)
+            # each tube's clear share: 0 when its three rays are blocked, 1 when none is, and
+            # for a tube a shadow's edge crosses the share of its sub-rays that pass (dropping
+            # such tubes whole overstated the blocked power by about a tube along every edge:
+            # +21 % for a 1 m disk at the focus on 0.1 m triangles)
+            share = np.where(corners.any(axis=1), 0.0, 1.0)
+            edge = np.flatnonzero(corners.any(axis=1) & ~corners.all(axis=1) & reached & tube_lit)
+            share[edge] = self._clear_share(lattice.tubes[edge], hits, chart_np, focus)
+            # what the obstacles take from the tubes, for the cells' blocked share
+            gone = np.flatnonzero((share < 1.0) & reached)
             removed = self._deposit(chart, ok, wp.array(lattice.tubes[gone], dtype=wp.vec3i, device=dev),
-                                    power_t[gone])
-            ok = wp.array((ok_np & ~blocked_np).astype(np.int32), dtype=wp.int32, device=dev)
+                                    power_t[gone] * (1.0 - share[gone]))
+            power_t = power_t * share
         if probe is not None and not probe.ideal:
             power_read = float(power_t[tube_lit].sum())
 
@@ -400,6 +409,21 @@ class Tracer:
             dev, private=(15,), min_chunk=2048)
         return power.numpy()
 
+    def _clear_share(self, tubes: NDArray, hits: NDArray, chart: NDArray, focus: NDArray,
+                     order: int | None = None) -> NDArray[np.float64]:
+        """(len(tubes),) the share of each tube's cross-section whose rays no obstacle blocks:
+        the tube cut into order^2 triangles of equal area, a ray at each one's centroid, its
+        hit and sphere entry interpolated from the corners' (m)."""
+        weights = _centroid_weights(SHADOW_EDGE_ORDER if order is None else order)  # (order^2, 3)
+        entry = sphere_points(chart, focus, self.grid.radius)
+        points = np.einsum("sk,tkc->tsc", weights, hits[tubes]).reshape(-1, 3)
+        ends = np.einsum("sk,tkc->tsc", weights, entry[tubes]).reshape(-1, 3)
+        obstacles = self.bvh.obstacles
+        blocked = obstacles.incident_blocked(points, self.k_hat, self.bvh.standoff)
+        clear = ~blocked
+        blocked[clear] = obstacles.blocked(points[clear], ends[clear])
+        return 1.0 - blocked.reshape(len(tubes), -1).mean(axis=1)
+
     def _blocked(self, hits: NDArray, lit: NDArray[np.bool_], reached: NDArray[np.bool_],
                  chart: NDArray, focus: NDArray) -> NDArray[np.bool_]:
         """(n_rays,) bool: lit rays an obstacle blocks on the way in (to ``hits``) or out (from
@@ -411,6 +435,22 @@ class Tracer:
         entry = sphere_points(chart[out], focus, self.grid.radius)
         blocked[out] = obstacles.blocked(hits[out], entry)
         return blocked
+
+
+#: sub-rays per edge of a tube a shadow's edge crosses (order^2 of them, at the centroids of
+#: equal sub-triangles): the blocked power's error along an edge falls from about a tube's
+#: width to about 1/order of it
+SHADOW_EDGE_ORDER = 8
+
+
+@lru_cache(maxsize=4)
+def _centroid_weights(m: int) -> NDArray[np.float64]:
+    """Barycentric weights (m^2, 3) of the centroids of a triangle's m^2 equal sub-triangles
+    (m per edge): the upward ones (i, j), i + j <= m - 1, and the downward, i + j <= m - 2."""
+    up = [((i + 1 / 3) / m, (j + 1 / 3) / m) for i in range(m) for j in range(m - i)]
+    down = [((i + 2 / 3) / m, (j + 2 / 3) / m) for i in range(m - 1) for j in range(m - 1 - i)]
+    uv = np.array(up + down)
+    return np.column_stack([1.0 - uv.sum(axis=1), uv[:, 0], uv[:, 1]])
 
 
 class ParaboloidTracer:
