@@ -30,6 +30,7 @@ def main() -> None:
     from raysim.optics import go
     from raysim.optics.runtime import cpu_threads
     from raysim.scene.scene import load_scene
+    from raysim.simulate import go_subdivisions
     from raysim.surface.mesh import paraboloid, reflectors_for
 
     scene = load_scene(args.scene)
@@ -41,9 +42,10 @@ def main() -> None:
         t0 = time.perf_counter()
         ideal, deformed = reflectors_for(scene)
         t1 = time.perf_counter()
-        a = go.trace(ideal, scene.sphere, scene.source.direction, scene.subdivisions)
+        m = go_subdivisions(scene, ideal)[0]
+        a = go.trace(ideal, scene.sphere, scene.source.direction, m)
         t2 = time.perf_counter()
-        b = go.trace(deformed, scene.sphere, scene.source.direction, scene.subdivisions)
+        b = go.trace(deformed, scene.sphere, scene.source.direction, m)
         t3 = time.perf_counter()
         run = (t3 - t0, t1 - t0, t2 - t1, t3 - t2, a.n_rays + b.n_rays, len(ideal.faces))
         best = run if best is None or run[0] < best[0] else best

@@ -101,9 +101,9 @@ class RayLattice:
     tubes: NDArray[np.int32]  # (T, 3) indices into points
 
 
-def ray_lattice(reflector: Reflector, subdivisions: int = 1) -> RayLattice:
+def ray_lattice(reflector: Reflector, subdivisions: int | None = 1) -> RayLattice:
     """Rays on an m-fold lattice of every face (m = ``subdivisions``); m = 1 uses the vertices."""
-    m = int(subdivisions)
+    m = 1 if subdivisions is None else int(subdivisions)  # None: a Scene's automatic value, outside simulate
     if m < 1:
         raise RaysimError(f"subdivisions must be >= 1, got {m}")
     if m == 1:
@@ -187,7 +187,7 @@ def lift_to_surface(reflector: Reflector, lattice: RayLattice, k_hat: NDArray,
 
 
 # --- the trace ------------------------------------------------------------------------------
-def trace(reflector: Reflector, grid: SphereGrid, direction=ON_AXIS, subdivisions: int = 1,
+def trace(reflector: Reflector, grid: SphereGrid, direction=ON_AXIS, subdivisions: int | None = 1,
           device: str | None = "cpu", progress: Progress | None = None,
           probe: Probe | None = None, e_hat=None) -> GOResult:
     """GO intensity of ``reflector`` on ``grid`` for a plane wave travelling along ``direction``.
@@ -224,13 +224,14 @@ class Tracer:
     """
 
     def __init__(self, template: Reflector, grid: SphereGrid, direction=ON_AXIS,
-                 subdivisions: int = 1, device: str | None = "cpu",
+                 subdivisions: int | None = 1, device: str | None = "cpu",
                  footprint_shortcut: bool = False) -> None:
         wp = runtime.init()
         self.device = runtime.resolve_device(device)
         if not grid.full_circle and grid.dphi > np.pi:
             raise RaysimError("a phi cell wider than 180 deg is only supported as the full circle")
-        self.template, self.grid, self.subdivisions = template, grid, int(subdivisions)
+        self.template, self.grid = template, grid
+        self.subdivisions = 1 if subdivisions is None else int(subdivisions)
         k_hat = np.asarray(direction, dtype=np.float64)
         self.k_hat = k_hat / np.linalg.norm(k_hat)
         dev = self.device
