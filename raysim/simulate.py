@@ -263,6 +263,14 @@ def check_options(scene: Scene, *, method: str | None = None, device: str | None
 
 def fieldmap_of(scene: Scene, method: str, run: Run, F: float, D: float, attrs: dict) -> xr.Dataset:
     """The FieldMap of ``run`` on the scene's grid (F, D of the reflector in m; flat attrs)."""
+    ideal = np.asarray(run.intensity_ideal)
+    if method == "go" and not np.any(np.isfinite(ideal) & (ideal > 0)):
+        # all the rays missed the grid (off-axis incidence of 30 deg on a hemisphere): the
+        # FieldMap's own check said "no ideal intensity", which does not say why
+        raise RaysimError(f"no GO ray of the ideal dish reached the sphere's cells (incidence "
+                          f"{math.degrees(math.acos(-float(scene.source.direction[2]))):.3g} deg "
+                          "from the axis, the grid's theta and phi ranges): widen the grid or "
+                          "tilt the incidence less")
     ds = fieldmap(scene.sphere, run.intensity, run.intensity_ideal, focal_length=F, diameter=D,
                   frequency_hz=scene.source.frequency_hz, method=method, sampling=run.sampling,
                   scene=scene.text, attrs=attrs, extra=run.extra)

@@ -223,3 +223,29 @@ n_phi = 12
     assert f"the sphere's radius is {1.0 / (c / 0.25e9 * 4.0 / 10.0):.3g} focal-spot widths" in small
     large = run(3e9, 3.0)
     assert "wavelengths across" not in large and "focal-spot widths" not in large
+
+
+def test_go_whose_rays_all_miss_the_grid_says_why():
+    """QA: at 30 deg incidence every reflected ray of a 10 m dish (F = 4 m) passes beyond the
+    hemisphere about the focus, and simulate ended with the FieldMap's check, 'no ideal
+    intensity', which says nothing of why."""
+    from raysim.errors import RaysimError
+    from raysim.scene.scene import parse_scene
+    from raysim.simulate import simulate
+
+    scene = parse_scene("""name = "tilted"
+[dish]
+diameter_m = 10.0
+focal_length_m = 4.0
+resolution_m = 0.3
+[source]
+frequency_hz = 3e9
+incidence_theta_deg = 40.0
+[sphere]
+radius_m = 2.0
+n_theta = 12
+n_phi = 12
+""")
+    with pytest.raises(RaysimError, match="no GO ray of the ideal dish reached the sphere's cells "
+                                          r"\(incidence 40 deg"):
+        simulate(scene)
