@@ -347,7 +347,13 @@ def _check_codecs(group: zarr.Group, path: str) -> None:
     """Refuse a store an array of which is not stored as raysim writes it: the codec chain
     (compression) and the rest of its ``zarr.json`` that Zarr derives from its shape, chunks,
     type and fill value. A codec dropped from the file read every chunk as the wrong bytes (a
-    NumPy error from xarray, garbage elsewhere)."""
+    NumPy error from xarray, garbage elsewhere). Only for a store this Zarr version wrote: the
+    defaults it derives may differ in another (its data are still verified by their checksums
+    where they are read)."""
+    from importlib import metadata
+
+    if group.attrs.get("version_zarr") != metadata.version("zarr"):
+        return
     scratch = zarr.open_group(zarr.storage.MemoryStore(), mode="w")
     try:
         arrays = list(group.arrays())
