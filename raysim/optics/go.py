@@ -416,9 +416,10 @@ class Tracer:
         the tube cut into order^2 triangles of equal area, a ray at each one's centroid, its
         hit and sphere entry interpolated from the corners' (m)."""
         weights = _centroid_weights(SHADOW_EDGE_ORDER if order is None else order)  # (order^2, 3)
-        entry = sphere_points(chart, focus, self.grid.radius)
+        # the sphere entries of these tubes' corners only, not of the whole lattice's rays
+        entry = sphere_points(chart[tubes.reshape(-1)], focus, self.grid.radius).reshape(len(tubes), 3, 3)
         points = np.einsum("sk,tkc->tsc", weights, hits[tubes]).reshape(-1, 3)
-        ends = np.einsum("sk,tkc->tsc", weights, entry[tubes]).reshape(-1, 3)
+        ends = np.einsum("sk,tkc->tsc", weights, entry).reshape(-1, 3)
         obstacles = self.bvh.obstacles
         blocked = obstacles.incident_blocked(points, self.k_hat, self.bvh.standoff)
         clear = ~blocked
