@@ -59,11 +59,14 @@ demo: $(STAMP)
 # The suite on TEST_JOBS processes (pytest-xdist), 2 by default as the CI machine has two
 # cores: a third less wall time, as much of it waits on subprocesses, Dask and sockets. A
 # file's tests stay on one process, so a module's fixtures are made once. TEST_JOBS=0 runs
-# the suite in this process.
+# the suite in this process. Each worker gets one BLAS thread: OpenBLAS starts one per core,
+# spinning while it waits for work, and with two workers on two cores they fought each other
+# (test_budget.py and test_gain.py: 165 CPU-seconds against 88 with one thread a worker).
 TEST_JOBS ?= 2
+TEST_ENV = $(if $(filter 0,$(TEST_JOBS)),,OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1)
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -n $(TEST_JOBS) --dist loadfile
+	$(TEST_ENV) $(BIN)/python -m pytest -n $(TEST_JOBS) --dist loadfile
 
 # The documentation site: Markdown pages, the API reference from the docstrings and the
 # tutorials in examples/ run on small grids; warnings are errors. Output: docs/_build/html.

@@ -164,9 +164,10 @@ def test_store_holds_distinct_physical_samples(reference, spec, monkeypatch):
 
 
 def test_killed_client_resumes_to_the_same_store(reference, spec, tmp_path, inproc):
-    """Two local worker processes (the CLI's default cluster), the client killed with SIGKILL
-    after the first sample, then resumed by another cluster: the same arrays as the
-    reference made by one worker, and the samples done before the kill untouched."""
+    """Two local worker processes (the CLI's default cluster), the client and then its
+    workers killed with SIGKILL after the first sample, then resumed by another cluster: the
+    same arrays as the reference made by one worker, and the samples done before the kill
+    untouched."""
     store = tmp_path / "killed.zarr"
     proc = popen_cli("dataset", str(DEMO), "-o", str(store), "--workers", "2", stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
@@ -176,6 +177,9 @@ def test_killed_client_resumes_to_the_same_store(reference, spec, tmp_path, inpr
             time.sleep(0.02)
         assert proc.poll() is None, "the run ended before it could be interrupted"
         proc.send_signal(signal.SIGKILL)  # the client; its local workers lose their scheduler
+        # and are killed at once too: left to notice, they finished the samples they held
+        # (all 8 of them on a busy machine), and the kill must leave some undone
+        os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=30)
     finally:
         kill_group(proc)
