@@ -24,9 +24,12 @@ def render(
 
     Works with no display (EGL off-screen rendering).
     """
+    from raysim.maps.netcdf import check_file
     from raysim.render import render as run
     from raysim.render.api import check_output_name
+    from raysim.render.backend import RenderError
 
+    check_file(file, RenderError)  # before the output's folder is made for a missing input
     # an input named as the output first (the message says what would be lost), then the name
     # as typed (a Path drops the trailing slash of "x.png/")
     output_path(Path(output), [("file to draw", file), *scene_inputs(file)])

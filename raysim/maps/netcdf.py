@@ -44,13 +44,20 @@ def canonical_order(ds: xr.Dataset, dims: tuple[str, str], unit: str, source: st
     return ds
 
 
-def read(path: str | os.PathLike[str], error: type[Exception]) -> xr.Dataset:
-    """Load a NetCDF file whole into memory; raise ``error`` with one line if it cannot be read."""
+def check_file(path: str | os.PathLike[str], error: type[Exception]) -> Path:
+    """``path`` if it names a regular file; else raise ``error`` with one line (a folder, or
+    nothing there): a command checks its input so before it makes any output folder."""
     path = Path(path)
     if path.is_dir():
         raise error(f"{path}: is a folder, give a NetCDF file")
     if not path.is_file():
         raise error(f"{path}: no such file")
+    return path
+
+
+def read(path: str | os.PathLike[str], error: type[Exception]) -> xr.Dataset:
+    """Load a NetCDF file whole into memory; raise ``error`` with one line if it cannot be read."""
+    path = check_file(path, error)
     try:
         with xr.open_dataset(path) as ds:
             return ds.load()

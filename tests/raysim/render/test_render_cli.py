@@ -77,6 +77,11 @@ def test_unreadable_or_foreign_files_end_with_status_2(monkeypatch, capsys, tmp_
         code, _, err = run_cli(monkeypatch, capsys, "render", str(path), "-o", str(tmp_path / "x.png"))
         assert code == 2, err
         assert message in err and len(err.strip().splitlines()) == 1
+    # a missing input leaves no trace: the output's folder is not made for it
+    code, _, err = run_cli(monkeypatch, capsys, "render", str(tmp_path / "missing.nc"),
+                           "-o", str(tmp_path / "new" / "x.png"))
+    assert code == 2 and "no such file" in err
+    assert not (tmp_path / "new").exists()
 
 
 def test_api_checks_the_output_name_and_sizes(files, tmp_path):
