@@ -415,6 +415,7 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["report", "f.nc", "-o", "crew_folder"], "holds surface.nc but no report.html"),
         (["report", "f.nc", "-o", "notes.txt"], "exists and is not a folder"),
         (["report", "f.nc", "-o", "notes.txt/rep"], "notes.txt is a file, not a folder"),
+        (["report", "user_folder", "-o", "rep_new"], "is a folder, give a scene file or a FieldMap"),
         (["report", "f.nc", "-o", "/proc/rep"], "cannot write in /proc"),  # before the work
         (["report", "missing.toml", "-o", "rep_new"], "no such scene file"),
         (["report", "corrupt.nc", "-o", "rep_new"], "not a readable NetCDF file"),

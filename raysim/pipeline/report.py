@@ -93,6 +93,8 @@ def report(source: str | os.PathLike[str], out_dir: str | os.PathLike[str], *, m
 
         check_options(solver=solver, N=grid, refine=refine)
     timings: dict[str, float] = {}
+    if Path(source).is_dir():
+        raise RenderError(f"{source}: is a folder, give a scene file or a FieldMap (.nc)")
     is_field = Path(source).suffix.lower() in (".nc", ".nc4", ".netcdf")
     if is_field:
         field = load(source)
