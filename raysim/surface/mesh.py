@@ -596,7 +596,7 @@ def _read_mesh(path: str | Path, unit: float, unit_setting: str = "dish.mesh_uni
     except Exception as exc:  # trimesh raises many kinds for unreadable files
         raise MeshError(f"{path}: trimesh cannot read it ({exc.__class__.__name__}: {exc})") from exc
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise MeshError(f"{path}: holds no triangles")
+        raise MeshError(f"{path}: {_cut_short(path) or 'holds no triangles'}")
     if not np.all(np.isfinite(np.asarray(mesh.vertices))):  # processing would drop them silently
         raise MeshError(f"{path}: holds vertices that are not finite numbers (NaN or infinite)")
     mesh.process()  # what loading with process=True does: merge duplicate vertices
@@ -640,6 +640,24 @@ def _drop_repeated_faces(mesh) -> None:
     if not keep.all():
         mesh.update_faces(keep)
         mesh.remove_unreferenced_vertices()
+
+
+def _cut_short(path: Path) -> str | None:
+    """Why an STL file that gave no triangles gave none, where its header tells: a binary
+    STL is an 80-byte header, a 4-byte triangle count n and 50 bytes a triangle, so a file
+    shorter than 84 + 50 n was cut short (a copy or download that stopped)."""
+    if path.suffix.lower() != ".stl" or (size := path.stat().st_size) < 134:
+        return None
+    with open(path, "rb") as f:
+        f.seek(80)
+        n = int.from_bytes(f.read(4), "little")
+        first = np.frombuffer(f.read(48), dtype="<f4")  # the first triangle's normal, corners
+    # random bytes read as floats are mostly huge, tiny or NaN; a mesh's are not
+    plausible = np.all(np.isfinite(first)) and np.all(np.abs(first) < 1e9)
+    if plausible and 84 + 50 * n > size:
+        return (f"a binary STL cut short: its header counts {n} triangles ({84 + 50 * n} bytes), "
+                f"the file holds {size} bytes ({(size - 84) // 50} whole triangles)")
+    return None
 
 
 def _merge_close_vertices(mesh, distance: float) -> None:

@@ -189,6 +189,22 @@ def test_unreadable_mesh_is_a_mesh_error(tmp_path: Path):
         load_reflector(tmp_path / "missing.ply")
 
 
+def test_a_binary_stl_cut_short_is_named_so(tmp_path: Path):
+    whole = tmp_path / "whole.stl"
+    paraboloid(20.0, 8.0, 1.0).mesh.export(whole)
+    data = whole.read_bytes()
+    n = int.from_bytes(data[80:84], "little")
+    assert len(data) == 84 + 50 * n  # the binary STL layout the message reads
+    cut = tmp_path / "cut.stl"
+    cut.write_bytes(data[: 84 + 50 * (n // 3) + 17])  # a copy stopped a third of the way
+    with pytest.raises(MeshError, match=f"cut short: its header counts {n} triangles.*{n // 3} whole"):
+        load_reflector(cut)
+    noise = tmp_path / "noise.stl"  # bytes that are no STL at all are not called one cut short
+    noise.write_bytes(np.random.default_rng(3).bytes(5000))
+    with pytest.raises(MeshError, match="holds no triangles"):
+        load_reflector(noise)
+
+
 def test_repeated_and_vertex_repeating_faces_are_dropped_on_loading(tmp_path: Path):
     import trimesh
 
