@@ -199,12 +199,12 @@ def um_text(value: float) -> str:
     return f"{um:.2f}" if abs(um) >= 0.01 or um == 0 else f"{um:.2g}"
 
 
-def noise_spread_attrs(spread: float, stated: bool, data: MeasuredFA,
-                       delta: NDArray[np.float64]) -> dict[str, Any]:
+def noise_spread_attrs(spread: float, stated: bool, data: MeasuredFA, size: float,
+                       of_map: str = "the map's own RMS") -> dict[str, Any]:
     """The SurfaceMap attributes of the map's spread under the readings' noise: ``spread`` (m
     RMS over the disk; NaN when not measured), the Monte Carlo of the linear inversion under
     the stated ``intensity_std`` (``stated``) or under the noise estimated from the scan; with
-    a warning when it is a large share of the map ``delta`` itself (m)."""
+    a warning when it is a large share of ``size``, the RMS (m) of the map ``of_map`` names."""
     if not np.isfinite(spread):
         return {}
     attrs: dict[str, Any] = {
@@ -213,13 +213,12 @@ def noise_spread_attrs(spread: float, stated: bool, data: MeasuredFA,
             "scan's stated intensity_std" if stated else
             f"readings' noise {data.noise_source}, the same in every cell"),
     }
-    size = map_rms(delta)
     if spread > NOISE_SHARE_WARNING * max(size, NOISE_WARNING_FLOOR):
         db = 10.0 / np.log(10.0) * float(np.sqrt(data.noise_variance))  # as the budget's dB
         share = f"{100 * spread / size:.0f} % of" if size > 0 else "more than"
         attrs["noise_warning"] = (
             f"the readings' noise ({db:.2g} dB per cell) alone spreads the map by "
-            f"{um_text(spread)} um RMS, {share} the map's own RMS "
+            f"{um_text(spread)} um RMS, {share} {of_map} "
             f"({um_text(size)} um): the map is mostly noise; average more readings per point "
             "(raysim budget gives how many a target RMS needs)")
     return attrs

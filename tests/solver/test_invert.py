@@ -221,6 +221,22 @@ def test_without_a_stated_std_the_noise_spread_is_predicted_and_a_noisy_map_is_f
                for t in summary(loud))
 
 
+def test_a_refined_map_of_noise_is_flagged_with_a_trusted_gain(paper_field):
+    """0.5 dB per reading with the gain trusted: the refinement fits the noise's nonlinear
+    part and the map comes out several times the noise's spread off the truth; its RMS, so
+    inflated, hid the warning, which now weighs the spread against the linear map too."""
+    field = paper_field.copy(deep=True)
+    i = field["intensity"].values
+    draw = np.random.default_rng(2).standard_normal(i.shape)
+    field["intensity"] = (("theta", "phi"), i * 10 ** (0.5 * draw / 10))
+    grid = ApertureGrid(110.0, 48)
+    clean = invert(paper_field, N=48, refine_iterations=1, gain="known", truth=None)
+    noisy = invert(field, N=48, refine_iterations=1, gain="known", truth=None)
+    error = metrics.rms(grid, noisy["deformation"].values - clean["deformation"].values)
+    assert error > 2 * noisy.attrs["noise_map_rms_m"]  # the spread alone does not bound it
+    assert "mostly noise" in noisy.attrs["noise_warning"]
+
+
 def test_bad_requests_raise_specific_errors(paper_field):
     with pytest.raises(SolverError, match="gain"):
         invert(paper_field, gain="sometimes")
