@@ -26,7 +26,14 @@ from solver.linear import LinearInverse, LinearSolution, Scan
 from solver.nonlinear import RefineHistory
 from solver.options import InvertOptions
 from solver.refinement import RefinementSetup
-from solver.resample import HOLE_SHARE_WARNING, RING_SHARE_WARNING, Hole, unmeasured_ring
+from solver.resample import (
+    HOLE_SHARE_WARNING,
+    RING_SHARE_WARNING,
+    SAMPLING_SHARE_WARNING,
+    Hole,
+    cell_spacing,
+    unmeasured_ring,
+)
 from solver.unobservable import Unobservable
 
 
@@ -131,6 +138,20 @@ def ring_attrs(scan: Scan) -> dict[str, Any]:
                                  f"r = {reached:.3g} m of {0.5 * scan.D:.3g} m: the ring beyond "
                                  f"({100 * share:.0f} % of the radius) is extrapolated, not "
                                  "measured; scan in finer rows to the rim image")
+    return attrs
+
+
+def sampling_attrs(scan: Scan) -> dict[str, Any]:
+    """How far apart the scan's cells meet the dish (:func:`solver.resample.cell_spacing`),
+    with a warning above :data:`solver.resample.SAMPLING_SHARE_WARNING` of the diameter."""
+    radial, arc = cell_spacing(scan.sphere, scan.F, scan.D)
+    attrs: dict[str, Any] = {"cell_spacing_radial_m": radial, "cell_spacing_rim_m": arc}
+    if max(radial, arc) > SAMPLING_SHARE_WARNING * scan.D:
+        attrs["sampling_warning"] = (
+            f"the scan's cells meet the dish up to {radial:.3g} m apart radially and {arc:.3g} m "
+            f"apart round the rim, on a {scan.D:.3g} m dish: the map holds nothing finer than "
+            "about twice that, and finer detail of the surface aliases into it; scan finer "
+            f"cells (under {SAMPLING_SHARE_WARNING * scan.D:.2g} m both ways) for a map to act on")
     return attrs
 
 

@@ -64,6 +64,7 @@ def report(
     Given a FieldMap instead of a scene, the simulation is skipped and no field.nc is written.
     """
     from raysim.files import check_output_folder
+    from raysim.pipeline.report import page_warnings
     from raysim.pipeline.report import report as run
     from raysim.render.backend import RenderError
 
@@ -73,4 +74,6 @@ def report(
     page = run(source, output, method=method, device=device, solver=solver, grid=grid, refine=refine,
                invert=invert,
                progress=lambda stage, fraction: note(f"report: {stage}"))
+    for line in page_warnings(page, source):  # what the page says first, said where the command ran
+        say(f"WARNING: {line}")
     say(f"{page}")

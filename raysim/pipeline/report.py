@@ -55,6 +55,8 @@ img { max-width: 100%; height: auto; box-sizing: border-box; border: 1px solid #
 figcaption { font-size: 0.95em; margin-top: 0.4em; }
 pre { background: #f5f5f5; padding: 1em; overflow-x: auto; }
 .limits { border-left: 4px solid #c0392b; padding: 0.3em 0 0.3em 0.8em; background: #fdf3f2; }
+.warnings { border-left: 4px solid #d35400; padding: 0.3em 0 0.3em 0.8em; background: #fdf2e9; }
+.warnings ul { margin: 0.3em 0; }
 .overrides { border-left: 4px solid #2c7fb8; padding: 0.3em 0 0.3em 0.8em; background: #f1f6fb; }
 </style>"""
 
@@ -415,6 +417,9 @@ def _accuracy(field: xr.Dataset, surface: xr.Dataset,
         return [("recovered", f"RMS {rms(panels['deformation']) * UM:.2f} µm (no truth to compare with)")]
     M = peak_to_peak(panels["truth"])
     err = rms(panels["error"])
+    if not M > 0:  # the ideal dish: RRMS = RMS / M means nothing (it raised ZeroDivisionError)
+        return [("truth", "flat (the ideal dish, M = 0 µm)"),
+                ("recovered - truth", f"RMS {err * UM:.2f} µm, no RRMS")]
     rows = [("truth", f"RMS {rms(panels['truth']) * UM:.2f} µm, peak-to-peak M = {M * UM:.1f} µm"),
             ("recovered - truth", f"RMS {err * UM:.2f} µm, RRMS = RMS / M = {100 * err / M:.2f} %")]
     if split is not None:
@@ -516,7 +521,8 @@ def _sizeable(harmonic: float, surface: xr.Dataset) -> bool:
     RMS at least (below that, the ring of grid cells the fit reads, inside the rim, finds a
     truth that is zero on the rim to be a little harmonic)."""
     truth = surface["truth"].values
-    return harmonic >= 0.01 * rms(truth[np.isfinite(truth)])
+    size = rms(truth[np.isfinite(truth)])
+    return size > 0 and harmonic >= 0.01 * size  # a flat truth (the ideal dish) has none
 
 
 def cannot_determine(surface: xr.Dataset, split: tuple[float, float] | None = None) -> list[str]:
@@ -627,12 +633,17 @@ def _page(field: xr.Dataset, surface: xr.Dataset | None, blocks: list[str], time
     limits = cannot_determine(surface, split) if surface is not None else []
     limits_html = (f'<p class="limits"><strong>What the intensities alone cannot determine:</strong> '
                    f'{html.escape(" ".join(limits))}</p>' if limits else "")
+    said = run_warnings(field, surface)
+    warnings_html = ('<div class="warnings"><strong>Warnings of this run:</strong><ul>'
+                     + "".join(f"<li>{html.escape(w)}</li>" for w in said) + "</ul></div>"
+                     if said else "")
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">
 <title>raysim report: {name}</title>
 {PAGE_STYLE}</head><body>
 <h1>raysim report: {name}</h1>
 <p>Surface deformation from one intensity scan on a hemisphere about the focus. {summary}</p>
+{warnings_html}
 {limits_html}
 <h2>Numbers of this run</h2><table>{rows}</table>
 <h2>Figures</h2>
@@ -642,6 +653,35 @@ def _page(field: xr.Dataset, surface: xr.Dataset | None, blocks: list[str], time
 page (field.nc, surface.nc) when the run wrote them.</p>
 </body></html>
 """
+
+
+def run_warnings(field: xr.Dataset, surface: xr.Dataset | None) -> list[str]:
+    """The warnings the FieldMap and the SurfaceMap carry (their ``*_warning`` attributes: a
+    map the model does not reproduce, mostly noise, with a hole, an extrapolated ring, cells
+    too coarse; a simulation out of its engine's reach), each as "simulation: ..." or
+    "inversion: ...", in the files' order."""
+    found = []
+    for what, ds in (("simulation", field), ("inversion", surface)):
+        if ds is None:
+            continue
+        found += [f"{what}: {value}" for key, value in ds.attrs.items()
+                  if key.endswith("_warning") and str(value).strip()]
+    return found
+
+
+def page_warnings(page: Path, source: str | os.PathLike[str]) -> list[str]:
+    """:func:`run_warnings` of a written report ``page``, read back from the maps beside it
+    (``field.nc``, or the FieldMap ``source`` it was made from, and ``surface.nc``)."""
+    folder = Path(page).parent
+    field_path = folder / "field.nc" if (folder / "field.nc").is_file() else Path(source)
+    maps = []
+    for path in (field_path, folder / "surface.nc"):
+        if path.is_file() and path.suffix.lower() in (".nc", ".nc4", ".netcdf"):
+            with xr.open_dataset(path) as ds:
+                maps.append(xr.Dataset(attrs=dict(ds.attrs)))
+        else:
+            maps.append(None)
+    return run_warnings(*maps) if maps[0] is not None else run_warnings(xr.Dataset(), maps[1])
 
 
 def _folder(out_dir: str | os.PathLike[str]) -> Path:

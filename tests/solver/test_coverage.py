@@ -153,3 +153,26 @@ def test_a_scan_that_starts_off_the_pole_counts_its_cap_as_a_hole(field):
     one = invert(from_row(1), refine_iterations=0, N=64).attrs  # a 2 deg cap: 1 row of 39 inside the rim image
     assert one["largest_hole_share"] == pytest.approx(1 / 39) and "theta 0.0..2.0 deg" in one["hole_warning"]
     assert invert(field, refine_iterations=0, N=64).attrs["largest_hole_share"] == 0.0
+
+
+@pytest.mark.parametrize("cells, rrms_below, warned", [((30, 60), 0.02, False),
+                                                       ((12, 24), None, True)])
+def test_cells_too_coarse_to_resolve_the_surface_are_said_so(cells, rrms_below, warned):
+    """Exact GO cell means of the paper's surface (tests/reference_go.py): 3 x 6 deg cells,
+    2.7 m and 5.8 m apart on the dish, invert within 2 %; 7.5 x 15 deg cells, 6.3 m and
+    14.4 m apart, miss the surface by about half its RMS, noise-free. Only those are warned."""
+    from solver.invert import invert
+    from solver.run import summary
+    from tests.reference_go import cell_mean_intensity
+    from tests.solver.conftest import D, F, R, go_fieldmap, paper_delta
+
+    sphere = SphereGrid(R, *cells)
+    field = go_fieldmap(sphere, F, D, paper_delta, ideal=cell_mean_intensity(sphere, F, D))
+    surface = invert(field, N=128, truth=paper_delta)
+    assert ("sampling_warning" in surface.attrs) == warned
+    if warned:
+        assert surface.attrs["rrms"] > 0.2
+        assert any(t.startswith("WARNING: the scan's cells meet the dish up to 6.25 m apart "
+                                "radially and 14.4 m") for t in summary(surface))
+    else:
+        assert surface.attrs["rrms"] < rrms_below

@@ -436,3 +436,31 @@ def test_the_scene_section_names_what_simulate_overrode(raysim_cli, tmp_path, mo
         assert "overrode" not in page
     else:
         assert line in page
+
+
+def test_the_inversions_warnings_are_on_the_page_and_the_console(raysim_cli, tmp_path, monkeypatch):
+    """QA: invert warned "do not act on it" for a scan, and the report of the same scan said
+    nothing, on the page or where it ran. Cells of 7.5 x 15 deg on the paper's dish are too
+    coarse to resolve the surface (solver.record.sampling_attrs): both say so now; the same
+    scene on 3 x 6 deg cells gets no warning box. The scene's dish is ideal: its flat truth
+    (M = 0) made the report raise ZeroDivisionError for the RRMS."""
+    monkeypatch.setattr(report_module, "_figures", lambda field, surface: [])
+    scene = tmp_path / "coarse.toml"
+    scene.write_text(COARSE_SCENE)
+    pages = {}
+    for cells in ((12, 24), (30, 60)):
+        field = tmp_path / f"fm{cells[0]}.nc"
+        code, _, err = raysim_cli("simulate", scene, "-o", field, "--n-theta", str(cells[0]),
+                                  "--n-phi", str(cells[1]))
+        assert code == 0, err
+        code, out, err = raysim_cli("report", field, "-o", tmp_path / f"rep{cells[0]}", "--grid", "64",
+                                    "--refine", "0")
+        assert code == 0, err
+        pages[cells[0]] = (out, (tmp_path / f"rep{cells[0]}" / "report.html").read_text(encoding="utf-8"))
+    out, page = pages[12]
+    assert "WARNING: inversion: the scan's cells meet the dish up to" in out
+    box = re.search(r'<div class="warnings">(.*?)</div>', page, re.S)
+    assert box is not None and "inversion: the scan&#x27;s cells meet the dish" in box.group(1)
+    assert page.index('class="warnings"') < page.index("Numbers of this run")
+    out, page = pages[30]
+    assert "WARNING" not in out and 'class="warnings"' not in page
