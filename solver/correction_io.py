@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from raysim.errors import RaysimError, SceneError
+from raysim.errors import RaysimError, SceneError, SurfaceMapError
 from raysim.files import write_together
 from raysim.maps.surfacemap import HARMONIC_UNOBSERVABLE, NOISE_DRAWS
 from raysim.scene.scene import check_frequency
@@ -201,8 +201,11 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
     grid = surface.grid_of(smap)
     std = smap["deformation_std"].values if "deformation_std" in smap else None
     draws = smap[NOISE_DRAWS].values if NOISE_DRAWS in smap else None
-    corr = correct(grid, smap["deformation"].values, layout, acts, terms, std, focal_length=F,
-                   noise_draws=draws)
+    try:
+        corr = correct(grid, smap["deformation"].values, layout, acts, terms, std, focal_length=F,
+                       noise_draws=draws)
+    except SurfaceMapError as exc:  # a map in the wrong unit: say which file
+        raise SurfaceMapError(f"{surface_path}: {exc}") from None
     if f_note:
         corr.notes.append(f_note)
     corr.notes += map_caveats(smap.attrs, layout.n_panels)
