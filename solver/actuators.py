@@ -247,8 +247,9 @@ def _panel_ids(panels, where: str) -> list[int]:
 
 def _toml_rows(data: dict, path: Path) -> list:
     """The ``[[actuator]]`` tables of an actuator TOML file; top-level keys the commands file
-    writes (unit, RMS before and after) are allowed, any other is refused."""
-    unknown = [key for key in data if key != "actuator" and key != "unit" and not key.startswith("rms_")]
+    writes (unit, RMS before and after, warnings) are allowed, any other is refused."""
+    unknown = [key for key in data if key not in ("actuator", "unit", "warnings")
+               and not key.startswith("rms_")]
     if unknown:
         raise ActuatorError(f"{path}: unknown top-level key {', '.join(unknown)} (actuators go in "
                             "[[actuator]] tables)")

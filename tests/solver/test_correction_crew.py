@@ -1,5 +1,9 @@
 """raysim correct after the QA of what the rig crew loads: a map in the wrong unit is refused
-(not turned into commands of -167 m beside a note)."""
+(not turned into commands of -167 m beside a note), and the map's and the run's warnings reach
+commands.csv and commands.toml (not only the console)."""
+
+import csv
+import tomllib
 
 import numpy as np
 import pytest
@@ -8,7 +12,9 @@ from raysim.errors import SurfaceMapError
 from solver import surface
 from solver.actuators import corners_layout
 from solver.correction import correct
+from solver.correction_io import run_correct
 from tests.solver.test_correction import GRID, LAYOUT, SCENE, _rng_map, _surface_file
+from tests.solver.test_correction_qa import _acts_csv
 
 TERMS = ("piston", "tilt")
 
@@ -56,3 +62,50 @@ def test_the_command_refuses_a_map_in_micrometres_and_writes_nothing(tmp_path, r
         assert "is the deformation in metres?" in line and "Traceback" not in result.stderr
     assert not (tmp_path / "new").exists()
     assert {p.name: p.read_bytes() for p in kept.iterdir()} == before
+
+
+# --- 2: the warnings reach the files the crew loads --------------------------------------
+def _csv_parts(path):
+    """(comment lines, actuator rows) of a commands.csv."""
+    lines = path.read_text().splitlines()
+    comments = [line for line in lines if line.startswith("#")]
+    rows = list(csv.DictReader(line for line in lines if not line.startswith("#")))
+    return comments, rows
+
+
+def test_the_maps_and_the_runs_warnings_reach_the_commands_files(tmp_path):
+    """QA: invert's warnings carried by the map and correct's own notes were printed, but the
+    commands files the crew loads said nothing. Each is now a comment line of commands.csv (one
+    line each: a line break in an attribute must not start a row) and an entry of the TOML's
+    ``warnings``; both files still read back as actuator files, with the same commands."""
+    scene = _scene(tmp_path)
+    delta = _rng_map()
+    attrs = dict(surface.load(_surface_file(tmp_path, delta)).attrs)
+    attrs.update(noise_warning="the map is mostly noise:\nits RMS is 80 % noise",
+                 refine_warning="refinement did not converge")
+    noisy = surface.save(surface.surfacemap(GRID, np.nan_to_num(delta), attrs), tmp_path / "noisy.nc")
+    acts = corners_layout(LAYOUT)
+    ranges = np.tile([-1e-3, 1e-3], (acts.n_actuators, 1))
+    ranges[[3, 8]] = 0.0  # two locked: a note of correct's own
+    path = _acts_csv(tmp_path / "acts.csv", acts, ranges)
+    run = run_correct(noisy, tmp_path / "out", scene=scene, actuators=path)
+    expected = ["WARNING (the map's, from raysim invert): the map is mostly noise: its RMS is 80 % noise",
+                "WARNING (the map's, from raysim invert): refinement did not converge",
+                "2 actuators locked (min_m = max_m = 0): commanded 0"]
+    comments, rows = _csv_parts(tmp_path / "out" / "commands.csv")
+    warned = tomllib.loads((tmp_path / "out" / "commands.toml").read_text())["warnings"]
+    for line in expected:
+        assert line in warned
+        assert f"# {line}" in comments or f"# WARNING: {line}" in comments
+    assert len(warned) == len(run.correction.notes) and len(rows) == acts.n_actuators
+    summary = (tmp_path / "out" / "summary.txt").read_text()
+    assert all(" ".join(w.split()[:6]) in summary for w in warned)
+    for name in ("commands.csv", "commands.toml"):
+        again = run_correct(noisy, tmp_path / name.replace(".", "_"), scene=scene,
+                            actuators=tmp_path / "out" / name)
+        assert again.actuators.ids == acts.ids
+        np.testing.assert_allclose(again.correction.commands, run.correction.commands, atol=1e-12)
+    # a clean map and plain actuators: nothing to warn of, said as an empty list
+    run_correct(_surface_file(tmp_path, delta), tmp_path / "clean", scene=scene)
+    assert tomllib.loads((tmp_path / "clean" / "commands.toml").read_text())["warnings"] == []
+    assert not any("WARNING" in line for line in _csv_parts(tmp_path / "clean" / "commands.csv")[0])
