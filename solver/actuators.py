@@ -200,11 +200,17 @@ def read_actuators(path: str | Path, layout) -> ActuatorLayout:
         where = f"{path}: actuator row {k + 1}"
         try:
             ids.append(str(row["id"]))
+            if not ids[-1].strip():  # a command nobody can address
+                raise ActuatorError(f"{where}: its id is empty; give every actuator the id the "
+                                    "rig knows it by")
             if ids[-1].lstrip().startswith("#"):  # commands.csv would read back as a comment
                 raise ActuatorError(f"{where}: id {ids[-1]!r} starts with '#', which marks a "
                                     "comment line in these files")
             xy.append((_number(row["x_m"], "x_m", where), _number(row["y_m"], "y_m", where)))
             members.append(_panel_ids(row["panels"], where))
+            if not members[-1]:  # commanded 0, and its panels' shape silently another
+                raise ActuatorError(f"{where} (actuator {ids[-1]}): its panels are empty; name "
+                                    "the panels it moves")
             lo, hi = row.get("min_m"), row.get("max_m")
             ranges.append((-np.inf if lo in (None, "") else _number(lo, "min_m", where),
                            np.inf if hi in (None, "") else _number(hi, "max_m", where)))

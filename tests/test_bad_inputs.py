@@ -236,6 +236,8 @@ def workspace(tmp_path_factory):
         "panel_other_dish.toml": _scene(PANELS.format(edges="[0.0, 5.0]"), diameter_m__20="diameter_m = 10"),
         "acts_outside.csv": "id,x_m,y_m,panels\na1,12.0,0.0,0\n",
         "acts_lonely.csv": "id,x_m,y_m,panels\na1,2.0,0.5,0\n",
+        "acts_no_id.csv": "id,x_m,y_m,panels\na1,2.0,0.5,0\n,3.0,0.5,0\n",
+        "acts_no_panels.csv": "id,x_m,y_m,panels\na1,2.0,0.5,0\na2,3.0,0.5,\n",
     }
     for name, text in files.items():
         (ws / name).write_text(text)
@@ -585,6 +587,10 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
          "unknown term 'coma'"),
         (["correct", "s_um.nc", "-o", "corr", "--scene", "panel_scene.toml"],
          "s_um.nc: the map departs by up to"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--actuators",
+          "acts_no_id.csv"], "acts_no_id.csv: actuator row 2: its id is empty"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--actuators",
+          "acts_no_panels.csv"], "acts_no_panels.csv: actuator row 2 (actuator a2): its panels are empty"),
     ],
     "rig park": [
         (["rig", "park", "missing.toml", "--simulate"], "no such rig file"),

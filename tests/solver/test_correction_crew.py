@@ -1,6 +1,7 @@
 """raysim correct after the QA of what the rig crew loads: a map in the wrong unit is refused
-(not turned into commands of -167 m beside a note), and the map's and the run's warnings reach
-commands.csv and commands.toml (not only the console)."""
+(not turned into commands of -167 m beside a note), the map's and the run's warnings reach
+commands.csv and commands.toml (not only the console), and an actuator row with an empty id or
+no panels is refused (a command nobody can address; an actuator silently commanded 0)."""
 
 import csv
 import tomllib
@@ -10,7 +11,7 @@ import pytest
 
 from raysim.errors import SurfaceMapError
 from solver import surface
-from solver.actuators import corners_layout
+from solver.actuators import ActuatorError, corners_layout, read_actuators
 from solver.correction import correct
 from solver.correction_io import run_correct
 from tests.solver.test_correction import GRID, LAYOUT, SCENE, _rng_map, _surface_file
@@ -109,3 +110,28 @@ def test_the_maps_and_the_runs_warnings_reach_the_commands_files(tmp_path):
     run_correct(_surface_file(tmp_path, delta), tmp_path / "clean", scene=scene)
     assert tomllib.loads((tmp_path / "clean" / "commands.toml").read_text())["warnings"] == []
     assert not any("WARNING" in line for line in _csv_parts(tmp_path / "clean" / "commands.csv")[0])
+
+
+# --- 3: actuator rows nobody can address ----------------------------------------------------
+@pytest.mark.parametrize(("name", "row", "match"), [
+    ("a.csv", ",{x},{y},{p}", r"a.csv: actuator row 2: its id is empty"),
+    ("a.csv", "  ,{x},{y},{p}", r"a.csv: actuator row 2: its id is empty"),
+    ("a.csv", "b,{x},{y},", r"a.csv: actuator row 2 \(actuator b\): its panels are empty"),
+    ("a.toml", '[[actuator]]\nid = ""\nx_m = {x}\ny_m = {y}\npanels = [{p}]',
+     r"a.toml: actuator row 2: its id is empty"),
+    ("a.toml", '[[actuator]]\nid = "b"\nx_m = {x}\ny_m = {y}\npanels = []',
+     r"a.toml: actuator row 2 \(actuator b\): its panels are empty"),
+])
+def test_an_actuator_without_id_or_panels_is_refused(tmp_path, name, row, match):
+    """QA: an empty id got a command nobody can address; empty panels left the actuator
+    commanded 0 and its panel's shape model silently another (it held no panel)."""
+    acts = corners_layout(LAYOUT)
+    x, y = (float(v) for v in acts.xy[1])
+    panels = acts.panels_of(1)
+    good = (f"a,{x!r},{y!r},{' '.join(map(str, panels))}" if name.endswith(".csv") else
+            f'[[actuator]]\nid = "a"\nx_m = {x!r}\ny_m = {y!r}\npanels = {panels}')
+    head = "id,x_m,y_m,panels\n" if name.endswith(".csv") else ""
+    path = tmp_path / name
+    path.write_text(head + good + "\n" + row.format(x=repr(x), y=repr(y), p=panels[0]) + "\n")
+    with pytest.raises(ActuatorError, match=match):
+        read_actuators(path, LAYOUT)
