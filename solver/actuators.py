@@ -200,11 +200,17 @@ def read_actuators(path: str | Path, layout) -> ActuatorLayout:
         where = f"{path}: actuator row {k + 1}"
         try:
             ids.append(str(row["id"]))
+            if not ids[-1].strip():  # a command nobody can address
+                raise ActuatorError(f"{where}: its id is empty; give every actuator the id the "
+                                    "rig knows it by")
             if ids[-1].lstrip().startswith("#"):  # commands.csv would read back as a comment
                 raise ActuatorError(f"{where}: id {ids[-1]!r} starts with '#', which marks a "
                                     "comment line in these files")
             xy.append((_number(row["x_m"], "x_m", where), _number(row["y_m"], "y_m", where)))
             members.append(_panel_ids(row["panels"], where))
+            if not members[-1]:  # commanded 0, and its panels' shape silently another
+                raise ActuatorError(f"{where} (actuator {ids[-1]}): its panels are empty; name "
+                                    "the panels it moves")
             lo, hi = row.get("min_m"), row.get("max_m")
             ranges.append((-np.inf if lo in (None, "") else _number(lo, "min_m", where),
                            np.inf if hi in (None, "") else _number(hi, "max_m", where)))
@@ -247,8 +253,9 @@ def _panel_ids(panels, where: str) -> list[int]:
 
 def _toml_rows(data: dict, path: Path) -> list:
     """The ``[[actuator]]`` tables of an actuator TOML file; top-level keys the commands file
-    writes (unit, RMS before and after) are allowed, any other is refused."""
-    unknown = [key for key in data if key != "actuator" and key != "unit" and not key.startswith("rms_")]
+    writes (unit, RMS before and after, warnings) are allowed, any other is refused."""
+    unknown = [key for key in data if key not in ("actuator", "unit", "warnings")
+               and not key.startswith("rms_")]
     if unknown:
         raise ActuatorError(f"{path}: unknown top-level key {', '.join(unknown)} (actuators go in "
                             "[[actuator]] tables)")

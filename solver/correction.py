@@ -29,6 +29,8 @@ from numpy.typing import NDArray
 from scipy.optimize import lsq_linear
 
 from raysim.constants import C0
+from raysim.errors import SurfaceMapError
+from raysim.scene.deformations import MAX_DEFORMATION_M
 from raysim.surface.deformation import Zernike, noll_norm
 from solver.actuators import ActuatorError, ActuatorLayout, shape_functions
 from solver.fit import _design, remove_terms
@@ -118,13 +120,22 @@ def correct(grid, delta: NDArray[np.float64], layout, actuators: ActuatorLayout,
     ``focal_length`` (m): the dish's F, for the half-path-length RMS Ruze's law takes
     (:func:`half_path_rms`); None leaves it out. The commands' std comes from ``noise_draws``
     ((draws, N, N), m: the inversion's Monte Carlo draws of the map's noise) where given, each
-    draw taken through the fit; else from ``delta_std`` with the points independent."""
+    draw taken through the fit; else from ``delta_std`` with the points independent. A map
+    departing by more than :data:`MAX_DEPARTURE_M` once the ``remove`` terms are off is refused
+    (:class:`~raysim.errors.SurfaceMapError`: no surface error, a unit mistake)."""
     delta = np.asarray(delta, dtype=np.float64)
     ids = panel_ids(grid, delta, layout)
     if not np.any(ids >= 0):
         raise ActuatorError("no point of the map lies on a panel: nothing the actuators reach")
     # the terms are fitted over the panels alone: a value in a gap is no surface
     before, removed = remove_terms(grid, np.where(ids >= 0, delta, np.nan), remove)
+    scale = float(np.nanmax(np.abs(before))) if np.isfinite(before).any() else 0.0
+    if scale > MAX_DEPARTURE_M:
+        raise SurfaceMapError(
+            f"the map departs by up to {scale:.3g} m from the dish ({', '.join(remove) or 'no terms'}"
+            f" removed), more than the {MAX_DEPARTURE_M:g} m beyond which no reflector's surface "
+            "error or actuator's travel goes: is the deformation in metres? (a map in um stored "
+            "as m is 1e6 times too large)")
     A = influence_matrix(grid, ids, layout, actuators)
     held = np.asarray(abs(A).sum(axis=0)).ravel() > 0
     notes = []
@@ -158,7 +169,6 @@ def correct(grid, delta: NDArray[np.float64], layout, actuators: ActuatorLayout,
     elif delta_std is not None and np.isfinite(delta_std).any():
         std = np.zeros(actuators.n_actuators)
         std[free] = fit.command_std(np.asarray(delta_std, dtype=np.float64).ravel()[on])
-    scale = float(np.nanmax(np.abs(before))) if np.isfinite(before).any() else 0.0
     if scale > SUSPECT_SHARE * grid.D:
         notes.append(f"the map departs by up to {scale:.3g} m on a {grid.D:g} m dish: is it in "
                      "metres? (commands follow it as it is)")
@@ -170,9 +180,15 @@ def correct(grid, delta: NDArray[np.float64], layout, actuators: ActuatorLayout,
     return result
 
 
-#: a map departing by more than this share of the diameter is no surface error (a map in um
-#: labelled m): said in the notes
+#: a map departing by more than this share of the diameter (and at most MAX_DEPARTURE_M) may be
+#: no surface error (a map in mm labelled m): said in the notes
 SUSPECT_SHARE = 1e-3
+#: a map departing by more than this (m) from the dish, the removed terms taken off, is refused:
+#: the 10 cm a scene allows a deformation (raysim.scene.deformations), beyond any reflector's
+#: surface error and the travel of any panel actuator or adjustment screw (millimetres to a few
+#: centimetres). A map in um stored as m departs by its error times 1e6: a 189 um bump gave
+#: 189 m and commands of -167 m, written with exit status 0 beside a note
+MAX_DEPARTURE_M = MAX_DEFORMATION_M
 
 
 class JointFit:

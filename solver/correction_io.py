@@ -3,7 +3,8 @@
 Reads a SurfaceMap, takes the panel layout from a scene (given, or the one the SurfaceMap's
 source FieldMap records), builds or reads the actuators, computes the commands and writes in
 the output folder: ``commands.csv`` and ``commands.toml`` (one row per actuator, in the chosen
-unit, a header saying what a positive number does and the RMS before and after),
+unit, a header saying what a positive number does and the RMS before and after, and the run's
+warnings: the crew loading the commands must see them),
 ``residual.nc`` (the predicted surface after the correction, a SurfaceMap), ``zernike.csv``
 (Noll content of the map and of the residual) and ``summary.txt``. Files are written through a
 temporary name and renamed; nothing is written when an input is bad, and an output name that is
@@ -29,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from raysim.errors import RaysimError, SceneError
+from raysim.errors import RaysimError, SceneError, SurfaceMapError
 from raysim.files import write_together
 from raysim.maps.surfacemap import HARMONIC_UNOBSERVABLE, NOISE_DRAWS
 from raysim.scene.scene import check_frequency
@@ -201,8 +202,11 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
     grid = surface.grid_of(smap)
     std = smap["deformation_std"].values if "deformation_std" in smap else None
     draws = smap[NOISE_DRAWS].values if NOISE_DRAWS in smap else None
-    corr = correct(grid, smap["deformation"].values, layout, acts, terms, std, focal_length=F,
-                   noise_draws=draws)
+    try:
+        corr = correct(grid, smap["deformation"].values, layout, acts, terms, std, focal_length=F,
+                       noise_draws=draws)
+    except SurfaceMapError as exc:  # a map in the wrong unit: say which file
+        raise SurfaceMapError(f"{surface_path}: {exc}") from None
     if f_note:
         corr.notes.append(f_note)
     corr.notes += map_caveats(smap.attrs, layout.n_panels)
@@ -310,10 +314,21 @@ def _rows(run: CorrectionRun) -> list[dict]:
     return rows
 
 
+def warning_lines(run: CorrectionRun) -> list[str]:
+    """The run's notes (summary.txt's last lines: what correct warns of and what the map's
+    attributes say it may not hold), one line each: a line break in a map's attribute would end
+    a CSV comment and start a row of actuators."""
+    return [" ".join(str(note).split()) for note in run.correction.notes]
+
+
 def commands_csv(run: CorrectionRun, header: list[str]) -> str:
+    """The commands as CSV: ``header`` and the run's warnings as ``#`` comment lines (those
+    the crew loading the commands must see, not only the console), then one row per actuator."""
     buf = io.StringIO()
     for line in header:
         buf.write(f"# {line}\n")
+    for line in warning_lines(run):
+        buf.write(f"# {line if line.startswith('WARNING') else 'WARNING: ' + line}\n")
     rows = _rows(run)
     writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
     writer.writeheader()
@@ -321,11 +336,24 @@ def commands_csv(run: CorrectionRun, header: list[str]) -> str:
     return buf.getvalue()
 
 
+def toml_string(text: str) -> str:
+    """``text`` as a TOML basic string: JSON's escapes are TOML's; the characters kept as they are
+    (JSON's \\u escapes of characters beyond U+FFFF are surrogate pairs, which TOML refuses),
+    DEL escaped (TOML refuses it bare)."""
+    return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")
+
+
 def commands_toml(run: CorrectionRun, header: list[str]) -> str:
+    """The commands as TOML: ``header`` as comments, ``unit``, the RMS before and after,
+    ``warnings`` (the run's warnings, a list of strings; [] when there are none) and one
+    ``[[actuator]]`` table per actuator."""
     lines = [f"# {h}" for h in header]
     c = run.correction
+    warnings = warning_lines(run)
     lines += [f'unit = "{run.unit}"', f"rms_before_{run.unit} = {c.rms_before / UNITS[run.unit]:.6g}",
-              f"rms_after_{run.unit} = {c.rms_after / UNITS[run.unit]:.6g}", ""]
+              f"rms_after_{run.unit} = {c.rms_after / UNITS[run.unit]:.6g}",
+              "warnings = [" + "".join(f"\n    {toml_string(w)}," for w in warnings)
+              + ("\n]" if warnings else "]"), ""]
     for row in _rows(run):
         lines.append("[[actuator]]")
         for k, v in row.items():

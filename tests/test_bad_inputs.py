@@ -236,6 +236,8 @@ def workspace(tmp_path_factory):
         "panel_other_dish.toml": _scene(PANELS.format(edges="[0.0, 5.0]"), diameter_m__20="diameter_m = 10"),
         "acts_outside.csv": "id,x_m,y_m,panels\na1,12.0,0.0,0\n",
         "acts_lonely.csv": "id,x_m,y_m,panels\na1,2.0,0.5,0\n",
+        "acts_no_id.csv": "id,x_m,y_m,panels\na1,2.0,0.5,0\n,3.0,0.5,0\n",
+        "acts_no_panels.csv": "id,x_m,y_m,panels\na1,2.0,0.5,0\na2,3.0,0.5,\n",
     }
     for name, text in files.items():
         (ws / name).write_text(text)
@@ -263,8 +265,20 @@ def workspace(tmp_path_factory):
     from solver.run import run_invert
 
     run_invert(ws / "f.nc", ws / "s.nc", N=32, refine=0)
+    _map_in_micrometres(ws / "s.nc", ws / "s_um.nc")
     _issue_32_files(ws)  # issue 32
     return ws
+
+
+def _map_in_micrometres(source: Path, path: Path) -> None:
+    """``source``'s SurfaceMap with a 30 um bump stored in um as if metres (30 m)."""
+    from solver import surface
+
+    smap = surface.load(source)
+    grid = surface.grid_of(smap)
+    X, Y = grid.XY
+    bump_um = 30.0 * np.exp(-((X - 3.0) ** 2 + Y**2) / 4.0)
+    surface.save(surface.surfacemap(grid, bump_um, dict(smap.attrs)), path)
 
 
 def _refused_port() -> int:
@@ -571,6 +585,12 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["correct", "s.nc", "-o", "notes.txt", "--scene", "panel_scene.toml"], "give a folder"),
         (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--remove", "coma"],
          "unknown term 'coma'"),
+        (["correct", "s_um.nc", "-o", "corr", "--scene", "panel_scene.toml"],
+         "s_um.nc: the map departs by up to"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--actuators",
+          "acts_no_id.csv"], "acts_no_id.csv: actuator row 2: its id is empty"),
+        (["correct", "s.nc", "-o", "corr", "--scene", "panel_scene.toml", "--actuators",
+          "acts_no_panels.csv"], "acts_no_panels.csv: actuator row 2 (actuator a2): its panels are empty"),
     ],
     "rig park": [
         (["rig", "park", "missing.toml", "--simulate"], "no such rig file"),

@@ -338,6 +338,7 @@ def correction_section(field: xr.Dataset, surface: xr.Dataset | None, out: Path)
     from raysim.render.correction import blocked_on_aperture, command_table_html, correction_figure
     from solver.actuators import ActuatorError, corners_layout
     from solver.correction import correct
+    from solver.errors import SurfaceMapError
     from solver.surface import grid_of
 
     layout = scene.panels
@@ -346,7 +347,10 @@ def correction_section(field: xr.Dataset, surface: xr.Dataset | None, out: Path)
     except ActuatorError as exc:
         return [f"<h2>Correction</h2><p>Not drawn: {html.escape(str(exc))}</p>"]
     grid = grid_of(surface)
-    corr = correct(grid, surface["deformation"].values, layout, acts, ("piston", "tilt"))
+    try:
+        corr = correct(grid, surface["deformation"].values, layout, acts, ("piston", "tilt"))
+    except SurfaceMapError as exc:  # a map departing by over 10 cm: the rest of the report stands
+        return [f"<h2>Correction</h2><p>Not drawn: {html.escape(str(exc))}</p>"]
     x = surface["x"].values
     blocked = blocked_on_aperture(field, x)
     caption = ("Correction: the recovered map (piston and tilt removed), the surface the corner "

@@ -5,6 +5,8 @@ terms (against a Monte Carlo), and actuator files that read back otherwise than 
 import numpy as np
 import pytest
 
+from raysim.maps.aperture import ApertureGrid
+from raysim.surface.panels import PanelLayout
 from solver.actuators import (
     ActuatorError,
     _xy,
@@ -100,11 +102,21 @@ def test_an_unknown_spread_leaves_those_actuators_command_error_unknown():
     assert np.all(np.isfinite(result.command_std[east])) and east.sum() > 20
 
 
-def test_a_map_in_micrometres_labelled_metres_is_noted():
-    result = correct(GRID, _rng_map() * 1e6, LAYOUT, corners_layout(LAYOUT), TERMS)
-    assert any("is it in metres?" in note for note in result.notes)
-    assert not any("metres?" in note
-                   for note in correct(GRID, _rng_map(), LAYOUT, corners_layout(LAYOUT), TERMS).notes)
+def test_a_map_departing_by_a_thousandth_of_the_diameter_is_noted():
+    """Between 1/1000 of the diameter (2 cm on a 20 m dish) and the 10 cm beyond which a map
+    is refused (tests/solver/test_correction_crew.py), a departure is noted (a map in mm
+    labelled metres?) and the commands follow it."""
+    layout, grid = PanelLayout((0.0, 5.0, 10.0), (6, 12), 0.0), ApertureGrid(20.0, 48)
+    acts = corners_layout(layout)
+    X, Y = grid.XY
+    bump = grid.masked(1e-3 * np.exp(-((X - 4.0) ** 2 + (Y - 2.0) ** 2) / 8.0))
+    unit = bump / np.nanmax(np.abs(correct(grid, bump, layout, acts, TERMS).before))
+    noted = correct(grid, unit * 0.05, layout, acts, TERMS)
+    assert any("departs by up to 0.05 m on a 20 m dish: is it in metres?" in n for n in noted.notes)
+    assert np.max(np.abs(noted.commands)) > 0.01
+    assert not any("metres?" in n for n in correct(grid, unit * 0.015, layout, acts, TERMS).notes)
+    assert not any("metres?" in n for n in correct(GRID, _rng_map(), LAYOUT, corners_layout(LAYOUT),
+                                                   TERMS).notes)
 
 
 @pytest.mark.parametrize(("name", "text", "why"), [

@@ -43,6 +43,17 @@ def test_the_section_draws_maps_commands_and_a_row_per_actuator(tmp_path):
     assert (tmp_path / "figures" / "correction.png").stat().st_size > 10_000
 
 
+def test_a_map_no_actuator_could_follow_is_said_not_drawn(tmp_path):
+    """raysim correct refuses a map departing by over 10 cm (a unit mistake); the report says
+    so in its correction section and keeps the rest, instead of failing as a whole."""
+    field, _ = _field(panels=True)
+    wild = Zernike(((2, 2, 0.2),), D / 2)
+    surface = surfacemap(wild, D, N=32, F=F, attrs={"solver": "example", "boundary": "test"})
+    html = "".join(report_module.correction_section(field, surface, tmp_path))
+    assert "<h2>Correction</h2><p>Not drawn: the map departs by up to" in html
+    assert "is the deformation in metres?" in html and "<tr><td>corner-" not in html
+
+
 def test_no_panels_no_section(tmp_path):
     field, truth = _field(panels=False)
     surface = surfacemap(truth, D, N=32, F=F, attrs={"solver": "example", "boundary": "test"})
