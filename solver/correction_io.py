@@ -239,7 +239,8 @@ def run_correct(surface_path, outdir, *, scene=None, actuators=None, layout_kind
 
 
 #: what raysim invert warned of in the map, repeated where the commands are read
-MAP_WARNINGS = ("noise_warning", "hole_warning", "ring_warning", "sampling_warning", "refine_warning")
+MAP_WARNINGS = ("noise_warning", "hole_warning", "ring_warning", "sampling_warning",
+                "saturation_warning", "refine_warning")
 
 
 def map_caveats(attrs, n_panels: int) -> list[str]:

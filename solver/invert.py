@@ -76,6 +76,7 @@ from solver.record import (
     rim_attrs,
     ring_attrs,
     sampling_attrs,
+    saturation_attrs,
     surface_attrs,
 )
 from solver.refinement import ModelChoice, RefinementSetup, choose_model, refinement_setup
@@ -243,6 +244,7 @@ def invert(field: xr.Dataset, *, solver: str = DEFAULT_SOLVER, N: int = DEFAULT_
     attrs.update(hole_attrs(hole))
     attrs.update(ring_attrs(scan))
     attrs.update(sampling_attrs(scan))
+    attrs.update(saturation_attrs(scan, data.n_rows))
     attrs.update(report_attrs(gn, why))
     attrs.update(noise_spread_attrs(spread, bool(stated), data, size, of_map))
     if gn is not None and gn.misfit_rms:  # the map is Gauss-Newton's: its misfit says the fit

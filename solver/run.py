@@ -129,6 +129,8 @@ def summary(result: xr.Dataset) -> list[str]:
         lines.append(f"WARNING: {a['ring_warning']}")
     if "sampling_warning" in a:
         lines.append(f"WARNING: {a['sampling_warning']}")
+    if "saturation_warning" in a:
+        lines.append(f"WARNING: {a['saturation_warning']}")
     if a.get("rows_dropped_at_rim"):
         lines.append(f"rim: {a['rows_dropped_why']}")
     lines.append(f"boundary: {a['boundary']}")

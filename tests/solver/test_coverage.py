@@ -176,3 +176,28 @@ def test_cells_too_coarse_to_resolve_the_surface_are_said_so(cells, rrms_below, 
                                 "radially and 14.4 m") for t in summary(surface))
     else:
         assert surface.attrs["rrms"] < rrms_below
+
+
+def test_a_saturated_meters_plateau_is_said_so():
+    """A meter over its range reads one constant: readings clipped at the 95th percentile
+    (GO cell means of the paper's surface, the gain trusted) made a map far off the truth
+    and said nothing. The plateau is warned of; the same scan unclipped, and one whose
+    readings are rounded to 0.01 dB like a meter's display, are not."""
+    from solver.invert import invert
+    from tests.reference_go import cell_mean_intensity
+    from tests.solver.conftest import D, F, R, go_fieldmap, paper_delta
+
+    sphere = SphereGrid(R, 30, 60)
+    field = go_fieldmap(sphere, F, D, paper_delta, ideal=cell_mean_intensity(sphere, F, D))
+    i = field["intensity"].values
+    clipped = field.copy(deep=True)
+    clipped["intensity"].values[:] = np.minimum(i, np.nanpercentile(i[i > 0], 95))
+    rounded = field.copy(deep=True)
+    with np.errstate(divide="ignore"):
+        rounded["intensity"].values[:] = 10 ** (np.round(10 * np.log10(i), 2) / 10)
+    maps = {name: invert(f, N=64, refine_iterations=1, truth=paper_delta)
+            for name, f in (("clean", field), ("clipped", clipped), ("rounded", rounded))}
+    assert "saturation_warning" in maps["clipped"].attrs
+    assert maps["clipped"].attrs["rrms"] > 5 * maps["clean"].attrs["rrms"]
+    assert "saturation_warning" not in maps["clean"].attrs
+    assert "saturation_warning" not in maps["rounded"].attrs
