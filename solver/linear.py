@@ -74,6 +74,11 @@ class Scan:
             raise SolverError(f"the inversion assumes an on-axis plane wave; this scan's source "
                               f"is {np.degrees(tilt):.3f} deg off axis")
         std = ds["intensity_std"].values if "intensity_std" in ds.data_vars else None
+        if std is not None:
+            # a spread of zero is no measured reading's: a placeholder, or a simulated rig
+            # without noise; read as no spread stated (NaN), so the noise is estimated from the
+            # scan there, not taken as none (all zero made the map's stated spread 0.00 um)
+            std = np.where(np.asarray(std, dtype=np.float64) > 0, std, np.nan)
         intensity = ds["intensity"].values.astype(np.float64)
         blocked = ds["blocked"].values.astype(bool) if "blocked" in ds.data_vars else None
         ideal = ds["intensity_ideal"].values.astype(np.float64)

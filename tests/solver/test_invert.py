@@ -183,6 +183,15 @@ def test_an_intensity_std_with_gaps_spreads_the_map_as_one_without(paper_field):
     none, nothing = spread(np.full_like(i, np.nan))
     assert none.attrs["noise_source"].startswith("estimated")
     assert 0.6 < nothing / full < 1.4
+    # a std of zero everywhere (a placeholder) stated a spread of 0.00 um; it states none
+    zero, nil = spread(np.zeros_like(i))
+    assert zero.attrs["noise_source"].startswith("estimated")
+    assert 0.6 < nil / full < 1.4
+    # zero in some cells: those take the scan's noise, the others keep theirs
+    some = sigma * i
+    some[:, 1::2] = 0.0
+    _, partly = spread(some)
+    assert 0.85 < partly / full < 1.15
 
 
 def test_without_a_stated_std_the_noise_spread_is_predicted_and_a_noisy_map_is_flagged(
