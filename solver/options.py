@@ -32,6 +32,11 @@ DEFAULT_REFINE = 3
 WEIGHTS = ("auto", "amplitude", "none")
 
 
+#: the largest harmonic order a caller may allow the rim targets' fit (each order needs two
+#: more targets, spread round the rim: 200 such points are more than any survey holds)
+MAX_HARMONICS_CAP = 100
+
+
 def _integer(name: str, value: object, lo: int, hi: int) -> None:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not lo <= value <= hi:
         raise SolverError(f"{name} must be an integer in {lo}..{hi}, got {value!r}")
@@ -125,6 +130,10 @@ class InvertOptions:
             _real_in("the SOR relaxation factor (omega)", self.omega, 0.0, 2.0)
         _integer("the uncertainty's Monte Carlo draws (uncertainty_samples)",
                  self.uncertainty_samples, 0, MAX_UNCERTAINTY_SAMPLES)
+        # the rim targets' harmonic order cap: 2.5 raised a bare TypeError in the fit, 0 or -3
+        # a RimTargetsError that blamed the targets' spacing
+        _integer("the rim targets' highest harmonic order (max_harmonics)", self.max_harmonics,
+                 1, MAX_HARMONICS_CAP)
         if isinstance(self.seed, bool) or not isinstance(self.seed, numbers.Integral) or self.seed < 0:
             raise SolverError(f"the random seed (seed) must be an integer >= 0, got {self.seed!r}")
         if self.rim is not None and self.solver == "fft":

@@ -300,6 +300,9 @@ def test_options_object_gives_the_keywords_answer_and_checks_itself(paper_field)
                 {"solver": "fft", "rim": RimTargets(np.ones(8), np.ones(8), np.zeros(8))}):
         with pytest.raises(SolverError):
             InvertOptions(**bad)
+    for harmonics in (2.5, 0, -3, True):  # a bare TypeError, or blame on the targets' spacing
+        with pytest.raises(SolverError, match=r"max_harmonics\) must be an integer in 1\.\.100"):
+            InvertOptions(max_harmonics=harmonics)
 
 
 def _bump_scene(amplitude_um: float) -> str:
