@@ -134,7 +134,12 @@ def _simulate_blocks(scene, output: Path, method: str, device: str, **options) -
 
         ds = run(scene, output, method, device, report, **options)
     a = ds.attrs
-    say(f"{output}: {summary(ds)}; {a['blocks']} blocks on {a['workers']} workers "
+    workers_text = f"{a['workers']} worker" + ("" if a["workers"] == 1 else "s")
+    say(f"{output}: {summary(ds)}; {a['blocks']} blocks on {workers_text} "
         f"({a['blocks_reused']} reused, {a['blocks_computed_twice']} computed twice"
         + (f", {a['blocks_repaired']} failed verification and were recomputed" if a.get("blocks_repaired")
            else "") + ")")
+    if options.get("resume") and not a["blocks_reused"] and not a.get("blocks_repaired"):
+        # as after an interrupt before the first block: the run's store was never kept
+        say(f"--resume: no interrupted run of {output} was there to complete, so every block was "
+            "computed afresh")

@@ -55,6 +55,19 @@ def test_simulate_writes_a_fieldmap_and_one_summary_line(tmp_path: Path, scene_f
     assert np.abs(FA).max() > 1e-3
 
 
+def test_a_resume_with_nothing_to_resume_says_it_started_afresh(tmp_path: Path, scene_file: Path):
+    """``simulate --resume`` without an interrupted run's blocks computed every block anew and
+    said "0 reused", as a resume that found its store lost would; and "1 workers"."""
+    out = tmp_path / "po.nc"
+    run = run_cli("simulate", str(scene_file), "-o", str(out), "--method", "po", "--workers", "1",
+                  "--resume", cwd=tmp_path, timeout=300)
+    assert run.returncode == 0, run.stderr
+    first, second = run.stdout.strip().splitlines()
+    assert " blocks on 1 worker (0 reused" in first
+    assert second == (f"--resume: no interrupted run of {out} was there to complete, so every "
+                      "block was computed afresh")
+
+
 def test_overrides_reach_the_output(tmp_path: Path, scene_file: Path):
     out = tmp_path / "o.nc"
     run = run_cli("simulate", str(scene_file), "-o", str(out), "--n-theta", "10", "--n-phi", "20",
