@@ -201,3 +201,27 @@ def test_a_saturated_meters_plateau_is_said_so():
     assert maps["clipped"].attrs["rrms"] > 5 * maps["clean"].attrs["rrms"]
     assert "saturation_warning" not in maps["clean"].attrs
     assert "saturation_warning" not in maps["rounded"].attrs
+
+
+def test_an_ideal_of_another_focal_length_is_refused():
+    """The paper's dish scanned (exact GO cell means, F = 33 m) with the ideal of an F = 36 m
+    dish: its rim image 5 deg nearer the pole passed the rim check's tolerance, and the lit
+    band beyond it was filled as a missing region (a map 88 000 % off). The ideal of the
+    right dish, and of one 1 % longer in F (its edge in the same row, its scale 2 % off, so
+    the gain estimated), still invert."""
+    from solver.invert import invert
+    from tests.reference_go import cell_mean_intensity
+    from tests.solver.conftest import D, F, R, go_fieldmap, paper_delta
+
+    sphere = SphereGrid(R, 45, 90)
+    field = go_fieldmap(sphere, F, D, paper_delta, ideal=cell_mean_intensity(sphere, F, D))
+    for focal, refused in ((36.0, True), (33.3, False), (F, False)):
+        scan = field.copy(deep=True)
+        scan["intensity_ideal"].values[:] = cell_mean_intensity(sphere, focal, D)
+        if refused:
+            with pytest.raises(FieldMapError, match="is lit up to theta = 80.0 deg, but its ideal "
+                                                    "intensity ends at 76.0 deg"):
+                invert(scan, N=48, refine_iterations=0)
+        else:
+            out = invert(scan, N=48, refine_iterations=0, truth=paper_delta, gain="power")
+            assert out.attrs["rrms"] < 0.1
