@@ -163,33 +163,31 @@ class Scan:
             self._wrong_rim(f"ends at theta = {np.degrees(edges[edge]):.1f} deg", rim)
 
     def _check_lit_where_ideal_is_dark(self) -> None:
-        """Raise when the scan is lit in whole rows beyond the ideal intensity's edge: the
+        """Raise when whole rows of the scan are lit where its ideal intensity is dark: the
         ideal is then another dish's (an F = 36 m ideal on the paper's 33 m scan, its rim
         image 5 deg nearer the pole, passed the rim check within its tolerance and made a map
-        88 000 % off, the lit band read as a missing region). A row counts as lit at half the
-        lit rows' median share (:func:`lit_share`); a deformation moves the rim's image by a
-        fraction of a row, and edge diffraction lights the boundary at a quarter, so a whole
-        row lit beyond the ideal's last part-lit one is no surface's doing."""
+        88 000 % off, the lit band read as a missing region). Each row's lit share
+        (:func:`lit_share`) is taken against its typical level, the median of the rows above
+        a tenth of the largest (PO's ripple on a small dish swings rows from 0.2 to 1 of the
+        largest): a row dark in the ideal (under a tenth of its level) and lit in the scan
+        (over half of its level) is no surface's doing: a deformation moves the rim's image
+        by a fraction of a row, and edge diffraction lights the boundary at a quarter."""
         ideal = lit_share(self.intensity_ideal, self.blocked, self.sphere)
         scan = lit_share(np.where(np.isfinite(self.intensity), self.intensity, np.nan),
                          self.blocked, self.sphere)
-        lit_ideal = np.flatnonzero(ideal > 0.5 * ideal.max(initial=0.0))
-        lit_scan = np.flatnonzero(scan > 0.5 * scan.max(initial=0.0))
-        if lit_ideal.size == 0 or lit_scan.size == 0:
-            return
-        ref = float(np.median(ideal[lit_ideal]))
-        edge = next((i for i in range(int(lit_ideal[0]) + 1, ideal.size) if ideal[i] < 0.25 * ref),
-                    None)
-        if edge is None:
-            return
-        scan_ref = float(np.median(scan[lit_scan]))
-        beyond = [i for i in range(edge + 1, scan.size) if scan[i] >= 0.5 * scan_ref]
-        if beyond:
+
+        def level(share: NDArray[np.float64]) -> float:
+            lit = share[share > 0.1 * share.max(initial=0.0)]
+            return float(np.median(lit)) if lit.size else 0.0
+
+        rows = np.flatnonzero((ideal < 0.1 * level(ideal)) & (scan > 0.5 * level(scan)))
+        if rows.size and level(ideal) > 0:
             edges = np.degrees(self.sphere.theta_edges)
             raise FieldMapError(
-                f"the scan is lit up to theta = {edges[beyond[-1] + 1]:.1f} deg, but its ideal "
-                f"intensity ends at {edges[edge]:.1f} deg: the ideal is not this dish's (another "
-                "focal length or diameter?); give the ideal of the dish the scan measured")
+                f"the scan is lit in {rows.size} rows ({edges[rows[0]]:.1f} to "
+                f"{edges[rows[-1] + 1]:.1f} deg) where its ideal intensity is dark: the ideal is "
+                "not this dish's (another focal length or diameter?); give the ideal of the dish "
+                "the scan measured")
 
     def _wrong_rim(self, where: str, rim: float) -> None:
         raise FieldMapError(

@@ -219,8 +219,8 @@ def test_an_ideal_of_another_focal_length_is_refused():
         scan = field.copy(deep=True)
         scan["intensity_ideal"].values[:] = cell_mean_intensity(sphere, focal, D)
         if refused:
-            with pytest.raises(FieldMapError, match="is lit up to theta = 80.0 deg, but its ideal "
-                                                    "intensity ends at 76.0 deg"):
+            with pytest.raises(FieldMapError, match=r"lit in 2 rows \(76.0 to 80.0 deg\) where "
+                                                    "its ideal intensity is dark"):
                 invert(scan, N=48, refine_iterations=0)
         else:
             out = invert(scan, N=48, refine_iterations=0, truth=paper_delta, gain="power")
