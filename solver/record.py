@@ -29,7 +29,8 @@ from solver.refinement import RefinementSetup
 from solver.resample import (
     HOLE_SHARE_WARNING,
     RING_SHARE_WARNING,
-    SAMPLING_SHARE_WARNING,
+    SAMPLING_RADIAL_SHARE,
+    SAMPLING_RIM_SHARE,
     Hole,
     cell_spacing,
     unmeasured_ring,
@@ -143,15 +144,18 @@ def ring_attrs(scan: Scan) -> dict[str, Any]:
 
 def sampling_attrs(scan: Scan) -> dict[str, Any]:
     """How far apart the scan's cells meet the dish (:func:`solver.resample.cell_spacing`),
-    with a warning above :data:`solver.resample.SAMPLING_SHARE_WARNING` of the diameter."""
+    with a warning above :data:`solver.resample.SAMPLING_RADIAL_SHARE` of the diameter between
+    rows or :data:`solver.resample.SAMPLING_RIM_SHARE` between columns at the rim."""
     radial, arc = cell_spacing(scan.sphere, scan.F, scan.D)
     attrs: dict[str, Any] = {"cell_spacing_radial_m": radial, "cell_spacing_rim_m": arc}
-    if max(radial, arc) > SAMPLING_SHARE_WARNING * scan.D:
+    radial_max, arc_max = SAMPLING_RADIAL_SHARE * scan.D, SAMPLING_RIM_SHARE * scan.D
+    if radial > radial_max or arc > arc_max:
         attrs["sampling_warning"] = (
             f"the scan's cells meet the dish up to {radial:.3g} m apart radially and {arc:.3g} m "
             f"apart round the rim, on a {scan.D:.3g} m dish: the map holds nothing finer than "
             "about twice that, and finer detail of the surface aliases into it; scan finer "
-            f"cells (under {SAMPLING_SHARE_WARNING * scan.D:.2g} m both ways) for a map to act on")
+            f"cells (under {radial_max:.2g} m radially and {arc_max:.2g} m round the rim) for a "
+            "map to act on")
     return attrs
 
 

@@ -70,11 +70,16 @@ def unmeasured_ring(sphere: SphereGrid, F: float, D: float) -> tuple[float, floa
     return max(1.0 - 2.0 * reached / D, 0.0), reached
 
 
-#: the spacing on the dish of the scan's usable cells (radially between rows, and round the
-#: rim between columns), as a share of D, above which the map is said not to resolve the
-#: surface: 10 x 30 deg cells on the paper's dish (10 m and 29 m apart) gave a map 5.5 mm RMS
-#: off a 1.2 mm peak-to-peak surface, noise-free; 2.5 deg cells (2.5 m) resolve it
-SAMPLING_SHARE_WARNING = 1.0 / 16.0
+#: the spacing on the dish of the scan's usable cells, as shares of D, above which the map is
+#: said not to resolve the surface: radially between rows, and round the rim between columns.
+#: Exact GO cell means of the paper's surface, inverted: rows 2.75 m apart gave 0.6 % RRMS,
+#: 4.3 m 90 %, 6.3 m 52 %, 7.7 m 520 % (the FA is the surface's Laplacian, and rows too far
+#: apart alias its radial ripple); columns 9.6 m apart at the rim gave 0.3 %. Twelve 5 m
+#: bumps over the dish: 0.3 % with columns 9.6 m apart at the rim, 1.8 % at 14.4 m, 4.5 % at
+#: 28.8 m. The rig rehearsal's 10 x 30 deg cells, 8.6 m and 29 m apart, missed the paper's
+#: surface by 4.5 times its peak-to-peak, noise-free
+SAMPLING_RADIAL_SHARE = 1.0 / 32.0
+SAMPLING_RIM_SHARE = 1.0 / 8.0
 
 
 def cell_spacing(sphere: SphereGrid, F: float, D: float) -> tuple[float, float]:

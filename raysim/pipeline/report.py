@@ -659,7 +659,7 @@ page (field.nc, surface.nc) when the run wrote them.</p>
 """
 
 
-def run_warnings(field: xr.Dataset, surface: xr.Dataset | None) -> list[str]:
+def run_warnings(field: xr.Dataset | None, surface: xr.Dataset | None) -> list[str]:
     """The warnings the FieldMap and the SurfaceMap carry (their ``*_warning`` attributes: a
     map the model does not reproduce, mostly noise, with a hole, an extrapolated ring, cells
     too coarse; a simulation out of its engine's reach), each as "simulation: ..." or
@@ -685,7 +685,7 @@ def page_warnings(page: Path, source: str | os.PathLike[str]) -> list[str]:
                 maps.append(xr.Dataset(attrs=dict(ds.attrs)))
         else:
             maps.append(None)
-    return run_warnings(*maps) if maps[0] is not None else run_warnings(xr.Dataset(), maps[1])
+    return run_warnings(*maps)
 
 
 def _folder(out_dir: str | os.PathLike[str]) -> Path:
