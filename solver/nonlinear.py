@@ -176,8 +176,16 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
         misfit[n_rows:] = np.nan
         return misfit
 
+    compared = int(np.count_nonzero(np.isfinite(fa_measured[:n_rows] * w)))
+
     def rms(misfit: NDArray[np.float64]) -> float:
-        return float(np.sqrt(np.nanmean(misfit[:n_rows] ** 2)))
+        """RMS of the misfit over the compared cells; inf where the model leaves more than
+        half of the cells the data hold dark (a map beyond the model's reach: rays crossing
+        or leaving the sphere), which no step may trade for a small RMS on the rest."""
+        kept = np.isfinite(misfit[:n_rows])
+        if np.count_nonzero(kept) <= 0.5 * compared:
+            return float("inf")
+        return float(np.sqrt(np.mean(misfit[:n_rows][kept] ** 2)))
 
     mask = grid.mask
     floor = misfit_noise_rms(noise_variance, fa_measured, w, n_rows)
@@ -186,6 +194,12 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
     misfit = misfit_of(delta, gamma, "starting map")
     history.misfit_rms.append(rms(misfit))
     history.gain_factor.append(gamma)
+    if not np.isfinite(history.misfit_rms[-1]):
+        history.stopped = ("the model of the starting (linear) map leaves most of the scan's "
+                           "cells dark, so there is no misfit to correct: the linear map kept")
+        report("done", 1.0)
+        history.seconds = time.perf_counter() - start
+        return delta, history
     # the Anderson state: the map inside the aperture and the scale, scaled to weigh little.
     # Only maps that were kept enter it, each with its own update: a rejected trial never gets
     # one, so it cannot steer later steps. The history is kept across a shortened step, for the

@@ -227,11 +227,18 @@ def fit_attrs(data: MeasuredFA, last: float) -> dict[str, Any]:
     fa = data.fa[:data.n_rows]
     data_rms = float(np.sqrt(np.nanmean(fa**2))) if np.any(np.isfinite(fa)) else 0.0
     noise = float(np.sqrt(data.noise_variance))
+    if not np.isfinite(last):  # the model of the map leaves most cells dark (solver.nonlinear)
+        return {"refine_data_fa_rms": data_rms, "refine_warning": (
+            "the model of the map leaves more than half of the scan's cells dark (its rays cross "
+            "or leave the sphere): the surface is beyond the model's reach, far outside the "
+            "equation's linear range, and the map is only the linear answer; do not act on it")}
     share = last / data_rms if data_rms > 0 else float("nan")
     attrs: dict[str, Any] = {"refine_data_fa_rms": data_rms, "refine_misfit_share": share}
     if data_rms > 0 and share > MISFIT_SHARE_WARNING and last > 3.0 * noise:
+        part = (f"{share * 100:.0f} % of" if share < 10 else
+                f"{share:.3g} times")  # a caustic's intensities: 6e16 against 2.5
         attrs["refine_warning"] = (
-            f"the model leaves {share * 100:.0f} % of the data's FA unexplained (misfit "
+            f"the model leaves {part} the data's FA unexplained (misfit "
             f"{last:.2e} RMS against {data_rms:.2e}, noise {noise:.1e}): the map does not "
             "reproduce the scan (a surface beyond GO's linear range, or data the model does "
             "not describe); do not act on it without checking")

@@ -179,7 +179,8 @@ def summary_lines(result: CampaignResult, noise_db: float, rim: int, rim_std: fl
         f"({1e6 * attrs.get('removed_delta_c_centre_m', 0.0):.1f} um at the centre)",
         f"predicted RMS (raysim budget): {result.predicted * 1e6:.1f} um",
         f"achieved RMS against the truth: {result.achieved * 1e6:.1f} um",
-    ]
+    ] + [f"WARNING (the map's, from the inversion): {value}" for key, value in attrs.items()
+         if key.endswith("_warning")]  # a map beyond the model's reach, mostly noise, ...
 
 
 def correction_lines(scene: Scene, plan: ScanPlan, surface, path: Path, noise_db: float,

@@ -162,3 +162,29 @@ def test_light_noise_near_the_dish_does_not_stop_the_shortened_steps(seed):
     assert linear["rms_m"] > 50e-6                  # the linear equation's error this near
     assert refined["rms_m"] < 0.3 * linear["rms_m"]
     assert floats(refined["refine_misfit_rms"])[-1] < floats(refined["refine_misfit_rms"])[0]
+
+
+def test_a_surface_beyond_the_models_reach_keeps_the_linear_map_and_says_so():
+    """QA: a 10 cm bump of 0.5 m on a 10 m dish (F = 3 m): the GO model of the linear map
+    left most cells dark (its rays cross and leave the sphere), NumPy warned of a mean of an
+    empty slice and the inversion ended in 'more than half of the samples inside the rim
+    image are missing', which none were. The refinement now stops with the linear map, and
+    the map says why it must not be acted on."""
+    import warnings
+
+    from raysim.scene.scene import parse_scene
+    from raysim.simulate import simulate
+    from solver.invert import invert
+
+    scene = parse_scene('name = "huge"\n[dish]\ndiameter_m = 10.0\nfocal_length_m = 3.0\n'
+                        'resolution_m = 0.1\n[[deformation]]\ntype = "bumps"\n'
+                        'bumps = [{x_m = 2.0, y_m = 0.0, amplitude_um = 100000.0, sigma_m = 0.5}]\n'
+                        '[source]\nfrequency_hz = 1e9\n[sphere]\nradius_m = 1.0\nn_theta = 24\n'
+                        'n_phi = 36\n')
+    field = simulate(scene, method="go")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        surface = invert(field, N=64)
+    assert "do not act on it" in surface.attrs["refine_warning"]
+    assert "times the data's FA" in surface.attrs["refine_warning"] or \
+        "cells dark" in surface.attrs["refine_warning"]
