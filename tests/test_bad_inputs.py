@@ -439,6 +439,8 @@ CASES: dict[str, list[tuple[list[str], str]]] = {
         (["check", "scene.toml", "-o", "rep_new", "--frequency", "-1e9"], "must be a finite frequency"),
         (["check", "scene.toml", "-o", "rep_new", "--gap-m", "5"], "wider than a panel allows"),
         (["check", "scene.toml", "-o", "rep_new", "--wave", "fdtd"], "unknown --wave 'fdtd'"),
+        (["check", "scene.toml", "-o", "rep_new", "--json", "rep_new/check.nc"],
+         "lies in the check's output folder"),
         (["check", "scene.toml", "-o", "rep_new", "--refine-model", "x"], "unknown --refine-model 'x'"),
         (["check", "scene.toml", "-o", "rep_new", "--sphere", "9x"], "--sphere takes"),
         (["check", "dish_mm.stl", "-o", "rep_new", "--frequency", "1e9"], "then give --mesh-unit 0.001"),

@@ -8,6 +8,7 @@ import typer
 
 from raysim.cli.common import app, progress_bar, say
 from raysim.cli.tables import check_json_path, json_option, json_to_stdout, print_table, write_json
+from raysim.errors import RaysimError
 from raysim.optics.fast import DEFAULT_TOL
 
 
@@ -70,6 +71,11 @@ def check(
     from raysim.pipeline.check import source_inputs, summary_rows, verdict_lines, write_check
     from raysim.pipeline.check_inputs import parse_grid
 
+    if json_path not in (None, "-") and Path(json_path).resolve().is_relative_to(Path(output).resolve()):
+        # the check replaces its folder whole: the JSON there overwrote check.nc, or made the
+        # next run refuse the folder as holding a file that is not the check's
+        raise RaysimError(f"--json {json_path}: lies in the check's output folder {output}, which "
+                          "each run replaces whole; write it beside the folder")
     check_json_path(json_path, [("source", source)])
     if json_path not in (None, "-"):  # and the files a scene names (read only for a --json file)
         check_json_path(json_path, source_inputs(source))
