@@ -135,8 +135,8 @@ class Scan:
         """Raise when the ideal intensity ends far from the rim image the ``focal_length`` and
         ``diameter`` attributes put at 2 atan(D / 4F): a wrong F or D shifts the mapping and
         the rows used (F = 30 m on the paper's 33 m map: 22 % RRMS, D = 100 m cut its outer
-        ring, without a word). The ideal's edge is the first row, after the lit ones, whose
-        lit share (:func:`lit_share`) is under a quarter of the lit rows' median (a sharp
+        ring, without a word). The ideal's edge is the first row after the last whose lit
+        share (:func:`lit_share`) reaches a quarter of the lit rows' median (a sharp
         edge's part-lit row, or edge diffraction's quarter power at the shadow boundary). The
         rim image must lie within two rows of it, plus the edge's own width beyond its one
         part-lit row (from the last row at 3/4 of the median to the first under a tenth: a
@@ -148,8 +148,11 @@ class Scan:
             return
         ref = float(np.median(share[lit]))
         edges, step = self.sphere.theta_edges, self.sphere.dtheta
-        rows = range(int(lit[0]) + 1, share.size)
-        edge = next((i for i in rows if share[i] < 0.25 * ref), None)
+        # the first row after the last one at a quarter of that: a ring gap's dark row inside
+        # the dish (GO leaves a whole row dark where the gap's image covers it) is no edge
+        # (a 5 m dish with 30 mm gaps was refused as having the wrong F or D)
+        last = int(np.flatnonzero(share >= 0.25 * ref)[-1])
+        edge = last + 1 if last + 1 < share.size else None
         rim = theta_rim(self.D, self.F)
         if edge is None:  # lit to the scan's end: the rim image is not before its last rows
             if rim < edges[-1] - 2.0 * step:

@@ -91,6 +91,23 @@ def test_attributes_that_move_the_rim_image_off_the_ideals_are_refused(field, na
         invert(wrong, refine_iterations=0)
 
 
+def test_a_ring_gaps_dark_row_is_not_the_rim(field):
+    """A ring gap whose image covers a whole theta row leaves it dark in GO's ideal and scan
+    alike (a 5 m dish with 30 mm gaps on a 0.5 m sphere): the rim check took that row for the
+    ideal's edge and refused the scan as having the wrong F or D. Both dark in one row at
+    40 deg, the scan inverts; the wrong focal length is still refused."""
+    from solver.invert import invert
+
+    gapped = field.copy(deep=True)
+    row = int(np.searchsorted(gapped["theta"].values, np.radians(40.0)))
+    gapped["intensity"].values[row] = 0.0
+    gapped["intensity_ideal"].values[row] = 0.0
+    invert(gapped, refine_iterations=0)
+    gapped.attrs["focal_length"] = 30.0
+    with pytest.raises(FieldMapError, match="ends at theta = 80.0 deg, but focal_length"):
+        invert(gapped, refine_iterations=0)
+
+
 def _dish_mesh(path, hole_radius):
     """A 10 m dish, F = 4 m, with a 0.2 mm Gaussian bump at x = 3.5 m (sigma 0.5 m), as rings
     of 0.125 m triangles; the triangles whose centroids lie within ``hole_radius`` (m) left out."""
