@@ -367,6 +367,22 @@ def _check_codecs(group: zarr.Group, path: str) -> None:
         if _document(m) != _document(made.metadata):
             raise CorruptStoreError(f"{path}: its array {name!r} is not stored as raysim writes it "
                                     f"(its zarr.json's codecs were changed); {resume_hint(path)}")
+        if not _layout_fill(arr.dtype, m.fill_value):  # what a lost chunk reads as
+            raise CorruptStoreError(f"{path}: its array {name!r} is not stored as raysim writes it "
+                                    f"(its zarr.json's fill value was changed to {m.fill_value!r}); "
+                                    f"{resume_hint(path)}")
+
+
+def _layout_fill(dtype: np.dtype, fill: Any) -> bool:
+    """Whether ``fill`` is the fill value the layout gives an array of ``dtype``
+    (raysim.dataset.store_layout: NaN for floating point, 0 for integers): a lost chunk of a
+    float array must read as NaN, never as numbers (a fill of 0.0 made a missing sample's
+    intensity zeros)."""
+    if dtype.kind == "f":
+        return bool(np.isnan(fill))
+    if dtype.kind in "iu":
+        return fill == 0
+    return True
 
 
 def listed_data_names(group: zarr.Group, path: str = "the store") -> list[str]:

@@ -140,8 +140,20 @@ def _codecs_lost(name: str):
     return damage
 
 
+def _fill_changed(name: str, fill):
+    """The array's fill value changed in its zarr.json (0.0 for NaN: a lost chunk would read as
+    zeros); the readers accepted it."""
+    def damage(path: Path) -> None:
+        meta = path / name / "zarr.json"
+        data = json.loads(meta.read_text())
+        data["fill_value"] = fill
+        meta.write_text(json.dumps(data))
+    return damage
+
+
 @pytest.mark.parametrize(("damage", "array", "computed"), [
-    (_codecs_lost("intensity"), "intensity", 0),
+    (_codecs_lost("intensity"), "intensity", 0), (_fill_changed("intensity", 0.0), "intensity", 0),
+    (_fill_changed("status", 1), "status", 0),
     (_unlink("intensity/zarr.json"), "intensity", 0), (_unlink("status/zarr.json"), "status", 0),
     (_truncate("deformation/zarr.json"), "deformation", 0), (_garble("checksum/zarr.json"), "checksum", 0),
     (_unlink("split/zarr.json"), "split", 0), (_unlink("ideal_status/zarr.json"), "ideal_status", 0),
