@@ -49,6 +49,7 @@ class RunReport:
     repaired: int = 0  # done samples (and ideal intensities) that failed verification: recomputed
     rewritten: tuple[str, ...] = ()  # creation-time arrays and attributes rewritten from the spec
     cleared: tuple[tuple[str, int], ...] = ()  # (array, chunks): unreadable records of done items, reset
+    nothing_to_resume: bool = False  # asked to resume, and no store was there: a new one made
 
     @property
     def samples_per_second(self) -> float:
@@ -79,6 +80,8 @@ class RunReport:
                      + ", ".join(f"{name} of {n} sample{'' if n == 1 else 's'}"
                                  if not name.startswith("ideal_") else f"{name} of {n} frequenc"
                                  f"{'y' if n == 1 else 'ies'}" for name, n in self.cleared))
+        if self.nothing_to_resume:  # a mistyped store path would start a store elsewhere
+            line += f"; --resume: no store was at {self.store} to complete, so a new one was made"
         return line + self._rewritten_note()
 
     def _rewritten_note(self) -> str:
@@ -158,7 +161,8 @@ def generate(spec: DatasetSpec | str | Path, store: str | Path, *, workers: int 
         store=path, samples=spec.samples, done=int(np.sum(final == zstore.DONE)),
         failed=int(np.sum(final == zstore.FAILED)), computed=len(pending), skipped=skipped,
         workers=n_workers, seconds=time.perf_counter() - start, failures=tuple(failures[:20]),
-        ideal_failures=tuple(ideal_failures), repaired=repaired, rewritten=rewritten, cleared=cleared)
+        ideal_failures=tuple(ideal_failures), repaired=repaired, rewritten=rewritten, cleared=cleared,
+        nothing_to_resume=resume and created)
 
 
 def _check_and_repair(group, path: str, spec: DatasetSpec) \

@@ -190,10 +190,21 @@ def test_killed_client_resumes_to_the_same_store(reference, spec, tmp_path, inpr
     report = generate(spec, store, resume=True, scheduler=inproc)
     assert (report.done, report.skipped, report.computed) == (spec.samples, len(done),
                                                               spec.samples - len(done))
+    assert not report.nothing_to_resume and "--resume" not in report.summary()
     assert_same_store(reference, store)
     after = np.asarray(zarr.open_group(str(store), mode="r")["finished"][...])
     kept = sorted(done)
     assert np.array_equal(after[kept], finished[kept])  # done samples were not redone
+
+
+def test_a_resume_with_no_store_says_it_made_a_new_one(reference, spec, tmp_path, inproc):
+    """QA: --resume with no store there (a mistyped path) started a new store without a word,
+    where simulate says so and scan refuses; the store is the uninterrupted one."""
+    store = tmp_path / "typo.zarr"
+    report = generate(spec, store, resume=True, scheduler=inproc)
+    assert report.nothing_to_resume and report.computed == spec.samples
+    assert f"--resume: no store was at {store} to complete, so a new one was made" in report.summary()
+    assert_same_store(reference, store)
 
 
 def test_a_store_of_another_spec_is_refused(reference, spec, tmp_path):
