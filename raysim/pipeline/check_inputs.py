@@ -165,7 +165,8 @@ def _mesh_dish(path: Path, R: float | None, F: float | None, scene: Scene | None
                          "(a reflector has 0.1 to 5)")
     if fit.rms > 0.02 * depth:
         raise CheckError(f"{path}: not a dish: it departs {fit.rms:.3g} m RMS from its best-fit "
-                         f"paraboloid ({100 * fit.rms / depth:.0f} % of the dish's depth)")
+                         f"paraboloid ({100 * fit.rms / depth:.2g} % of that paraboloid's depth "
+                         f"{depth:.3g} m; a dish departs less than 2 %)")
     _check_axis(path, loaded, fit)
     R = SPHERE_RADIUS_OF_F * fit.F if R is None else float(R)
     if not (math.isfinite(R) and 0 < R < fit.F):

@@ -386,3 +386,27 @@ def test_a_mesh_with_its_axis_tilted_is_refused_at_once_as_such(tmp_path):
         load_dish(tmp_path / "tilted.ply", sphere_radius=1.4)
     dish.export(tmp_path / "upright.ply")
     assert load_dish(tmp_path / "upright.ply", sphere_radius=1.4).is_mesh
+
+
+def test_a_sphere_cap_is_not_a_dish_and_the_message_gives_the_share_beside_the_limit(tmp_path):
+    """QA: a sphere cap with a 10 m dish's rim sag was refused as departing "(2 % of the dish's
+    depth)", the limit itself, as if it were the measured share. The share is the RMS over the
+    best-fit paraboloid's depth D^2 / 16F, recomputed here from the message's own figures."""
+    import re
+
+    import trimesh
+
+    from raysim.pipeline.check_inputs import CheckError, _mesh_dish
+    from raysim.surface.mesh import paraboloid
+
+    dish = paraboloid(10.0, 3.0, 0.25)
+    v = np.asarray(dish.vertices, dtype=float).copy()
+    v[:, 2] = 6.0 - np.sqrt(36.0 - v[:, 0] ** 2 - v[:, 1] ** 2)  # the sphere of radius 2F
+    trimesh.Trimesh(v, np.asarray(dish.faces), process=False).export(tmp_path / "cap.stl")
+    with pytest.raises(CheckError) as info:
+        _mesh_dish(tmp_path / "cap.stl", None, None)
+    text = str(info.value)
+    rms, share, depth = (float(x) for x in re.search(
+        r"departs ([\d.e-]+) m RMS .*\(([\d.]+) % of that paraboloid's depth ([\d.]+) m; a dish "
+        r"departs less than 2 %\)", text).groups())
+    assert share == pytest.approx(100 * rms / depth, rel=0.05) and share > 2.0
