@@ -176,7 +176,8 @@ def refine(delta: NDArray[np.float64], fa_measured: NDArray[np.float64], sphere:
         misfit[n_rows:] = np.nan
         return misfit
 
-    compared = int(np.count_nonzero(np.isfinite(fa_measured[:n_rows] * w)))
+    compared = int(np.count_nonzero(np.isfinite(
+        (fa_measured * np.broadcast_to(w, fa_measured.shape))[:n_rows])))
 
     def rms(misfit: NDArray[np.float64]) -> float:
         """RMS of the misfit over the compared cells; inf where the model leaves more than
