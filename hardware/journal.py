@@ -6,8 +6,9 @@ individual readings in W, the time in s since the epoch) with a CRC-32 of its co
 record is written with one ``write`` and synced to disk (``fsync``) before the scan moves on.
 
 Reading stops at the first line that is not a complete, intact record: a torn last line (a
-kill during the write) is ignored and cut off before the journal is appended to again; a bad
-record followed by good ones is corruption and an error. Records must carry the indices 0, 1,
+kill during the write, so without its newline) is ignored and cut off before the journal is
+appended to again; a bad record followed by good ones, or a last line complete with its newline
+whose check fails, is corruption and an error. Records must carry the indices 0, 1,
 2, ... in order, so a resumed scan continues after the last complete one with no duplicate,
 no gap and no reordering.
 
@@ -120,8 +121,12 @@ def read_journal_sessions(path: str | Path) -> Contents:
     for number, line in enumerate(lines[1:], start=2):
         body = _parse(line)
         if body is None:
-            if number == len(lines):
+            if number == len(lines) and not line.endswith(b"\n"):
                 break  # a torn last line: the step it described was not completed
+            if number == len(lines):  # one write ends every record with its newline
+                raise JournalError(f"{path}: its last line {number} is complete but damaged (its "
+                                   "check fails): not an interrupted write; restore the journal, "
+                                   "or delete that line to take its step again")
             raise JournalError(f"{path}: line {number} is damaged and complete records follow it")
         if set(body) == {"session"} and isinstance(body["session"], dict):
             session = body["session"]

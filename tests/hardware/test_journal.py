@@ -64,6 +64,20 @@ def test_damage_before_good_records_is_an_error(tmp_path: Path) -> None:
         read_journal(path)
 
 
+def test_a_complete_last_line_that_fails_its_check_is_an_error(tmp_path: Path) -> None:
+    """QA: an edited digit in the last line, complete with its newline, was dropped as a torn
+    write and the step taken again without a word; a write torn by a kill has no newline."""
+    path = tmp_path / "j"
+    with Journal.create(path, "abc", 10) as jr:
+        for n in range(3):
+            jr.append(record(n))
+    lines = path.read_bytes().splitlines(keepends=True)
+    lines[-1] = lines[-1].replace(b'"i":2', b'"i":3')
+    path.write_bytes(b"".join(lines))
+    with pytest.raises(JournalError, match="last line 4 is complete but damaged"):
+        read_journal(path)
+
+
 def test_duplicate_or_reordered_records_are_errors(tmp_path: Path) -> None:
     path = tmp_path / "j"
     with Journal.create(path, "abc", 10) as jr:
