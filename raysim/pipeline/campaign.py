@@ -175,7 +175,8 @@ def summary_lines(result: CampaignResult, noise_db: float, rim: int, rim_std: fl
         f"scan: {noise_db:g} dB per reading, {result.readings} readings per point "
         f"({result.hours:.1f} h on the rig), {targets}",
         f"gain: {result.gain_injected:.6f} unknown to the plan, estimated {result.gain_estimated:.6f}"
-        f" +- {attrs.get('gain_std', 0.0):.1e}; delta_c removed "
+        f" +- {attrs.get('gain_std', 0.0):.1e} (the readings' noise alone: a deformed dish moves "
+        "the estimate further); delta_c removed "
         f"({1e6 * attrs.get('removed_delta_c_centre_m', 0.0):.1f} um at the centre)",
         f"predicted RMS (raysim budget): {result.predicted * 1e6:.1f} um",
         f"achieved RMS against the truth: {result.achieved * 1e6:.1f} um",
