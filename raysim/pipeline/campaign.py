@@ -194,7 +194,7 @@ def correction_lines(scene: Scene, plan: ScanPlan, surface, path: Path, noise_db
     from solver.budget import noise_response, relative_std
     from solver.correction import correct
     from solver.correction_budget import budget_shapes, command_std_from_budget
-    from solver.correction_io import CorrectionRun, commands_csv, header_lines
+    from solver.correction_io import CorrectionRun, commands_csv, header_lines, map_caveats
 
     layout = scene.panels
     acts = corners_layout(layout)
@@ -213,6 +213,8 @@ def correction_lines(scene: Scene, plan: ScanPlan, surface, path: Path, noise_db
         modes += [(m, n, v_ref * ms) for m, n, ms in response.reference if m > 0]
     corr.command_std = command_std_from_budget(grid, layout, acts, terms,
                                                budget_shapes(grid, modes, rim, rim_std))
+    # what the map may not hold, in the file the crew loads, as raysim correct writes it
+    corr.notes += map_caveats(surface.attrs, layout.n_panels)
     run = CorrectionRun(corr, acts, "um", (), np.array([]), np.array([]), [], [], [])
     path.write_text(commands_csv(run, header_lines(run, terms)), encoding="utf-8")
     predicted = float(np.sqrt(np.mean(corr.command_std**2)))

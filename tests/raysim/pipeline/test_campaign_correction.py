@@ -25,6 +25,13 @@ def test_a_panelled_campaign_writes_commands_with_their_inherited_error(tmp_path
     result = run_campaign(scene, plan, tmp_path / "c", rim=32, N=64, refine=1)
     text = (result.folder / "commands.csv").read_text()
     assert "a positive command moves the surface" in text
+    # what the map may not hold (here: the panel pistons GO does not see) is in the file the
+    # crew loads, as raysim correct writes it; the campaign's commands.csv left it out
+    from raysim.maps.surfacemap import load
+    from solver.correction_io import map_caveats
+
+    caveats = map_caveats(load(result.folder / "surface.nc").attrs, 24 + 18 + 12 + 6)
+    assert caveats and all(" ".join(c.split()) in text for c in caveats)
     rows = list(csv.DictReader(line for line in text.splitlines() if not line.startswith("#")))
     assert len(rows) == 97
     std = np.array([float(r["command_std_um"]) for r in rows])
