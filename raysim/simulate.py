@@ -498,6 +498,7 @@ class _WaveContext:
                  device: str | None, keep: bool, method: str) -> None:
         from raysim.optics import po
         from raysim.optics.sources import Sources
+        from raysim.surface.quadrature import targets_around
 
         self.edges = _wave_edges(method, options)
         self.spw = options.samples_per_wavelength or po.DEFAULT_SAMPLES_PER_WAVELENGTH
@@ -508,9 +509,11 @@ class _WaveContext:
 
         self.radiator, self.radiator_tol = options.radiator, options.radiator_tol
         plans: dict = {}  # the ideal reflector's trees, reused by the deformed one where they hold it
+        # the whole job's points set each reflector's quadrature (the integrand's rate on them)
         self.sources: dict[str, Sources] = {
             name: Sources(r, wave, self.spw, self.edges, device, keep, radiator=options.radiator,
-                          tol=options.radiator_tol, plans=plans)
+                          tol=options.radiator_tol, plans=plans,
+                          targets=targets_around(self.points[name], (0.0, 0.0, float(r.F)), wave.k_hat))
             for name, r in (("ideal", ideal), ("deformed", deformed))}
         # the whole grid's chart domain: every block of points is summed on the same grids
         self.domains = {name: domain_of(self.points[name], (0.0, 0.0, float(r.F)))
@@ -539,7 +542,11 @@ class _WaveContext:
         ideal, deformed = self.sources["ideal"], self.sources["deformed"]
         for sources in (ideal, deformed):
             sources.prime()
-        engine = {"samples_per_wavelength": float(self.spw), "samples": int(deformed.stats.n_samples),
+        from raysim.surface.quadrature import INTEGRAND_SAMPLES
+
+        # the quadrature follows the integrand's rate on the job's points (samples per period)
+        engine = {"samples_per_wavelength": float(self.spw), "integrand_samples": INTEGRAND_SAMPLES,
+                  "samples": int(deformed.stats.n_samples),
                   "samples_lit": int(deformed.stats.n_lit), "samples_lit_ideal": int(ideal.stats.n_lit)}
         if self.edges:
             engine.update({"edge_points": int(deformed.n_edge_points),

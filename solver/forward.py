@@ -430,6 +430,7 @@ class ForwardJob:
         from raysim.optics import po
         from raysim.optics.sources import Sources
         from raysim.surface.mesh import paraboloid
+        from raysim.surface.quadrature import targets_around
 
         reflector = deformed(ideal if ideal is not None else
                              paraboloid(self.D, self.F, self.face_m).with_obstacles(self.obstacles),
@@ -438,9 +439,11 @@ class ForwardJob:
             else self.samples_per_wavelength
         from raysim.optics.fast.chart import domain_of
 
-        sources = Sources(reflector, self.wave(), spw, "rim" if self.ptd else None, device, keep,
-                          radiator=self.radiator, tol=self.radiator_tol)
         points = self.sphere.points(self.F).reshape(-1, 3)
+        wave = self.wave()
+        sources = Sources(reflector, wave, spw, "rim" if self.ptd else None, device, keep,
+                          radiator=self.radiator, tol=self.radiator_tol,
+                          targets=targets_around(points, (0.0, 0.0, self.F), wave.k_hat))
         # the whole grid's chart domain: every block is summed on the same grids (same bits)
         return _ForwardContext(sources, points, domain_of(points, (0.0, 0.0, self.F)))
 

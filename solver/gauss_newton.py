@@ -334,11 +334,13 @@ def model_pairs(model: WaveForward, sphere, F: float, D: float) -> float:
     (:func:`raysim.optics.fast.radiator.estimated_cost`)."""
     from raysim.optics.fast.radiator import quadrature_cost
     from raysim.optics.po import C0, DEFAULT_SAMPLES_PER_WAVELENGTH
-    from raysim.surface.quadrature import plan
+    from raysim.surface.quadrature import plan, targets_around
 
     spw = model.samples_per_wavelength or DEFAULT_SAMPLES_PER_WAVELENGTH
-    quadrature = plan(model.paraboloid(D, F), C0 / model.frequency_hz, spw)
-    return quadrature_cost(quadrature, sphere.points(F).reshape(-1, 3), model.wavenumber(),
+    points = sphere.points(F).reshape(-1, 3)
+    targets = targets_around(points, (0.0, 0.0, F), (0.0, 0.0, -1.0))  # the model's wave: along -z
+    quadrature = plan(model.paraboloid(D, F), C0 / model.frequency_hz, spw, targets)
+    return quadrature_cost(quadrature, points, model.wavenumber(),
                            (0.0, 0.0, F), getattr(model, "radiator", "direct"),
                            getattr(model, "radiator_tol", 1e-6))[0]
 

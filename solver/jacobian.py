@@ -32,6 +32,7 @@ from scipy.interpolate import BSpline, RectBivariateSpline
 
 from raysim.maps.sphere import SphereGrid
 from raysim.surface.mesh import Reflector
+from raysim.surface.quadrature import Targets
 from solver.aperture import ApertureGrid
 from solver.errors import SolverError
 from solver.forward import WaveForward
@@ -125,14 +126,15 @@ class GridToSamples:
         return self._filled_T(iAy.T @ GC @ iAx)
 
 
-def _check_memory(reflector: Reflector, wavelength: float, samples_per_wavelength: float) -> None:
+def _check_memory(reflector: Reflector, wavelength: float, samples_per_wavelength: float,
+                  targets: Targets | None = None) -> None:
     """Refuse (SolverError, one line) a Jacobian whose samples would not fit this machine's
     memory (:data:`JACOBIAN_BYTES_PER_SAMPLE` each above ``simulate``'s base), before the
     model's field is computed."""
     from raysim.simulate import WAVE_BASE_BYTES, physical_memory
     from raysim.surface.quadrature import plan
 
-    n = plan(reflector, wavelength, samples_per_wavelength).n_samples
+    n = plan(reflector, wavelength, samples_per_wavelength, targets).n_samples
     need = WAVE_BASE_BYTES + JACOBIAN_BYTES_PER_SAMPLE * n
     if need > physical_memory():
         raise SolverError(f"Gauss-Newton's Jacobian needs {n:.2g} PO samples, about {need / 1e9:.2g} GB, "
@@ -155,6 +157,7 @@ class WaveJacobian:
     def __init__(self, model: WaveForward, sphere: SphereGrid, F: float, D: float,
                  grid: ApertureGrid, delta: NDArray[np.float64]) -> None:
         from raysim.optics import po, po_jacobian
+        from raysim.surface.quadrature import targets_around
 
         self.model, self.sphere, self.grid = model, sphere, grid
         self.points = sphere.points(F).reshape(-1, 3)
@@ -166,9 +169,11 @@ class WaveJacobian:
             else model.samples_per_wavelength
         # the model's own reflector and field (PO, PTD's rim, the incident wave when total)
         self.reflector = model.reflector(D, F, surface)
-        _check_memory(self.reflector, self.wave.wavelength, spw)
+        # the forward model's quadrature (its points set it: solver.forward.WaveForward.build)
+        targets = targets_around(self.points, self.focus, self.wave.k_hat)
+        _check_memory(self.reflector, self.wave.wavelength, spw, targets)
         self.E = model.field(sphere, F, D, surface).reshape(-1, 3)
-        self.elements = po_jacobian.surface_elements(self.reflector, self.wave, spw, model.device)
+        self.elements = po_jacobian.surface_elements(self.reflector, self.wave, spw, model.device, targets)
         self.samples = GridToSamples(grid, self.elements.x, self.elements.y)
         # the probe as a real vector per point (None: |E|^2 times the boresight pattern g0)
         from raysim.maps.probe import arrival_directions

@@ -38,7 +38,7 @@ from raysim.optics.illumination import ETA0, Illumination
 from raysim.optics.radiator import PREFACTORS, Radiator
 from raysim.optics.shadow_edge import lit_samples
 from raysim.surface.mesh import Reflector
-from raysim.surface.quadrature import plan
+from raysim.surface.quadrature import Targets, plan
 
 Z_HAT = np.array([0.0, 0.0, 1.0])
 
@@ -67,15 +67,16 @@ class SurfaceElements:
 
 
 def surface_elements(reflector: Reflector, wave: Illumination, samples_per_wavelength: float,
-                     device: str | None = "cpu") -> SurfaceElements:
+                     device: str | None = "cpu", targets: Targets | None = None) -> SurfaceElements:
     """The PO samples of ``reflector`` (which must have a smooth surface) under ``wave``.
 
-    The same samples, lit test and lit-side rule as :func:`raysim.optics.po.po_elements`.
+    The same samples, lit test and lit-side rule as :func:`raysim.optics.po.po_elements`
+    (``targets``: as :class:`raysim.optics.sources.Sources`'s, for the same quadrature).
     """
     if reflector.surface is None:
         raise RaysimError("the PO Jacobian needs a reflector with a smooth surface")
     dev = runtime.resolve_device(device)
-    quadrature = plan(reflector, wave.wavelength, samples_per_wavelength)
+    quadrature = plan(reflector, wave.wavelength, samples_per_wavelength, targets)
     bvh = ReflectorBVH.build(reflector, dev)
     h_hat = wave.h_hat
     v = reflector.vertices[reflector.faces]

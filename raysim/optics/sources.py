@@ -41,7 +41,7 @@ from raysim.optics.po import ElementStats, po_elements
 from raysim.optics.radiator import position_extent
 from raysim.progress import Progress
 from raysim.surface.mesh import Reflector
-from raysim.surface.quadrature import plan
+from raysim.surface.quadrature import Targets, plan
 
 BLOCK_ALIGN = 4  # points: the CPU kernel's tile; blocks start at multiples of it
 BYTES_PER_ELEMENT = 9 * 8  # a PO element in the kernels' (9, N) float64 layout
@@ -81,12 +81,16 @@ class Sources:
     plans : a dict given to the Sources of another reflector too (the ideal and the deformed
         one of a simulation): the fast radiator's trees are planned once and shared where
         they serve both (:class:`raysim.optics.fast.radiator.FastRadiator`'s ``plans``).
+    targets : where the fields are wanted (:class:`raysim.surface.quadrature.Targets`): the
+        quadrature then follows the integrand's own rate (:func:`raysim.surface.quadrature.plan`);
+        None: ``samples_per_wavelength`` everywhere.
     """
 
     def __init__(self, reflector: Reflector, wave: Illumination, samples_per_wavelength: float,
                  edges: str | None = None, device: str | None = "cpu", keep: bool = True,
                  edge_points_per_wavelength: float | None = None, radiator: str = "direct",
-                 tol: float = DEFAULT_TOL, plans: dict | None = None) -> None:
+                 tol: float = DEFAULT_TOL, plans: dict | None = None,
+                 targets: Targets | None = None) -> None:
         from raysim.optics import ptd
 
         if radiator not in RADIATORS:
@@ -97,7 +101,7 @@ class Sources:
         self.methods: dict[str, str] = {}  # kind -> which sum ran last (fast radiator)
         self.device = runtime.resolve_device(device)
         self.reflector, self.wave = reflector, wave
-        self.quadrature = plan(reflector, wave.wavelength, samples_per_wavelength)
+        self.quadrature = plan(reflector, wave.wavelength, samples_per_wavelength, targets)
         self.bvh = ReflectorBVH.build(reflector, self.device)
         self.keep = bool(keep) and BYTES_PER_ELEMENT * self.quadrature.n_samples <= KEEP_BYTES
         self.edges = edges

@@ -1,0 +1,117 @@
+"""PO's quadrature spaced by the integrand's own rate (raysim.surface.quadrature.plan with
+targets): the rate bound against finite differences of the phase on the smooth surface, the
+field against a finer uniform quadrature, and the same samples for a deformed twin."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from raysim.optics import po
+from raysim.optics.radiator import Radiator
+from raysim.surface.deformation import PaperDeformation
+from raysim.surface.mesh import paraboloid
+from raysim.surface.quadrature import (
+    INTEGRAND_SAMPLES,
+    Targets,
+    integrand_rate,
+    plan,
+    targets_around,
+)
+
+D, F, FACE = 20.0, 8.0, 2.5
+
+
+def sphere_points(centre, radius: float, n: int, rng) -> np.ndarray:
+    v = rng.normal(size=(n, 3))
+    return np.asarray(centre) + radius * v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def surface_phase_rate(x, y, P, k_hat, h=1e-5):
+    """|surface gradient| of psi(s) = k_i . s + |P - s| on z = (x^2 + y^2) / 4F, by central
+    differences in (x, y) and the graph's metric (g = I + grad z grad z^T)."""
+    def psi(x, y):
+        s = np.stack([x, y, (x * x + y * y) / (4 * F)], axis=-1)
+        return s @ k_hat + np.linalg.norm(P - s, axis=-1)
+
+    px = (psi(x + h, y) - psi(x - h, y)) / (2 * h)
+    py = (psi(x, y + h) - psi(x, y - h)) / (2 * h)
+    zx, zy = x / (2 * F), y / (2 * F)
+    det = 1 + zx**2 + zy**2  # inverse metric: (I (1 + |grad z|^2) - grad z grad z^T) / det
+    gxx, gyy, gxy = (1 + zy**2) / det, (1 + zx**2) / det, -zx * zy / det
+    return np.sqrt(gxx * px**2 + 2 * gxy * px * py + gyy * py**2)
+
+
+@pytest.mark.parametrize("tilt_deg", [0.0, 8.0])
+def test_the_rate_bounds_the_phase_gradient_on_the_surface(tilt_deg):
+    rng = np.random.default_rng(3)
+    dish = paraboloid(D, F, FACE)
+    t = np.radians(tilt_deg)
+    k_hat = np.array([np.sin(t), 0.0, -np.cos(t)])
+    targets = Targets((0.0, 0.0, F), 2.0, tuple(k_hat))
+    bound = integrand_rate(dish, targets)
+    P = np.concatenate([sphere_points((0, 0, F), 2.0, 300, rng),
+                        sphere_points((0, 0, F), 1.0, 100, rng)])  # on the sphere and inside it
+    faces = rng.choice(len(dish.faces), 40, replace=False)
+    worst = 0.0
+    for f in faces:
+        corners = dish.vertices[dish.faces[f], :2]
+        for b in rng.dirichlet(np.ones(3), 5):  # points inside the face
+            x, y = b @ corners
+            rate = surface_phase_rate(np.full(len(P), x), np.full(len(P), y), P, k_hat).max()
+            assert rate <= bound[f] * (1 + 1e-6)
+            worst = max(worst, rate / bound[f])
+    assert worst > 0.5  # a bound, not a guess far above the rate
+    # tilting the wave off the axis defocuses it: the integrand oscillates faster
+    if tilt_deg:
+        axial = integrand_rate(dish, Targets((0.0, 0.0, F), 2.0, (0.0, 0.0, -1.0)))
+        assert np.median(bound) > 1.5 * np.median(axial)
+
+
+def field(dish, wave, quadrature, points):
+    radiator = Radiator(points, wave.k)
+    for chunk in po.po_elements(dish, wave, quadrature):
+        radiator.add_packed(chunk.numpy(), "electric")
+    return radiator.field()
+
+
+def test_the_field_matches_a_finer_uniform_quadrature_with_fewer_samples():
+    rng = np.random.default_rng(5)
+    dish = paraboloid(D, F, FACE)
+    wave = po.Illumination.plane_wave(3e9, (0, 0, -1), (1, 0, 0))
+    points = sphere_points((0, 0, F), 2.0, 150, rng)
+    points = points[points[:, 2] < F + 1.0]  # the hemisphere facing the dish and a band above
+    targets = targets_around(points, (0.0, 0.0, F), wave.k_hat)
+    rate_plan = plan(dish, wave.wavelength, 1.5, targets)
+    uniform = plan(dish, wave.wavelength, 1.5)
+    fine = plan(dish, wave.wavelength, 3.0)
+    assert rate_plan.n_samples < 0.75 * uniform.n_samples
+    assert np.all(rate_plan.spacings >= uniform.spacing)  # never closer than asked
+    E_ref = field(dish, wave, fine, points)
+    err = np.sqrt(np.mean(np.abs(field(dish, wave, rate_plan, points) - E_ref) ** 2) / np.mean(np.abs(E_ref) ** 2))
+    assert err < 1e-6
+    # fewer points per period than the rule's are visibly worse (the rule is not idle)
+    from raysim.surface import quadrature
+
+    coarse = quadrature.FaceQuadrature(dish, uniform.spacing,
+                                       face_spacing=rate_plan.spacings * INTEGRAND_SAMPLES / 2.5)
+    err_coarse = np.sqrt(np.mean(np.abs(field(dish, wave, coarse, points) - E_ref) ** 2) / np.mean(np.abs(E_ref) ** 2))
+    assert err_coarse > 30 * err
+
+
+def test_a_deformed_twin_gets_the_ideal_samples_and_a_big_tilt_more():
+    dish = paraboloid(D, F, FACE)
+    targets = Targets((0.0, 0.0, F), 2.0, (0.0, 0.0, -1.0))
+    twin = dish.deformed(PaperDeformation(D, F))  # millimetres
+    a, b = plan(dish, 0.1, 1.5, targets), plan(twin, 0.1, 1.5, targets)
+    assert a.n_samples == b.n_samples
+    np.testing.assert_array_equal(a.orders[1], b.orders[1])
+    steep = dish.deformed(PaperDeformation(D, F, 200.0))  # half a metre: slopes of tenths
+    assert plan(steep, 0.1, 1.5, targets).n_samples > a.n_samples
+
+
+def test_targets_reaching_the_dish_keep_the_uniform_rule():
+    dish = paraboloid(D, F, FACE)
+    wide = Targets((0.0, 0.0, F), 9.0, (0.0, 0.0, -1.0))  # the ball holds the vertex
+    uniform = plan(dish, 0.1, 1.5)
+    assert plan(dish, 0.1, 1.5, wide).n_samples >= uniform.n_samples * 0.99
