@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -490,34 +491,53 @@ def grid_sums(grids: Iterable[tuple[int, int, NDArray[np.complex128]]], the_plan
               k: float) -> NDArray[np.float64]:
     """The raw sums (R * Q, 6) on ``domain``'s whole tensor grid (R thetas x Q phis, row-major):
     each cluster's Fourier series (its grid's FFT, the Nyquist row and column dropped) summed
-    at the grid's angles by two matrix products, times exp(-j k |P - c|), clusters summed."""
+    at the grid's angles by two matrix products, times exp(-j k |P - c|), clusters summed.
+
+    The series of one chunk of stop grids are summed on a second thread while the next chunk
+    is built (the aggregation's kernels and transforms), so this step's numpy work, mostly on
+    one core, overlaps work that keeps both busy; the chunks are still summed one after
+    another in order, so the bits are those of a plain loop."""
+    total = np.zeros((len(domain.thetas or ()), 3, len(domain.phis or ())), dtype=np.complex128)
+    scratch = Scratch()
+    with ThreadPoolExecutor(max_workers=1) as summer:
+        pending = None
+        for q0, q1, G in grids:
+            if pending is not None:
+                pending.result()  # one chunk summed at a time: at most two chunks of grids held
+            pending = summer.submit(_add_series, total, G, q0, q1, the_plan, domain, k, scratch)
+        if pending is not None:
+            pending.result()
+    R, _, Q = total.shape
+    total = np.moveaxis(total, 1, 2).reshape(R * Q, 3)
+    return np.concatenate([total.real, total.imag], axis=1)
+
+
+def _add_series(total: NDArray[np.complex128], G: NDArray[np.complex128], q0: int, q1: int, the_plan: Plan,
+                domain: Domain, k: float, scratch: Scratch) -> None:
+    """Add the series of stop clusters q0 .. q1 - 1 (their grids ``G``) on ``domain``'s tensor
+    grid to ``total`` (R, 3, Q), a few clusters at a time (:data:`CHUNK_BYTES`), in order."""
     level = the_plan.levels[the_plan.stop]
     n = the_plan.sizes[the_plan.stop]
     keep, E_theta, E_phi_T = series_basis(n, domain)
     R, Q = E_theta.shape[0], E_phi_T.shape[1]
     points = tensor_points(domain)
-    total = np.zeros((R, 3, Q), dtype=np.complex128)
     nk = len(keep)
     per = max(1, int(CHUNK_BYTES // (16 * 3 * R * Q * 2)))
-    scratch = Scratch()
-    for q0, q1, G in grids:
-        for c0 in range(q0, q1, per):
-            c1 = min(c0 + per, q1)
-            c = c1 - c0
-            S = sfft.fft2(G[c0 - q0:c1 - q0], axes=(1, 2), workers=FFT_WORKERS)
-            # the kept coefficients, in the (k_theta, cluster, component, k_phi) order the two
-            # plain matrix products (one BLAS call each, theta first, then phi) read them in
-            A = scratch.array("coefficients", (nk, c, 3, nk))
-            for coarse, packed in kept_blocks(n, nk):
-                A.transpose(1, 0, 3, 2)[packed] = S[coarse]
-            A *= 1.0 / (n * n)
-            T = np.matmul(E_theta, A.reshape(nk, c * 3 * nk), out=scratch.array("theta", (R, c * 3 * nk)))
-            W = np.matmul(T.reshape(R * c * 3, nk), E_phi_T, out=scratch.array("series", (R * c * 3, Q)))
-            r = distances(points, level.centres[c0:c1])
-            phase = np.exp(-1j * k * r).reshape(c, R, Q).transpose(1, 0, 2)  # (R, c, Q)
-            total += np.einsum("rcaq,rcq->raq", W.reshape(R, c, 3, Q), phase)  # no (R, c, 3, Q) product
-    total = np.moveaxis(total, 1, 2).reshape(R * Q, 3)
-    return np.concatenate([total.real, total.imag], axis=1)
+    for c0 in range(q0, q1, per):
+        c1 = min(c0 + per, q1)
+        c = c1 - c0
+        S = sfft.fft2(G[c0 - q0:c1 - q0], axes=(1, 2), workers=FFT_WORKERS)
+        # the kept coefficients, in the (k_theta, cluster, component, k_phi) order the two
+        # plain matrix products (one BLAS call each, theta first, then phi) read them in
+        A = scratch.array("coefficients", (nk, c, 3, nk))
+        for coarse, packed in kept_blocks(n, nk):
+            A.transpose(1, 0, 3, 2)[packed] = S[coarse]
+        A *= 1.0 / (n * n)
+        T = np.matmul(E_theta, A.reshape(nk, c * 3 * nk), out=scratch.array("theta", (R, c * 3 * nk)))
+        W = np.matmul(T.reshape(R * c * 3, nk), E_phi_T, out=scratch.array("series", (R * c * 3, Q)))
+        r = distances(points, level.centres[c0:c1])
+        phase = np.exp(-1j * k * r).reshape(c, R, Q).transpose(1, 0, 2)  # (R, c, Q)
+        total += np.einsum("rcaq,rcq->raq", W.reshape(R, c, 3, Q), phase)  # no (R, c, 3, Q) product
 
 
 def series_basis(n: int, domain: Domain) -> tuple[NDArray[np.int64], NDArray[np.complex128],
