@@ -44,9 +44,10 @@ from dataclasses import dataclass
 from functools import cached_property, lru_cache
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from raysim.errors import RaysimError
+from raysim.surface.deformation import NoDeformation
 from raysim.surface.mesh import Reflector
 
 
@@ -105,13 +106,19 @@ def gauss_legendre01(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
 
 
 #: Gauss points per period of the integrand's own oscillation where the targets are known
-#: (:func:`plan`). Measured on the paper's dish against 2.5 to 3 samples per wavelength
-#: everywhere, E relative RMS: 3.8e-8 at 0.3 GHz and 2.8e-9 at 1 GHz with 5 (1.5 samples per
-#: wavelength everywhere, the rule without targets: 2.6e-9 and 2.8e-10); 4 gave 3.9e-6 and
-#: 7.4e-8 (benchmarks/bench_quadrature.py).
+#: (:func:`plan`). Measured on the paper's dish against 2.5 samples per wavelength everywhere,
+#: E relative RMS: 2.1e-8 at 0.3 GHz and 2.3e-9 at 1 GHz with 5 (1.5 samples per wavelength
+#: everywhere, the rule without targets: 2.8e-9 and 2.5e-10); 4 gave 2.7e-6 and 6.7e-8
+#: (benchmarks/bench_quadrature.py).
 INTEGRAND_SAMPLES = 5.0
 #: the least tilt allowance (:func:`slope_allowance`), units of k: 2 mrad of tilt
 MIN_SLOPE_ALLOWANCE = 2.0**-8
+#: the fewest Gauss points along a face's edge where the rule thins it: at three or four points
+#: on a face (a small target ball, a low rate) five per period left 1e-5 of the field from the
+#: faces' non-oscillating variation (the amplitude, the lifted surface's curvature)
+INTEGRAND_FLOOR = 6.0
+#: the most points :func:`surface_tilt` reads the surface's slopes at
+MAX_TILT_POINTS = 2_000_000
 
 
 @dataclass(frozen=True)
@@ -135,35 +142,30 @@ def targets_around(points: NDArray[np.float64], centre: tuple[float, float, floa
                    tuple(float(v) for v in np.asarray(k_hat, dtype=np.float64)))  # type: ignore[arg-type]
 
 
-def integrand_rate(reflector: Reflector, targets: Targets) -> NDArray[np.float64]:
+def integrand_rate(reflector: Reflector, targets: Targets,
+                   spacing: float | None = None) -> NDArray[np.float64]:
     """A bound (F,) on each face's integrand phase rate along the surface, in units of k:
     max over the face's corners and centroid of |t(k_i - u0)| + 2 sin(alpha / 2), u0 the
     direction from the point to the targets' centre and alpha = asin(R / distance) the half
     angle the targets' ball subtends (|u - u0| <= 2 sin(alpha / 2) for every target; t does
     not lengthen a vector). A point inside the ball gets 2 + |t(k_i)|, more than any rate.
 
-    On a reflector with a smooth surface the points and normals are those of its undeformed
-    surface (the paraboloid of focal length F, plus a loaded mesh's own departure), so a
-    deformed reflector of the same triangulation, a refinement's next surface or a Jacobian's
-    perturbed copy gets the same samples as the ideal one; the deformation's tilt is added
-    instead as :func:`slope_allowance`, the same on every face. A bare triangulation uses its
-    facets."""
+    On a reflector with a smooth surface the points and normals are those of its paraboloid
+    (focal length F), so a deformed reflector of the same triangulation, a refinement's next
+    surface, a Jacobian's perturbed copy and a loaded mesh's ideal twin get the same samples;
+    what tilts the surface away from it (a loaded mesh's departure, the deformation) is added
+    as :func:`slope_allowance` of its steepest slope, found on a lattice of each face about
+    ``spacing`` (m) apart (:func:`surface_tilt`), the same on every face. A bare triangulation
+    uses its facets."""
     v = reflector.vertices[reflector.faces]  # (F, 3, 3)
     pts = np.concatenate([v, v.mean(axis=1, keepdims=True)], axis=1)  # corners and centroid
     allowance = 0.0
     surface = reflector.surface
     if surface is not None:
         x, y, F = pts[..., 0], pts[..., 1], float(surface.F)
-        z, sx, sy = (x * x + y * y) / (4.0 * F), x / (2.0 * F), y / (2.0 * F)
-        panel = reflector.surface_panel(np.arange(len(v)))
-        panel = None if panel is None else np.repeat(panel[:, None], pts.shape[1], axis=1)
-        if surface.departure is not None:
-            z = z + surface.departure(x, y, panel)
-            dx, dy = surface.departure.gradient(x, y, panel)
-            sx, sy = sx + dx, sy + dy
-        pts = np.stack([x, y, z], axis=-1)
-        normal = np.stack([-sx, -sy, np.ones_like(x)], axis=-1)
-        allowance = slope_allowance(*surface.deformation.gradient(x, y, surface._deformation_panel(panel)))
+        pts = np.stack([x, y, (x * x + y * y) / (4.0 * F)], axis=-1)
+        normal = np.stack([-x / (2.0 * F), -y / (2.0 * F), np.ones_like(x)], axis=-1)
+        allowance = slope_allowance(surface_tilt(reflector, spacing))
     else:
         cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
         normal = np.broadcast_to(cross[:, None, :], pts.shape)
@@ -179,13 +181,48 @@ def integrand_rate(reflector: Reflector, targets: Targets) -> NDArray[np.float64
     return np.max(tangential + spread, axis=1) + allowance
 
 
-def slope_allowance(gx: ArrayLike, gy: ArrayLike) -> float:
-    """What a deformation of slopes (gx, gy) (dz/dx, dz/dy, dimensionless) can add to the
+def surface_tilt(reflector: Reflector, spacing: float | None = None) -> float:
+    """The steepest slope (dimensionless) of what the smooth surface adds to its paraboloid (a
+    loaded mesh's departure and the deformation), on a barycentric lattice of every face
+    about ``spacing`` (m) apart (coarser where that would take more than
+    :data:`MAX_TILT_POINTS` points; at least the corners, edge midpoints and centroid), so
+    that a feature between a face's corners is seen; 0 for a bare paraboloid."""
+    surface = reflector.surface
+    if surface is None or (surface.departure is None and isinstance(surface.deformation, NoDeformation)):
+        return 0.0
+    v = reflector.vertices[reflector.faces][..., :2]  # (F, 3, 2)
+    length = np.linalg.norm(v[:, [1, 2, 0]] - v, axis=2).max(axis=1)
+    a, b = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+    area = 0.5 * float(np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum())
+    step = max(float(spacing or 0.0), math.sqrt(2.0 * area / MAX_TILT_POINTS), 1e-300)
+    order = np.clip(np.ceil(length / step), 2, 64).astype(np.int64)
+    panels = reflector.surface_panel(np.arange(len(v)))
+    steepest = 0.0
+    for k in np.unique(order):
+        faces = np.flatnonzero(order == k)
+        i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
+        keep = i + j <= k
+        bary = np.column_stack([(k - i - j)[keep], i[keep], j[keep]]) / k
+        bary = np.vstack([bary, [1 / 3, 1 / 3, 1 / 3]])
+        per = max(1, MAX_TILT_POINTS // (4 * len(bary)))
+        for f0 in range(0, len(faces), per):
+            sel = faces[f0:f0 + per]
+            xy = np.einsum("pk,fkc->fpc", bary, v[sel])  # (f, p, 2)
+            panel = None if panels is None else np.repeat(panels[sel][:, None], len(bary), axis=1)
+            gx, gy = surface.deformation.gradient(xy[..., 0], xy[..., 1], surface._deformation_panel(panel))
+            if surface.departure is not None:
+                dx, dy = surface.departure.gradient(xy[..., 0], xy[..., 1], panel)
+                gx, gy = gx + dx, gy + dy
+            steepest = max(steepest, float(np.max(np.hypot(gx, gy), initial=0.0)))
+    return steepest
+
+
+def slope_allowance(tilt: float) -> float:
+    """What tilting the surface by ``tilt`` (its steepest slope, dimensionless) can add to the
     integrand's rate (units of k): tilting the normal by e turns t(k_i - u), of length up
     to 2, by at most about 2 e; rounded up to a power of two, at least
     :data:`MIN_SLOPE_ALLOWANCE` (so deformations of millimetres over metres, the ones an
     inversion refines, all get the same samples)."""
-    tilt = float(np.max(np.hypot(gx, gy), initial=0.0))
     return max(MIN_SLOPE_ALLOWANCE, 2.0 ** math.ceil(math.log2(max(2.0 * tilt, 1e-300))))
 
 
@@ -489,7 +526,9 @@ def plan(reflector: Reflector, wavelength: float, samples_per_wavelength: float,
     spacing = wavelength / samples_per_wavelength
     if targets is None:
         return FaceQuadrature(reflector, spacing)
-    per_wavelength = INTEGRAND_SAMPLES * integrand_rate(reflector, targets)
-    with np.errstate(divide="ignore"):
-        face_spacing = np.maximum(wavelength / per_wavelength, spacing)  # inf where nothing oscillates
+    quadrature = FaceQuadrature(reflector, spacing)
+    # along a face's longest edge L: INTEGRAND_SAMPLES points per period of its rate, at least a floor
+    periods = quadrature.edge_length * integrand_rate(reflector, targets, spacing) / wavelength
+    points = np.maximum(INTEGRAND_SAMPLES * periods, INTEGRAND_FLOOR)
+    face_spacing = np.maximum(quadrature.edge_length / points, spacing)
     return FaceQuadrature(reflector, spacing, face_spacing=face_spacing)

@@ -9,7 +9,7 @@ import pytest
 
 from raysim.optics import po
 from raysim.optics.radiator import Radiator
-from raysim.surface.deformation import PaperDeformation
+from raysim.surface.deformation import GaussianBumps, PaperDeformation
 from raysim.surface.mesh import paraboloid
 from raysim.surface.quadrature import (
     INTEGRAND_SAMPLES,
@@ -115,3 +115,42 @@ def test_targets_reaching_the_dish_keep_the_uniform_rule():
     wide = Targets((0.0, 0.0, F), 9.0, (0.0, 0.0, -1.0))  # the ball holds the vertex
     uniform = plan(dish, 0.1, 1.5)
     assert plan(dish, 0.1, 1.5, wide).n_samples >= uniform.n_samples * 0.99
+
+
+def relative_error(dish, wave, quadrature, points, reference):
+    E = field(dish, wave, quadrature, points)
+    return np.sqrt(np.mean(np.abs(E - reference) ** 2) / np.mean(np.abs(reference) ** 2))
+
+
+def test_a_small_target_ball_keeps_enough_points_on_each_face():
+    """A ball of 0.3 m on 2.5 m faces: the rate is low, and five points per period alone would
+    leave three points a face (1e-5 of the field, from the amplitude's and the surface's own
+    variation); the floor keeps the field within 1e-7 of a finer rule."""
+    rng = np.random.default_rng(11)
+    dish = paraboloid(D, F, FACE)
+    wave = po.Illumination.plane_wave(1.5e9, (0, 0, -1), (1, 0, 0))
+    points = sphere_points((0, 0, F), 0.3, 100, rng)
+    thin = plan(dish, wave.wavelength, 1.5, targets_around(points, (0.0, 0.0, F), wave.k_hat))
+    assert thin.n_samples < 0.2 * plan(dish, wave.wavelength, 1.5).n_samples
+    reference = field(dish, wave, plan(dish, wave.wavelength, 3.0), points)
+    assert relative_error(dish, wave, thin, points, reference) < 1e-7
+
+
+def test_a_bump_between_the_corners_is_seen():
+    """A 5 mm bump 0.15 m wide, a metre from any face corner or centroid: its slopes raise
+    the tilt allowance, so the deformed dish is sampled closer than the ideal one, and its
+    field stays within 1e-6 of a finer rule."""
+    rng = np.random.default_rng(7)
+    dish = paraboloid(D, F, FACE)
+    wave = po.Illumination.plane_wave(1.5e9, (0, 0, -1), (1, 0, 0))
+    bumped = dish.deformed(GaussianBumps(((3.10, -6.60, 5e-3, 0.15),)))
+    corners = dish.vertices[:, :2]
+    centroids = dish.vertices[dish.faces][..., :2].mean(axis=1)
+    nearest = np.min(np.hypot(*(np.vstack([corners, centroids]) - (3.10, -6.60)).T))
+    assert nearest > 0.9  # the bump lies between the points the rate itself is read at
+    points = sphere_points((0, 0, F), 1.0, 100, rng)
+    targets = targets_around(points, (0.0, 0.0, F), wave.k_hat)
+    ideal, deformed = plan(dish, wave.wavelength, 1.5, targets), plan(bumped, wave.wavelength, 1.5, targets)
+    assert deformed.n_samples > 1.5 * ideal.n_samples
+    reference = field(bumped, wave, plan(bumped, wave.wavelength, 3.0), points)
+    assert relative_error(bumped, wave, deformed, points, reference) < 1e-6
