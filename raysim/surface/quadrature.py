@@ -31,9 +31,10 @@ targets this is far below k: on a paraboloid lit along its axis, t(k_i) = t(u_F)
 at the focus (the law of reflection), so for targets on a sphere of radius R about the focus the
 rate is at most k R / |s - F| (0.18 k to 0.3 k on the paper's dish). Given the targets
 (:class:`Targets`), :func:`plan` spaces each face's samples for its own rate
-(:func:`integrand_rate`), :data:`INTEGRAND_SAMPLES` Gauss points per period of the integrand,
-and never closer than the samples per wavelength asked for: the integration grid follows the
-integrand's phase over the observation region, not the wavelength alone.
+(:func:`integrand_rate`), :data:`INTEGRAND_SAMPLES` Gauss points per period of the integrand
+and at least :data:`INTEGRAND_FLOOR` along a face, and never closer than the samples per
+wavelength asked for: the integration grid follows the integrand's phase over the observation
+region, not the wavelength alone.
 """
 
 from __future__ import annotations
