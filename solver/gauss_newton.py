@@ -338,8 +338,9 @@ def model_pairs(model: WaveForward, sphere, F: float, D: float) -> float:
 
     spw = model.samples_per_wavelength or DEFAULT_SAMPLES_PER_WAVELENGTH
     points = sphere.points(F).reshape(-1, 3)
-    targets = targets_around(points, (0.0, 0.0, F), (0.0, 0.0, -1.0))  # the model's wave: along -z
-    quadrature = plan(model.paraboloid(D, F), C0 / model.frequency_hz, spw, targets)
+    wave = model.job(sphere, F, D, None).wave()  # the quadrature the model's own radiation uses
+    quadrature = plan(model.paraboloid(D, F), C0 / model.frequency_hz, spw,
+                      targets_around(points, (0.0, 0.0, F), wave.k_hat))
     return quadrature_cost(quadrature, points, model.wavenumber(),
                            (0.0, 0.0, F), getattr(model, "radiator", "direct"),
                            getattr(model, "radiator_tol", 1e-6))[0]

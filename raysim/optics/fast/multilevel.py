@@ -497,14 +497,16 @@ def grid_sums(grids: Iterable[tuple[int, int, NDArray[np.complex128]]], the_plan
     is built (the aggregation's kernels and transforms), so this step's numpy work, mostly on
     one core, overlaps work that keeps both busy; the chunks are still summed one after
     another in order, so the bits are those of a plain loop."""
-    total = np.zeros((len(domain.thetas or ()), 3, len(domain.phis or ())), dtype=np.complex128)
+    basis = series_basis(the_plan.sizes[the_plan.stop], domain)
+    points = tensor_points(domain)
+    total = np.zeros((basis[1].shape[0], 3, basis[2].shape[1]), dtype=np.complex128)
     scratch = Scratch()
     with ThreadPoolExecutor(max_workers=1) as summer:
         pending = None
         for q0, q1, G in grids:
             if pending is not None:
                 pending.result()  # one chunk summed at a time: at most two chunks of grids held
-            pending = summer.submit(_add_series, total, G, q0, q1, the_plan, domain, k, scratch)
+            pending = summer.submit(_add_series, total, G, q0, q1, the_plan, basis, points, k, scratch)
         if pending is not None:
             pending.result()
     R, _, Q = total.shape
@@ -513,14 +515,15 @@ def grid_sums(grids: Iterable[tuple[int, int, NDArray[np.complex128]]], the_plan
 
 
 def _add_series(total: NDArray[np.complex128], G: NDArray[np.complex128], q0: int, q1: int, the_plan: Plan,
-                domain: Domain, k: float, scratch: Scratch) -> None:
-    """Add the series of stop clusters q0 .. q1 - 1 (their grids ``G``) on ``domain``'s tensor
-    grid to ``total`` (R, 3, Q), a few clusters at a time (:data:`CHUNK_BYTES`), in order."""
+                basis: tuple[NDArray[np.int64], NDArray[np.complex128], NDArray[np.complex128]],
+                points: NDArray[np.float64], k: float, scratch: Scratch) -> None:
+    """Add the series of stop clusters q0 .. q1 - 1 (their grids ``G``) on the tensor grid of
+    ``points`` (R * Q, 3) m to ``total`` (R, 3, Q), a few clusters at a time
+    (:data:`CHUNK_BYTES`), in order; ``basis``: :func:`series_basis` of the stop grids."""
     level = the_plan.levels[the_plan.stop]
     n = the_plan.sizes[the_plan.stop]
-    keep, E_theta, E_phi_T = series_basis(n, domain)
+    keep, E_theta, E_phi_T = basis
     R, Q = E_theta.shape[0], E_phi_T.shape[1]
-    points = tensor_points(domain)
     nk = len(keep)
     per = max(1, int(CHUNK_BYTES // (16 * 3 * R * Q * 2)))
     for c0 in range(q0, q1, per):
