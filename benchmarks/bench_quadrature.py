@@ -2,13 +2,14 @@
 uniform rule, both against a finer uniform one.
 
 Run: ``python benchmarks/bench_quadrature.py [--freqs 0.3 1 3] [--points 300] [--fine 2.5]
-[--integrand-samples 5 4]``.
+[--integrand-tol 1e-9 1e-8] [--n-max 24]``.
 
 For each frequency: the PO elements of the ideal dish (D 110 m, F 33 m, 5 m faces, plane wave
 along the axis) radiated by the direct sum to ``--points`` points spread over the 90 x 360 sphere
 grid (R 10 m about the focus), from three quadratures: ``--fine`` samples per wavelength on every
 face (the reference), the uniform rule at 1.5, and the rule on the integrand's rate with each
-``--integrand-samples`` value (Gauss points per period; the targets are the whole grid's ball).
+``--integrand-tol`` value (each face's Gauss error on the integrand's phase, its rules of
+order up to ``--n-max``; the targets are the whole grid's ball).
 Prints the samples and the relative RMS difference of E from the reference.
 """
 
@@ -36,7 +37,8 @@ def main() -> None:
     ap.add_argument("--freqs", type=float, nargs="+", default=[0.3, 1.0, 3.0])
     ap.add_argument("--points", type=int, default=300)
     ap.add_argument("--fine", type=float, default=2.5)
-    ap.add_argument("--integrand-samples", type=float, nargs="+", default=[quadrature.INTEGRAND_SAMPLES])
+    ap.add_argument("--integrand-tol", type=float, nargs="+", default=[quadrature.INTEGRAND_TOL])
+    ap.add_argument("--n-max", type=int, default=quadrature.INTEGRAND_N_MAX)
     args = ap.parse_args()
     dish = paraboloid(110.0, 33.0, 5.0)
     grid = SphereGrid(10.0, 90, 360).points(33.0).reshape(-1, 3)
@@ -59,9 +61,10 @@ def main() -> None:
         print(f"| {f:g} | uniform, {args.fine:g} per wavelength (reference) | {fine.n_samples:,} | | "
               f"{time.perf_counter() - start:.1f} |", flush=True)
         rules = [("uniform, 1.5 per wavelength", quadrature.plan(dish, wave.wavelength, 1.5))]
-        for s in args.integrand_samples:
-            quadrature.INTEGRAND_SAMPLES = s
-            rules.append((f"integrand's rate, {s:g} per period",
+        quadrature.INTEGRAND_N_MAX = args.n_max
+        for tol in args.integrand_tol:
+            quadrature.INTEGRAND_TOL = tol
+            rules.append((f"integrand's rate, {tol:g} per face, orders up to {args.n_max}",
                           quadrature.plan(dish, wave.wavelength, 1.5, targets)))
         for name, q in rules:
             start = time.perf_counter()

@@ -542,10 +542,10 @@ class _WaveContext:
         ideal, deformed = self.sources["ideal"], self.sources["deformed"]
         for sources in (ideal, deformed):
             sources.prime()
-        from raysim.surface.quadrature import INTEGRAND_SAMPLES
+        from raysim.surface.quadrature import INTEGRAND_TOL
 
-        # the quadrature follows the integrand's rate on the job's points (samples per period)
-        engine = {"samples_per_wavelength": float(self.spw), "integrand_samples": INTEGRAND_SAMPLES,
+        # the quadrature follows the integrand's rate on the job's points (each face's Gauss error)
+        engine = {"samples_per_wavelength": float(self.spw), "integrand_tol": INTEGRAND_TOL,
                   "samples": int(deformed.stats.n_samples),
                   "samples_lit": int(deformed.stats.n_lit), "samples_lit_ideal": int(ideal.stats.n_lit)}
         if self.edges:

@@ -106,19 +106,72 @@ def gauss_legendre01(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     return 0.5 * (x + 1.0), 0.5 * w
 
 
-#: Gauss points per period of the integrand's own oscillation where the targets are known
-#: (:func:`plan`). Measured on the paper's dish against 2.5 samples per wavelength everywhere,
-#: E relative RMS: 2.1e-8 at 0.3 GHz and 2.3e-9 at 1 GHz with 5 (1.5 samples per wavelength
-#: everywhere, the rule without targets: 2.8e-9 and 2.5e-10); 4 gave 2.7e-6 and 6.7e-8
-#: (benchmarks/bench_quadrature.py).
-INTEGRAND_SAMPLES = 5.0
+@lru_cache(maxsize=256)
+def gauss_reach(n: int, tol: float) -> float:
+    """The largest half-span omega (rad) up to which the n-point rules of the conical product
+    (Gauss-Legendre, and Gauss-Jacobi with weight 1 + x) integrate exp(j omega x) over [-1, 1]
+    within ``tol`` of the integral's scale (the weights' sum): the phase, in radians, that a
+    Gauss rule of n points can follow across half its interval. Gauss rules are exact to degree
+    2n - 1 and exp(j omega x)'s Legendre coefficients fall off quickly past degree omega, so
+    this grows about as 2n less a margin of order n^(1/3); read here on a grid of omega
+    0.01 rad apart against rules of n + 40 points."""
+    from scipy.special import roots_jacobi
+
+    omega = np.arange(1, int(400 * n) + 1) * 0.01
+    worst = np.zeros_like(omega)
+    for rule in (np.polynomial.legendre.leggauss, lambda m: roots_jacobi(m, 0.0, 1.0)):
+        (x, w), (xr, wr) = rule(n), rule(n + 40)
+        got = np.exp(1j * np.outer(omega, x)) @ w
+        ref = np.exp(1j * np.outer(omega, xr)) @ wr
+        worst = np.maximum(worst, np.abs(got - ref) / np.sum(wr))
+    above = np.flatnonzero(worst > tol)
+    if not len(above):
+        return float(omega[-1])
+    return float(omega[above[0] - 1]) if above[0] else 0.0
+
+
+def integrand_orders(omega: NDArray[np.float64], chirp: NDArray[np.float64] | float = 0.0,
+                     tol: float = 0.0, n_max: int = 0,
+                     floor: int = 0) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """(m, n) per face for an integrand whose phase turns through 2 ``omega`` (rad, (F,)) along
+    the face's longest edge at the rate of a ramp, and bends away from that ramp by up to
+    ``chirp`` (rad, c in c x^2 over the edge's half-length x in [-1, 1]): the m-fold lattice
+    of sub-triangles, each with the conical rule of order n in [``floor``, ``n_max``], with the
+    fewest points m n along the edge such that a sub-triangle's phase, omega / m plus the
+    chirp's own rate at its ends 2 c / m^2, is within :func:`gauss_reach` (n, ``tol``).
+    Defaults: :data:`INTEGRAND_TOL`, :data:`INTEGRAND_N_MAX`, :data:`INTEGRAND_FLOOR`."""
+    tol, n_max, floor = tol or INTEGRAND_TOL, n_max or INTEGRAND_N_MAX, floor or INTEGRAND_FLOOR
+    omega = np.asarray(omega, dtype=np.float64)
+    chirp = np.broadcast_to(np.asarray(chirp, dtype=np.float64), omega.shape)
+    best_m = np.zeros(omega.shape, dtype=np.int64)
+    best_n = np.zeros(omega.shape, dtype=np.int64)
+    for n in range(floor, n_max + 1):
+        reach = gauss_reach(n, tol)
+        # the least m with reach m^2 - omega m - 2 c >= 0
+        m = np.ceil((omega + np.sqrt(omega * omega + 8.0 * reach * chirp)) / (2.0 * reach) - 1e-12)
+        m = np.maximum(1, m).astype(np.int64)
+        better = (best_n == 0) | (m * n < best_m * best_n)
+        best_m, best_n = np.where(better, m, best_m), np.where(better, n, best_n)
+    return best_m, best_n
+
+
+#: the largest error, relative to the integrand's amplitude, of each face's rule where it follows
+#: the integrand (:func:`plan`): Gauss's error on exp(j omega x), omega the half of the phase the
+#: integrand turns through across a sub-triangle (:func:`gauss_reach`)
+INTEGRAND_TOL = 1e-9
+#: the most Gauss points along a sub-triangle's edge where the rule follows the integrand: a
+#: high order needs fewer points per period (about 5 at 10 points, 3.5 at 24, for 1e-9), so
+#: a face's samples are (m n)^2 with n up to this on an m-fold lattice
+INTEGRAND_N_MAX = 24
 #: the least tilt allowance (:func:`slope_allowance`), units of k: 2 mrad of tilt
 MIN_SLOPE_ALLOWANCE = 2.0**-8
 #: the fewest Gauss points along a face's edge where the rule thins it: at three or four points
-#: on a face (a small target ball, a low rate) five per period left 1e-5 of the field from the
-#: faces' non-oscillating variation (the amplitude, the lifted surface's curvature)
-INTEGRAND_FLOOR = 6.0
-#: the most points :func:`surface_tilt` reads the surface's slopes at
+#: on a face (a small target ball, a low rate) the integrand's phase alone left 1e-5 of the
+#: field from the faces' non-oscillating variation (the amplitude, the lifted surface's curvature)
+INTEGRAND_FLOOR = 6
+#: the least curvature allowance (:func:`bend_allowance`), 1/m: a radius of a kilometre
+MIN_BEND_ALLOWANCE = 2.0**-10
+#: the most points :func:`surface_bounds` reads the surface's slopes at
 MAX_TILT_POINTS = 2_000_000
 
 
@@ -143,8 +196,8 @@ def targets_around(points: NDArray[np.float64], centre: tuple[float, float, floa
                    tuple(float(v) for v in np.asarray(k_hat, dtype=np.float64)))  # type: ignore[arg-type]
 
 
-def integrand_rate(reflector: Reflector, targets: Targets,
-                   spacing: float | None = None) -> NDArray[np.float64]:
+def integrand_rate(reflector: Reflector, targets: Targets, spacing: float | None = None,
+                   tilt: float | None = None) -> NDArray[np.float64]:
     """A bound (F,) on each face's integrand phase rate along the surface, in units of k:
     max over the face's corners and centroid of |t(k_i - u0)| + 2 sin(alpha / 2), u0 the
     direction from the point to the targets' centre and alpha = asin(R / distance) the half
@@ -156,8 +209,8 @@ def integrand_rate(reflector: Reflector, targets: Targets,
     surface, a Jacobian's perturbed copy and a loaded mesh's ideal twin get the same samples;
     what tilts the surface away from it (a loaded mesh's departure, the deformation) is added
     as :func:`slope_allowance` of its steepest slope, found on a lattice of each face about
-    ``spacing`` (m) apart (:func:`surface_tilt`), the same on every face. A bare triangulation
-    uses its facets."""
+    ``spacing`` (m) apart (:func:`surface_bounds`; ``tilt``: that slope where the caller has
+    it), the same on every face. A bare triangulation uses its facets."""
     v = reflector.vertices[reflector.faces]  # (F, 3, 3)
     pts = np.concatenate([v, v.mean(axis=1, keepdims=True)], axis=1)  # corners and centroid
     allowance = 0.0
@@ -166,7 +219,7 @@ def integrand_rate(reflector: Reflector, targets: Targets,
         x, y, F = pts[..., 0], pts[..., 1], float(surface.F)
         pts = np.stack([x, y, (x * x + y * y) / (4.0 * F)], axis=-1)
         normal = np.stack([-x / (2.0 * F), -y / (2.0 * F), np.ones_like(x)], axis=-1)
-        allowance = slope_allowance(surface_tilt(reflector, spacing))
+        allowance = slope_allowance(surface_bounds(reflector, spacing)[0] if tilt is None else tilt)
     else:
         cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
         normal = np.broadcast_to(cross[:, None, :], pts.shape)
@@ -182,15 +235,17 @@ def integrand_rate(reflector: Reflector, targets: Targets,
     return np.max(tangential + spread, axis=1) + allowance
 
 
-def surface_tilt(reflector: Reflector, spacing: float | None = None) -> float:
-    """The steepest slope (dimensionless) of what the smooth surface adds to its paraboloid (a
-    loaded mesh's departure and the deformation), on a barycentric lattice of every face
-    about ``spacing`` (m) apart (coarser where that would take more than
-    :data:`MAX_TILT_POINTS` points; at least the corners, edge midpoints and centroid), so
-    that a feature between a face's corners is seen; 0 for a bare paraboloid."""
+def surface_bounds(reflector: Reflector, spacing: float | None = None) -> tuple[float, float]:
+    """(tilt, bend): the steepest slope (dimensionless) and the largest curvature (1/m, the
+    Frobenius norm of the Hessian, read by differences of the slopes a millimetre apart) of
+    what the smooth surface adds to its paraboloid (a loaded mesh's departure and the
+    deformation), on a barycentric lattice of every face about ``spacing`` (m) apart (coarser
+    where that would take more than :data:`MAX_TILT_POINTS` points; at least the corners, edge
+    midpoints and centroid), so that a feature between a face's corners is seen; (0, 0) for a
+    bare paraboloid."""
     surface = reflector.surface
     if surface is None or (surface.departure is None and isinstance(surface.deformation, NoDeformation)):
-        return 0.0
+        return 0.0, 0.0
     v = reflector.vertices[reflector.faces][..., :2]  # (F, 3, 2)
     length = np.linalg.norm(v[:, [1, 2, 0]] - v, axis=2).max(axis=1)
     a, b = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
@@ -198,7 +253,16 @@ def surface_tilt(reflector: Reflector, spacing: float | None = None) -> float:
     step = max(float(spacing or 0.0), math.sqrt(2.0 * area / MAX_TILT_POINTS), 1e-300)
     order = np.clip(np.ceil(length / step), 2, 64).astype(np.int64)
     panels = reflector.surface_panel(np.arange(len(v)))
-    steepest = 0.0
+
+    def slopes(x: NDArray, y: NDArray, panel: NDArray | None) -> tuple[NDArray, NDArray]:
+        gx, gy = surface.deformation.gradient(x, y, surface._deformation_panel(panel))
+        if surface.departure is not None:
+            dx, dy = surface.departure.gradient(x, y, panel)
+            gx, gy = gx + dx, gy + dy
+        return gx, gy
+
+    h = 1e-3  # m: the slopes' differences (features narrower than centimetres are not surfaces)
+    steepest = bend = 0.0
     for k in np.unique(order):
         faces = np.flatnonzero(order == k)
         i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
@@ -210,12 +274,15 @@ def surface_tilt(reflector: Reflector, spacing: float | None = None) -> float:
             sel = faces[f0:f0 + per]
             xy = np.einsum("pk,fkc->fpc", bary, v[sel])  # (f, p, 2)
             panel = None if panels is None else np.repeat(panels[sel][:, None], len(bary), axis=1)
-            gx, gy = surface.deformation.gradient(xy[..., 0], xy[..., 1], surface._deformation_panel(panel))
-            if surface.departure is not None:
-                dx, dy = surface.departure.gradient(xy[..., 0], xy[..., 1], panel)
-                gx, gy = gx + dx, gy + dy
+            x, y = xy[..., 0], xy[..., 1]
+            gx, gy = slopes(x, y, panel)
             steepest = max(steepest, float(np.max(np.hypot(gx, gy), initial=0.0)))
-    return steepest
+            # forward differences, on the same panel's formula (a panel's edge is not crossed)
+            ax, ay = slopes(x + h, y, panel)
+            bx, by = slopes(x, y + h, panel)
+            hessian = np.sqrt((ax - gx) ** 2 + (ay - gy) ** 2 + (bx - gx) ** 2 + (by - gy) ** 2) / h
+            bend = max(bend, float(np.max(hessian, initial=0.0)))
+    return steepest, bend
 
 
 def slope_allowance(tilt: float) -> float:
@@ -225,6 +292,13 @@ def slope_allowance(tilt: float) -> float:
     :data:`MIN_SLOPE_ALLOWANCE` (so deformations of millimetres over metres, the ones an
     inversion refines, all get the same samples)."""
     return max(MIN_SLOPE_ALLOWANCE, 2.0 ** math.ceil(math.log2(max(2.0 * tilt, 1e-300))))
+
+
+def bend_allowance(bend: float) -> float:
+    """The curvature (1/m) the rule allows for what the smooth surface adds to its paraboloid,
+    ``bend`` (:func:`surface_bounds`) rounded up to a power of two, at least
+    :data:`MIN_BEND_ALLOWANCE` (the same samples for every surface of millimetres over metres)."""
+    return max(MIN_BEND_ALLOWANCE, 2.0 ** math.ceil(math.log2(max(bend, 1e-300))))
 
 
 @dataclass(frozen=True)
@@ -320,6 +394,7 @@ class FaceQuadrature:
     n_max: int = 10
     curve_rim: bool = True
     face_spacing: NDArray[np.float64] | None = None
+    face_orders: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None
 
     @cached_property
     def spacings(self) -> NDArray[np.float64]:
@@ -348,7 +423,10 @@ class FaceQuadrature:
 
     @cached_property
     def orders(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-        """(m, n) per face: m-fold lattice of sub-triangles, conical rule of order n on each."""
+        """(m, n) per face: m-fold lattice of sub-triangles, conical rule of order n on each
+        (``face_orders`` where given, else from each face's spacing)."""
+        if self.face_orders is not None:
+            return self.face_orders
         return self.orders_for(self.edge_length, self.spacings)
 
     def orders_for(self, length: NDArray[np.float64], spacing: NDArray[np.float64] | float | None = None
@@ -411,10 +489,11 @@ class FaceQuadrature:
         refl = self.reflector
         parts: list[Samples] = []
         m_all, n_all = self.orders
-        key = m_all[faces] * (self.n_max + 1) + n_all[faces]
+        base = int(max(self.n_max, int(n_all.max(initial=0)))) + 1
+        key = m_all[faces] * base + n_all[faces]
         for value in np.unique(key):
             sel = faces[key == value]
-            rule = lattice_rule(conical_rule(int(value % (self.n_max + 1))), int(value // (self.n_max + 1)))
+            rule = lattice_rule(conical_rule(int(value % base)), int(value // base))
             corners = refl.vertices[refl.faces[sel]]  # (F, 3, 3)
             facet = np.einsum("pk,fkc->fpc", rule.bary, corners).reshape(-1, 3)
             face = np.repeat(sel, rule.size)
@@ -519,17 +598,28 @@ def plan(reflector: Reflector, wavelength: float, samples_per_wavelength: float,
          targets: Targets | None = None) -> FaceQuadrature:
     """The quadrature plan for ``reflector`` at ``wavelength`` (m): about
     ``samples_per_wavelength`` Gauss points per wavelength along every face edge; with
-    ``targets``, fewer where the integrand oscillates slower than that: each face
-    :data:`INTEGRAND_SAMPLES` points per period of its own rate (:func:`integrand_rate`), never
-    more than ``samples_per_wavelength`` per wavelength."""
+    ``targets``, fewer where the integrand oscillates slower than that: each face the fewest
+    points along its edge whose Gauss rules follow the phase its own rate
+    (:func:`integrand_rate`) turns through across it within :data:`INTEGRAND_TOL`
+    (:func:`integrand_orders`), at least :data:`INTEGRAND_FLOOR`, and never more than the
+    uniform rule's."""
     if not samples_per_wavelength > 0:
         raise RaysimError(f"samples per wavelength must be > 0, got {samples_per_wavelength}")
     spacing = wavelength / samples_per_wavelength
-    if targets is None:
-        return FaceQuadrature(reflector, spacing)
     quadrature = FaceQuadrature(reflector, spacing)
-    # along a face's longest edge L: INTEGRAND_SAMPLES points per period of its rate, at least a floor
-    periods = quadrature.edge_length * integrand_rate(reflector, targets, spacing) / wavelength
-    points = np.maximum(INTEGRAND_SAMPLES * periods, INTEGRAND_FLOOR)
-    face_spacing = np.maximum(quadrature.edge_length / points, spacing)
-    return FaceQuadrature(reflector, spacing, face_spacing=face_spacing)
+    if targets is None:
+        return quadrature
+    length = quadrature.edge_length
+    tilt, bend = surface_bounds(reflector, spacing)
+    k = 2.0 * np.pi / wavelength
+    # half the phase the integrand turns through along the face's longest edge, and how far
+    # the surface's added curvature bends it from a ramp there: the reflected path changes by
+    # up to twice the height, so the phase's curvature by up to 2 k bend, c = k bend (L / 2)^2
+    omega = 0.5 * k * length * integrand_rate(reflector, targets, spacing, tilt)
+    chirp = k * bend_allowance(bend) * (0.5 * length) ** 2 if reflector.surface is not None else 0.0
+    m, n = integrand_orders(omega, chirp)
+    m_u, n_u = quadrature.orders
+    uniform = m_u * n_u <= m * n
+    m, n = np.where(uniform, m_u, m), np.where(uniform, n_u, n)
+    face_spacing = np.maximum(length / (m * n), spacing)
+    return FaceQuadrature(reflector, spacing, face_spacing=face_spacing, face_orders=(m, n))
