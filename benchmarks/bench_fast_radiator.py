@@ -1,13 +1,14 @@
 """Fast (multilevel) radiator against the direct sum on the paper's dish (D 110 m, F 33 m, R 10 m).
 
 Run: ``python benchmarks/bench_fast_radiator.py [--freqs 0.1 0.3 1] [--grid 90 360] [--ptd]
-[--tol 1e-6] [--ref-points N] [--curve]``. For each frequency: the PO elements of the ideal
-dish (default sampling) radiated to the sphere grid by the fast radiator (tolerance ``--tol``)
-and by the direct sum, wall time of each (kernels warmed up first), the relative RMS error
-of E, and the process's peak memory so far. Beyond :data:`FULL_PAIRS` element-point pairs the
-direct reference runs on ``--ref-points`` points spread over the grid only (its time then
-extrapolated to the whole grid, marked ``~``); ``--ref-points 0`` makes it cover every point
-whatever the cost.
+[--tol 1e-6] [--ref-points N] [--curve] [--integrand]``. For each frequency: the PO elements of
+the ideal dish (default sampling; ``--integrand``: the quadrature on the integrand's rate for
+the grid's points, as ``raysim simulate`` makes them) radiated to the sphere grid by the fast
+radiator (tolerance ``--tol``) and by the direct sum, wall time of each (kernels warmed up
+first), the relative RMS error of E, and the process's peak memory so far. Beyond
+:data:`FULL_PAIRS` element-point pairs the direct reference runs on ``--ref-points`` points
+spread over the grid only (its time then extrapolated to the whole grid, marked ``~``);
+``--ref-points 0`` makes it cover every point whatever the cost.
 ``--curve``: relative RMS error against tolerance at the first frequency (multilevel sum forced,
 even where the direct sum would be chosen).
 """
@@ -27,7 +28,7 @@ REF_CHUNK = 4_000_000  # elements handed to the direct reference at once (0.3 GB
 sys.path.insert(0, str(ROOT))
 
 
-def elements(freq_ghz: float, ptd: bool):
+def elements(freq_ghz: float, ptd: bool, targets=None):
     from raysim.optics import po
     from raysim.optics import ptd as ptd_mod
     from raysim.surface.mesh import paraboloid
@@ -35,7 +36,8 @@ def elements(freq_ghz: float, ptd: bool):
 
     wave = po.Illumination.plane_wave(freq_ghz * 1e9, (0, 0, -1), (1, 0, 0))
     dish = paraboloid(110.0, 33.0, 5.0)
-    quad = plan(dish, wave.wavelength, po.DEFAULT_SAMPLES_PER_WAVELENGTH)
+    quad = plan(dish, wave.wavelength, po.DEFAULT_SAMPLES_PER_WAVELENGTH,
+                None if targets is None else targets(wave))
     # the chunks as they come (no concatenated copy: at 12 GHz the elements are 8 GB)
     # made as they are read: at 12 GHz the elements are 8 GB, more than a batch
     out = {"electric": (chunk.numpy() for chunk in po.po_elements(dish, wave, quad))}
@@ -49,15 +51,17 @@ def elements(freq_ghz: float, ptd: bool):
 
 
 def run(freq: float, grid_shape: tuple[int, int], tol: float, ref_points: int, ptd: bool,
-        force: bool = False) -> dict:
+        force: bool = False, integrand: bool = False) -> dict:
     from raysim.maps.sphere import SphereGrid
     from raysim.optics.fast.radiator import FastRadiator
     from raysim.optics.radiator import Radiator
+    from raysim.surface.quadrature import targets_around
 
-    start = time.perf_counter()
-    wave, srcs, n_samples = elements(freq, ptd)
-    t_elements = time.perf_counter() - start
     pts = SphereGrid(10.0, *grid_shape).points(33.0).reshape(-1, 3)
+    start = time.perf_counter()
+    wave, srcs, n_samples = elements(freq, ptd, (lambda w: targets_around(pts, (0.0, 0.0, 33.0), w.k_hat))
+                                     if integrand else None)
+    t_elements = time.perf_counter() - start
     full = n_samples * len(pts) <= FULL_PAIRS or ref_points <= 0
     idx = np.arange(len(pts)) if full else np.linspace(0, len(pts) - 1, ref_points).astype(int)
     fast = FastRadiator(pts, wave.k, tol=tol, centre=(0, 0, 33.0), force=force)
@@ -112,13 +116,14 @@ def main() -> None:
     ap.add_argument("--ref-points", type=int, default=400)
     ap.add_argument("--ptd", action="store_true")
     ap.add_argument("--curve", action="store_true")
+    ap.add_argument("--integrand", action="store_true")
     args = ap.parse_args()
     run(0.1, (6, 12), args.tol, 50, args.ptd)  # warm-up: compile or load the kernels
     print("| f (GHz) | elements | points | fast (s) | direct (s) | rel. RMS error | peak memory (GB) "
           "| plan |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for f in args.freqs:
-        r = run(f, tuple(args.grid), args.tol, args.ref_points, args.ptd)
+        r = run(f, tuple(args.grid), args.tol, args.ref_points, args.ptd, integrand=args.integrand)
         mark = "" if r["direct_full"] else "~"
         plan = "; ".join(f"{k}: {v}" for k, v in r["method"].items())
         print(f"| {f:g} | {r['elements']:,} | {r['points']:,} | {r['t_fast']:.1f} "
@@ -126,7 +131,8 @@ def main() -> None:
     if args.curve:
         print("\n| tol | rel. RMS error | fast (s) | plan |\n| --- | --- | --- | --- |")
         for tol in (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8):
-            r = run(args.freqs[0], tuple(args.grid), tol, args.ref_points, args.ptd, force=True)
+            r = run(args.freqs[0], tuple(args.grid), tol, args.ref_points, args.ptd, force=True,
+                    integrand=args.integrand)
             plan = "; ".join(r["method"].values())
             print(f"| {tol:.0e} | {r['err']:.1e} | {r['t_fast']:.1f} | {plan} |", flush=True)
 

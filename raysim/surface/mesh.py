@@ -67,13 +67,24 @@ class ParaboloidSurface:
         """(dz/dx, dz/dy) of the surface, dimensionless."""
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
-        if self.departure is None:
-            gx, gy = self.deformation.gradient(x, y, panel)
-        else:
-            dx, dy = self.departure.gradient(x, y, panel)
-            ex, ey = self.deformation.gradient(x, y, self._deformation_panel(panel))
-            gx, gy = dx + ex, dy + ey
+        gx, gy = self.added_slope(x, y, panel)
         return x / (2.0 * self.F) + gx, y / (2.0 * self.F) + gy
+
+    def added(self, x: ArrayLike, y: ArrayLike, panel: ArrayLike | None = None) -> NDArray:
+        """What the surface adds to its paraboloid at (x, y) (m, along z): the departure and the
+        deformation."""
+        if self.departure is None:
+            return self.deformation(x, y, panel)
+        return self.departure(x, y, panel) + self.deformation(x, y, self._deformation_panel(panel))
+
+    def added_slope(self, x: ArrayLike, y: ArrayLike,
+                    panel: ArrayLike | None = None) -> tuple[NDArray, NDArray]:
+        """The slope (d/dx, d/dy, dimensionless) of what the surface adds to its paraboloid."""
+        if self.departure is None:
+            return self.deformation.gradient(x, y, panel)
+        dx, dy = self.departure.gradient(x, y, panel)
+        ex, ey = self.deformation.gradient(x, y, self._deformation_panel(panel))
+        return dx + ex, dy + ey
 
     def normal(self, x: ArrayLike, y: ArrayLike, panel: ArrayLike | None = None) -> NDArray:
         """Unit normals pointing into the dish (towards +z), shape (..., 3)."""

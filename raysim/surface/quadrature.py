@@ -130,35 +130,101 @@ def gauss_reach(n: int, tol: float) -> float:
     return float(omega[above[0] - 1]) if above[0] else 0.0
 
 
-def integrand_orders(omega: NDArray[np.float64], chirp: NDArray[np.float64] | float = 0.0,
-                     tol: float = 0.0, n_max: int = 0,
+def integrand_orders(omega: NDArray[np.float64], tol: float = 0.0, n_max: int = 0,
                      floor: int = 0) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """(m, n) per face for an integrand whose phase turns through 2 ``omega`` (rad, (F,)) along
-    the face's longest edge at the rate of a ramp, and bends away from that ramp by up to
-    ``chirp`` (rad, c in c x^2 over the edge's half-length x in [-1, 1]): the m-fold lattice
-    of sub-triangles, each with the conical rule of order n in [``floor``, ``n_max``], with the
-    fewest points m n along the edge such that a sub-triangle's phase, omega / m plus the
-    chirp's own rate at its ends 2 c / m^2, is within :func:`gauss_reach` (n, ``tol``).
-    Defaults: :data:`INTEGRAND_TOL`, :data:`INTEGRAND_N_MAX`, :data:`INTEGRAND_FLOOR`."""
+    """(m, n) per face for an integrand whose phase turns through 2 ``omega`` (rad, (F,))
+    along the face's longest edge: the m-fold lattice of sub-triangles, each with the conical
+    rule of order n in [``floor``, ``n_max``], with the fewest points m n along the edge
+    such that omega / m is within :func:`gauss_reach` (n, ``tol``). Defaults:
+    :data:`INTEGRAND_TOL`, :data:`INTEGRAND_N_MAX`, :data:`INTEGRAND_FLOOR`."""
     tol, n_max, floor = tol or INTEGRAND_TOL, n_max or INTEGRAND_N_MAX, floor or INTEGRAND_FLOOR
     omega = np.asarray(omega, dtype=np.float64)
-    chirp = np.broadcast_to(np.asarray(chirp, dtype=np.float64), omega.shape)
+    if not np.all(np.isfinite(omega)) or np.any(omega < 0):
+        raise RaysimError("integrand_orders: the phase per face must be finite and >= 0")
     best_m = np.zeros(omega.shape, dtype=np.int64)
     best_n = np.zeros(omega.shape, dtype=np.int64)
     for n in range(floor, n_max + 1):
-        reach = gauss_reach(n, tol)
-        # the least m with reach m^2 - omega m - 2 c >= 0
-        m = np.ceil((omega + np.sqrt(omega * omega + 8.0 * reach * chirp)) / (2.0 * reach) - 1e-12)
-        m = np.maximum(1, m).astype(np.int64)
+        m = np.maximum(1, np.ceil(omega / gauss_reach(n, tol))).astype(np.int64)
         better = (best_n == 0) | (m * n < best_m * best_n)
         best_m, best_n = np.where(better, m, best_m), np.where(better, n, best_n)
     return best_m, best_n
+
+
+def surface_orders(reflector: Reflector, m: NDArray[np.int64], n: NDArray[np.int64],
+                   rate: NDArray[np.float64], k: float, cap: NDArray[np.int64]) -> NDArray[np.int64]:
+    """The lattice folds m (F,) raised, face by face, until each face's rule (m, n) integrates
+    what the surface adds to its paraboloid (the deformation, a loaded mesh's departure)
+    within :data:`SURFACE_TOL`: the perturbation exp(j 2 k d) - 1 of the phase (d the added
+    height, the reflected path changing by up to twice it), times a ramp of the face's rate
+    ``rate`` (units of k) along x, along y and none, integrated with m and with 2m (the face's
+    area 1); where the two differ by more, m doubles and the face is read again, until its
+    points along an edge reach ``cap`` (the uniform rule's). Slopes and curvatures scale with
+    a feature's height; what a rule must resolve scales with its width, so a narrow feature
+    of micrometres is seen here and not by :func:`slope_allowance`. A surface that adds
+    nothing keeps ``m``."""
+    surface = reflector.surface
+    if surface is None or (surface.departure is None and isinstance(surface.deformation, NoDeformation)):
+        return m
+    corners = reflector.vertices[reflector.faces][..., :2]  # (F, 3, 2)
+    panels = reflector.surface_panel(np.arange(len(corners)))
+    m = np.asarray(m, dtype=np.int64).copy()
+    todo = np.flatnonzero(m * n < cap)
+    for _ in range(SURFACE_DOUBLINGS):
+        if not len(todo):
+            break
+        error = np.zeros(len(todo))
+        key = m[todo] * (int(n.max()) + 1) + n[todo]
+        for value in np.unique(key):
+            group = np.flatnonzero(key == value)
+            mi, ni = divmod(int(value), int(n.max()) + 1)
+            coarse, fine = (lattice_rule(conical_rule(ni), f) for f in (mi, 2 * mi))
+            per = max(1, SURFACE_POINTS // fine.size)
+            for g0 in range(0, len(group), per):
+                part = group[g0:g0 + per]
+                faces = todo[part]
+                panel = None if panels is None else panels[faces]
+                error[part] = _perturbation_gap(surface, corners[faces], panel, rate[faces] * k, 2.0 * k,
+                                                coarse, fine)
+        todo = todo[error > SURFACE_TOL]
+        m[todo] *= 2
+        todo = todo[m[todo] * n[todo] < cap[todo]]
+    return m
+
+
+def _perturbation_gap(surface, corners: NDArray[np.float64], panels: NDArray[np.int64] | None,
+                      ramp: NDArray[np.float64], scale: float, coarse: TriangleRule,
+                      fine: TriangleRule) -> NDArray[np.float64]:
+    """For faces with ``corners`` (f, 3, 2) m: the largest difference, over ramps of
+    ``ramp`` (f,) rad/m along x, y and none, between the ``coarse`` and ``fine`` rules'
+    integrals of (exp(j ``scale`` d) - 1) times the ramp, as a share of the face's area."""
+    centre = corners.mean(axis=1)  # (f, 2)
+    out = np.zeros(len(corners))
+    results = []
+    for rule in (coarse, fine):
+        xy = np.einsum("pk,fkc->fpc", rule.bary, corners)  # (f, p, 2)
+        panel = None if panels is None else np.repeat(panels[:, None], rule.size, axis=1)
+        d = surface.added(xy[..., 0], xy[..., 1], panel)
+        bump = np.expm1(1j * scale * d) * rule.weights  # (f, p)
+        local = xy - centre[:, None, :]
+        sums = [bump.sum(axis=1)]
+        for axis in (0, 1):
+            sums.append(np.einsum("fp,fp->f", bump, np.exp(1j * ramp[:, None] * local[..., axis])))
+        results.append(sums)
+    for a, b in zip(*results, strict=True):
+        out = np.maximum(out, np.abs(a - b))
+    return out
 
 
 #: the largest error, relative to the integrand's amplitude, of each face's rule where it follows
 #: the integrand (:func:`plan`): Gauss's error on exp(j omega x), omega the half of the phase the
 #: integrand turns through across a sub-triangle (:func:`gauss_reach`)
 INTEGRAND_TOL = 1e-9
+#: the largest error, as a share of a face's area, of each face's rule on what the surface adds
+#: to its paraboloid (:func:`surface_orders`)
+SURFACE_TOL = 1e-8
+#: the times a face's lattice is doubled at most for it, and the points read at once
+SURFACE_DOUBLINGS = 6
+SURFACE_POINTS = 2_000_000
 #: the most Gauss points along a sub-triangle's edge where the rule follows the integrand: a
 #: high order needs fewer points per period (about 5 at 10 points, 3.5 at 24, for 1e-9), so
 #: a face's samples are (m n)^2 with n up to this on an m-fold lattice
@@ -169,9 +235,7 @@ MIN_SLOPE_ALLOWANCE = 2.0**-8
 #: on a face (a small target ball, a low rate) the integrand's phase alone left 1e-5 of the
 #: field from the faces' non-oscillating variation (the amplitude, the lifted surface's curvature)
 INTEGRAND_FLOOR = 6
-#: the least curvature allowance (:func:`bend_allowance`), 1/m: a radius of a kilometre
-MIN_BEND_ALLOWANCE = 2.0**-10
-#: the most points :func:`surface_bounds` reads the surface's slopes at
+#: the most points :func:`surface_tilt` reads the surface's slopes at
 MAX_TILT_POINTS = 2_000_000
 
 
@@ -209,7 +273,7 @@ def integrand_rate(reflector: Reflector, targets: Targets, spacing: float | None
     surface, a Jacobian's perturbed copy and a loaded mesh's ideal twin get the same samples;
     what tilts the surface away from it (a loaded mesh's departure, the deformation) is added
     as :func:`slope_allowance` of its steepest slope, found on a lattice of each face about
-    ``spacing`` (m) apart (:func:`surface_bounds`; ``tilt``: that slope where the caller has
+    ``spacing`` (m) apart (:func:`surface_tilt`; ``tilt``: that slope where the caller has
     it), the same on every face. A bare triangulation uses its facets."""
     v = reflector.vertices[reflector.faces]  # (F, 3, 3)
     pts = np.concatenate([v, v.mean(axis=1, keepdims=True)], axis=1)  # corners and centroid
@@ -219,7 +283,7 @@ def integrand_rate(reflector: Reflector, targets: Targets, spacing: float | None
         x, y, F = pts[..., 0], pts[..., 1], float(surface.F)
         pts = np.stack([x, y, (x * x + y * y) / (4.0 * F)], axis=-1)
         normal = np.stack([-x / (2.0 * F), -y / (2.0 * F), np.ones_like(x)], axis=-1)
-        allowance = slope_allowance(surface_bounds(reflector, spacing)[0] if tilt is None else tilt)
+        allowance = slope_allowance(surface_tilt(reflector, spacing) if tilt is None else tilt)
     else:
         cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
         normal = np.broadcast_to(cross[:, None, :], pts.shape)
@@ -235,17 +299,15 @@ def integrand_rate(reflector: Reflector, targets: Targets, spacing: float | None
     return np.max(tangential + spread, axis=1) + allowance
 
 
-def surface_bounds(reflector: Reflector, spacing: float | None = None) -> tuple[float, float]:
-    """(tilt, bend): the steepest slope (dimensionless) and the largest curvature (1/m, the
-    Frobenius norm of the Hessian, read by differences of the slopes a millimetre apart) of
-    what the smooth surface adds to its paraboloid (a loaded mesh's departure and the
-    deformation), on a barycentric lattice of every face about ``spacing`` (m) apart (coarser
-    where that would take more than :data:`MAX_TILT_POINTS` points; at least the corners, edge
-    midpoints and centroid), so that a feature between a face's corners is seen; (0, 0) for a
-    bare paraboloid."""
+def surface_tilt(reflector: Reflector, spacing: float | None = None) -> float:
+    """The steepest slope (dimensionless) of what the smooth surface adds to its paraboloid (a
+    loaded mesh's departure and the deformation), on a barycentric lattice of every face
+    about ``spacing`` (m) apart (coarser where that would take more than
+    :data:`MAX_TILT_POINTS` points; at least the corners, edge midpoints and centroid), so
+    that a feature between a face's corners is seen; 0 for a bare paraboloid."""
     surface = reflector.surface
     if surface is None or (surface.departure is None and isinstance(surface.deformation, NoDeformation)):
-        return 0.0, 0.0
+        return 0.0
     v = reflector.vertices[reflector.faces][..., :2]  # (F, 3, 2)
     length = np.linalg.norm(v[:, [1, 2, 0]] - v, axis=2).max(axis=1)
     a, b = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
@@ -253,16 +315,7 @@ def surface_bounds(reflector: Reflector, spacing: float | None = None) -> tuple[
     step = max(float(spacing or 0.0), math.sqrt(2.0 * area / MAX_TILT_POINTS), 1e-300)
     order = np.clip(np.ceil(length / step), 2, 64).astype(np.int64)
     panels = reflector.surface_panel(np.arange(len(v)))
-
-    def slopes(x: NDArray, y: NDArray, panel: NDArray | None) -> tuple[NDArray, NDArray]:
-        gx, gy = surface.deformation.gradient(x, y, surface._deformation_panel(panel))
-        if surface.departure is not None:
-            dx, dy = surface.departure.gradient(x, y, panel)
-            gx, gy = gx + dx, gy + dy
-        return gx, gy
-
-    h = 1e-3  # m: the slopes' differences (features narrower than centimetres are not surfaces)
-    steepest = bend = 0.0
+    steepest = 0.0
     for k in np.unique(order):
         faces = np.flatnonzero(order == k)
         i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
@@ -274,15 +327,9 @@ def surface_bounds(reflector: Reflector, spacing: float | None = None) -> tuple[
             sel = faces[f0:f0 + per]
             xy = np.einsum("pk,fkc->fpc", bary, v[sel])  # (f, p, 2)
             panel = None if panels is None else np.repeat(panels[sel][:, None], len(bary), axis=1)
-            x, y = xy[..., 0], xy[..., 1]
-            gx, gy = slopes(x, y, panel)
+            gx, gy = surface.added_slope(xy[..., 0], xy[..., 1], panel)
             steepest = max(steepest, float(np.max(np.hypot(gx, gy), initial=0.0)))
-            # forward differences, on the same panel's formula (a panel's edge is not crossed)
-            ax, ay = slopes(x + h, y, panel)
-            bx, by = slopes(x, y + h, panel)
-            hessian = np.sqrt((ax - gx) ** 2 + (ay - gy) ** 2 + (bx - gx) ** 2 + (by - gy) ** 2) / h
-            bend = max(bend, float(np.max(hessian, initial=0.0)))
-    return steepest, bend
+    return steepest
 
 
 def slope_allowance(tilt: float) -> float:
@@ -293,12 +340,6 @@ def slope_allowance(tilt: float) -> float:
     inversion refines, all get the same samples)."""
     return max(MIN_SLOPE_ALLOWANCE, 2.0 ** math.ceil(math.log2(max(2.0 * tilt, 1e-300))))
 
-
-def bend_allowance(bend: float) -> float:
-    """The curvature (1/m) the rule allows for what the smooth surface adds to its paraboloid,
-    ``bend`` (:func:`surface_bounds`) rounded up to a power of two, at least
-    :data:`MIN_BEND_ALLOWANCE` (the same samples for every surface of millimetres over metres)."""
-    return max(MIN_BEND_ALLOWANCE, 2.0 ** math.ceil(math.log2(max(bend, 1e-300))))
 
 
 @dataclass(frozen=True)
@@ -610,15 +651,12 @@ def plan(reflector: Reflector, wavelength: float, samples_per_wavelength: float,
     if targets is None:
         return quadrature
     length = quadrature.edge_length
-    tilt, bend = surface_bounds(reflector, spacing)
     k = 2.0 * np.pi / wavelength
-    # half the phase the integrand turns through along the face's longest edge, and how far
-    # the surface's added curvature bends it from a ramp there: the reflected path changes by
-    # up to twice the height, so the phase's curvature by up to 2 k bend, c = k bend (L / 2)^2
-    omega = 0.5 * k * length * integrand_rate(reflector, targets, spacing, tilt)
-    chirp = k * bend_allowance(bend) * (0.5 * length) ** 2 if reflector.surface is not None else 0.0
-    m, n = integrand_orders(omega, chirp)
+    rate = integrand_rate(reflector, targets, spacing)
+    # half the phase the integrand turns through along the face's longest edge
+    m, n = integrand_orders(0.5 * k * length * rate)
     m_u, n_u = quadrature.orders
+    m = surface_orders(reflector, m, n, rate, k, m_u * n_u)
     uniform = m_u * n_u <= m * n
     m, n = np.where(uniform, m_u, m), np.where(uniform, n_u, n)
     face_spacing = np.maximum(length / (m * n), spacing)
