@@ -350,17 +350,22 @@ def gap_width(dish: Dish) -> float:
 # --- the wave engine ------------------------------------------------------------------------
 def wave_cost(dish: Dish, frequency_hz: float, radiator: str = "fast") -> tuple[float, float, int]:
     """(cost, direct, samples): PO's sums at ``frequency_hz`` for the ideal and the deformed
-    reflector (the same sample count) to the sphere's points, as ``radiator`` runs them and as
-    the direct sum would, in direct pair evaluations, and the samples of one reflector."""
+    reflector (the ideal's quadrature for both, on the integrand's rate for the sphere's
+    points, as ``simulate`` makes it) to the sphere's points, as ``radiator`` runs them and as
+    the direct sum would, in direct pair evaluations, and the samples of one reflector as
+    ``simulate``'s memory cap counts them (1.5 per wavelength on every face)."""
     from raysim.optics.fast.radiator import quadrature_cost
     from raysim.optics.po import DEFAULT_SAMPLES_PER_WAVELENGTH
     from raysim.simulate import max_po_samples
-    from raysim.surface.quadrature import plan
+    from raysim.surface.quadrature import plan, targets_around
 
     wavelength = 299_792_458.0 / frequency_hz
-    quad = plan(_wave_ideal(dish), wavelength, DEFAULT_SAMPLES_PER_WAVELENGTH)
-    n = quad.n_samples
+    ideal = _wave_ideal(dish)
+    n = plan(ideal, wavelength, DEFAULT_SAMPLES_PER_WAVELENGTH).n_samples
     points = dish.wave.sphere.points(dish.F).reshape(-1, 3)
+    k_hat = np.asarray(dish.wave.source.direction, dtype=np.float64)
+    targets = targets_around(points, (0.0, 0.0, dish.F), k_hat / np.linalg.norm(k_hat))
+    quad = plan(ideal, wavelength, DEFAULT_SAMPLES_PER_WAVELENGTH, targets)
     cost, direct = quadrature_cost(quad, points, 2.0 * math.pi / wavelength, (0.0, 0.0, dish.F),
                                    "direct" if n > max_po_samples() else radiator)
     return 2.0 * cost, 2.0 * direct, n

@@ -30,11 +30,13 @@ projection onto the surface's tangent plane. On a reflector that focuses the wav
 targets this is far below k: on a paraboloid lit along its axis, t(k_i) = t(u_F), u_F pointing
 at the focus (the law of reflection), so for targets on a sphere of radius R about the focus the
 rate is at most k R / |s - F| (0.18 k to 0.3 k on the paper's dish). Given the targets
-(:class:`Targets`), :func:`plan` spaces each face's samples for its own rate
-(:func:`integrand_rate`), :data:`INTEGRAND_SAMPLES` Gauss points per period of the integrand
-and at least :data:`INTEGRAND_FLOOR` along a face, and never closer than the samples per
-wavelength asked for: the integration grid follows the integrand's phase over the observation
-region, not the wavelength alone.
+(:class:`Targets`), :func:`plan` gives each face the fewest points whose Gauss rules follow
+the phase its own rate (:func:`integrand_rate`) turns through across it
+(:func:`integrand_orders`: high-order rules on a lattice of sub-triangles, each within
+:func:`gauss_reach`), at least :data:`INTEGRAND_FLOOR` along a face, then reads what the surface
+adds to its paraboloid face by face (:func:`surface_orders`), and never takes more points than
+the samples per wavelength asked for: the integration grid follows the integrand's phase over
+the observation region, not the wavelength alone.
 """
 
 from __future__ import annotations
@@ -226,8 +228,8 @@ SURFACE_TOL = 1e-8
 SURFACE_DOUBLINGS = 6
 SURFACE_POINTS = 2_000_000
 #: the most Gauss points along a sub-triangle's edge where the rule follows the integrand: a
-#: high order needs fewer points per period (about 5 at 10 points, 3.5 at 24, for 1e-9), so
-#: a face's samples are (m n)^2 with n up to this on an m-fold lattice
+#: high order needs fewer points a period of the integrand (about 5 at 10 points, 3.5 at 24,
+#: for 1e-9), so a face's samples are (m n)^2 with n up to this on an m-fold lattice
 INTEGRAND_N_MAX = 24
 #: the least tilt allowance (:func:`slope_allowance`), units of k: 2 mrad of tilt
 MIN_SLOPE_ALLOWANCE = 2.0**-8

@@ -181,8 +181,8 @@ def relative_error(dish, wave, quadrature, points, reference):
 
 
 def test_a_small_target_ball_keeps_enough_points_on_each_face():
-    """A ball of 0.3 m on 2.5 m faces: the rate is low, and five points per period alone would
-    leave three points a face (1e-5 of the field, from the amplitude's and the surface's own
+    """A ball of 0.3 m on 2.5 m faces: the rate is low, and the ramp's phase alone would leave
+    three points a face (1e-5 of the field, from the amplitude's and the surface's own
     variation); the floor keeps the field within 1e-7 of a finer rule."""
     rng = np.random.default_rng(11)
     dish = paraboloid(D, F, FACE)
