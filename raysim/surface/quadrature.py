@@ -170,15 +170,16 @@ def surface_orders(reflector: Reflector, m: NDArray[np.int64], n: NDArray[np.int
     corners = reflector.vertices[reflector.faces][..., :2]  # (F, 3, 2)
     panels = reflector.surface_panel(np.arange(len(corners)))
     m = np.asarray(m, dtype=np.int64).copy()
+    base = int(n.max(initial=0)) + 1
     todo = np.flatnonzero(m * n < cap)
     for _ in range(SURFACE_DOUBLINGS):
         if not len(todo):
             break
         error = np.zeros(len(todo))
-        key = m[todo] * (int(n.max()) + 1) + n[todo]
+        key = m[todo] * base + n[todo]
         for value in np.unique(key):
             group = np.flatnonzero(key == value)
-            mi, ni = divmod(int(value), int(n.max()) + 1)
+            mi, ni = divmod(int(value), base)
             coarse, fine = (lattice_rule(conical_rule(ni), f) for f in (mi, 2 * mi))
             per = max(1, SURFACE_POINTS // fine.size)
             for g0 in range(0, len(group), per):
@@ -262,8 +263,8 @@ def targets_around(points: NDArray[np.float64], centre: tuple[float, float, floa
                    tuple(float(v) for v in np.asarray(k_hat, dtype=np.float64)))  # type: ignore[arg-type]
 
 
-def integrand_rate(reflector: Reflector, targets: Targets, spacing: float | None = None,
-                   tilt: float | None = None) -> NDArray[np.float64]:
+def integrand_rate(reflector: Reflector, targets: Targets,
+                   spacing: float | None = None) -> NDArray[np.float64]:
     """A bound (F,) on each face's integrand phase rate along the surface, in units of k:
     max over the face's corners and centroid of |t(k_i - u0)| + 2 sin(alpha / 2), u0 the
     direction from the point to the targets' centre and alpha = asin(R / distance) the half
@@ -275,8 +276,8 @@ def integrand_rate(reflector: Reflector, targets: Targets, spacing: float | None
     surface, a Jacobian's perturbed copy and a loaded mesh's ideal twin get the same samples;
     what tilts the surface away from it (a loaded mesh's departure, the deformation) is added
     as :func:`slope_allowance` of its steepest slope, found on a lattice of each face about
-    ``spacing`` (m) apart (:func:`surface_tilt`; ``tilt``: that slope where the caller has
-    it), the same on every face. A bare triangulation uses its facets."""
+    ``spacing`` (m) apart (:func:`surface_tilt`), the same on every face. A bare triangulation
+    uses its facets."""
     v = reflector.vertices[reflector.faces]  # (F, 3, 3)
     pts = np.concatenate([v, v.mean(axis=1, keepdims=True)], axis=1)  # corners and centroid
     allowance = 0.0
@@ -285,7 +286,7 @@ def integrand_rate(reflector: Reflector, targets: Targets, spacing: float | None
         x, y, F = pts[..., 0], pts[..., 1], float(surface.F)
         pts = np.stack([x, y, (x * x + y * y) / (4.0 * F)], axis=-1)
         normal = np.stack([-x / (2.0 * F), -y / (2.0 * F), np.ones_like(x)], axis=-1)
-        allowance = slope_allowance(surface_tilt(reflector, spacing) if tilt is None else tilt)
+        allowance = slope_allowance(surface_tilt(reflector, spacing))
     else:
         cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
         normal = np.broadcast_to(cross[:, None, :], pts.shape)
@@ -341,7 +342,6 @@ def slope_allowance(tilt: float) -> float:
     :data:`MIN_SLOPE_ALLOWANCE` (so deformations of millimetres over metres, the ones an
     inversion refines, all get the same samples)."""
     return max(MIN_SLOPE_ALLOWANCE, 2.0 ** math.ceil(math.log2(max(2.0 * tilt, 1e-300))))
-
 
 
 @dataclass(frozen=True)
