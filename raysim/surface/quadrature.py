@@ -132,14 +132,16 @@ def gauss_reach(n: int, tol: float) -> float:
     return float(omega[above[0] - 1]) if above[0] else 0.0
 
 
-def integrand_orders(omega: NDArray[np.float64], tol: float = 0.0, n_max: int = 0,
-                     floor: int = 0) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+def integrand_orders(omega: NDArray[np.float64], tol: float | None = None, n_max: int | None = None,
+                     floor: int | None = None) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """(m, n) per face for an integrand whose phase turns through 2 ``omega`` (rad, (F,))
     along the face's longest edge: the m-fold lattice of sub-triangles, each with the conical
     rule of order n in [``floor``, ``n_max``], with the fewest points m n along the edge
     such that omega / m is within :func:`gauss_reach` (n, ``tol``). Defaults:
-    :data:`INTEGRAND_TOL`, :data:`INTEGRAND_N_MAX`, :data:`INTEGRAND_FLOOR`."""
-    tol, n_max, floor = tol or INTEGRAND_TOL, n_max or INTEGRAND_N_MAX, floor or INTEGRAND_FLOOR
+    :data:`INTEGRAND_TOL`, :data:`INTEGRAND_N_MAX`, :data:`INTEGRAND_FLOOR` (None)."""
+    tol = INTEGRAND_TOL if tol is None else tol
+    n_max = INTEGRAND_N_MAX if n_max is None else n_max
+    floor = INTEGRAND_FLOOR if floor is None else floor
     omega = np.asarray(omega, dtype=np.float64)
     if not np.all(np.isfinite(omega)) or np.any(omega < 0):
         raise RaysimError("integrand_orders: the phase per face must be finite and >= 0")
@@ -165,7 +167,7 @@ def surface_orders(reflector: Reflector, m: NDArray[np.int64], n: NDArray[np.int
     of micrometres is seen here and not by :func:`slope_allowance`. A surface that adds
     nothing keeps ``m``."""
     surface = reflector.surface
-    if surface is None or (surface.departure is None and isinstance(surface.deformation, NoDeformation)):
+    if not _adds_to_paraboloid(reflector):
         return m
     corners = reflector.vertices[reflector.faces][..., :2]  # (F, 3, 2)
     panels = reflector.surface_panel(np.arange(len(corners)))
@@ -192,6 +194,14 @@ def surface_orders(reflector: Reflector, m: NDArray[np.int64], n: NDArray[np.int
         m[todo] *= 2
         todo = todo[m[todo] * n[todo] < cap[todo]]
     return m
+
+
+def _adds_to_paraboloid(reflector: Reflector) -> bool:
+    """Whether ``reflector``'s smooth surface adds anything to its paraboloid (a deformation or
+    a loaded mesh's departure); False for a bare triangulation."""
+    surface = reflector.surface
+    return surface is not None and (surface.departure is not None
+                                    or not isinstance(surface.deformation, NoDeformation))
 
 
 def _perturbation_gap(surface, corners: NDArray[np.float64], panels: NDArray[np.int64] | None,
@@ -309,7 +319,7 @@ def surface_tilt(reflector: Reflector, spacing: float | None = None) -> float:
     :data:`MAX_TILT_POINTS` points; at least the corners, edge midpoints and centroid), so
     that a feature between a face's corners is seen; 0 for a bare paraboloid."""
     surface = reflector.surface
-    if surface is None or (surface.departure is None and isinstance(surface.deformation, NoDeformation)):
+    if not _adds_to_paraboloid(reflector):
         return 0.0
     v = reflector.vertices[reflector.faces][..., :2]  # (F, 3, 2)
     length = np.linalg.norm(v[:, [1, 2, 0]] - v, axis=2).max(axis=1)
