@@ -112,24 +112,33 @@ def gauss_legendre01(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
 def gauss_reach(n: int, tol: float) -> float:
     """The largest half-span omega (rad) up to which the n-point rules of the conical product
     (Gauss-Legendre, and Gauss-Jacobi with weight 1 + x) integrate exp(j omega x) over [-1, 1]
-    within ``tol`` of the integral's scale (the weights' sum): the phase, in radians, that a
+    within ``tol`` of the integral's scale (the weights' sum, 2): the phase, in radians, that a
     Gauss rule of n points can follow across half its interval. Gauss rules are exact to degree
     2n - 1 and exp(j omega x)'s Legendre coefficients fall off quickly past degree omega, so
-    this grows about as 2n less a margin of order n^(1/3); read here on a grid of omega
-    0.01 rad apart against rules of n + 40 points."""
+    this grows about as 2n less a margin of order n^(1/3). Read off the rules against the
+    exact integrals (2 sin w / w, and that plus 2 j (sin w - w cos w) / w^2 for the weight
+    1 + x), on a grid of omega 0.1 rad apart (the error turns with a period of about pi), the
+    last step then again 0.01 rad apart: the first grid point past ``tol``, less one."""
     from scipy.special import roots_jacobi
 
-    omega = np.arange(1, int(400 * n) + 1) * 0.01
-    worst = np.zeros_like(omega)
-    for rule in (np.polynomial.legendre.leggauss, lambda m: roots_jacobi(m, 0.0, 1.0)):
-        (x, w), (xr, wr) = rule(n), rule(n + 40)
-        got = np.exp(1j * np.outer(omega, x)) @ w
-        ref = np.exp(1j * np.outer(omega, xr)) @ wr
-        worst = np.maximum(worst, np.abs(got - ref) / np.sum(wr))
-    above = np.flatnonzero(worst > tol)
+    def worst(omega: NDArray[np.float64]) -> NDArray[np.float64]:
+        s, c = np.sin(omega), np.cos(omega)
+        flat = 2.0 * s / omega
+        exact = (flat, flat + 2j * (s - omega * c) / omega**2)
+        out = np.zeros_like(omega)
+        for (x, w), ref in zip((np.polynomial.legendre.leggauss(n), roots_jacobi(n, 0.0, 1.0)), exact,
+                               strict=True):
+            out = np.maximum(out, np.abs(np.exp(1j * np.outer(omega, x)) @ w - ref) / 2.0)
+        return out
+
+    coarse = np.arange(1, 40 * n + 1) * 0.1
+    above = np.flatnonzero(worst(coarse) > tol)
     if not len(above):
-        return float(omega[-1])
-    return float(omega[above[0] - 1]) if above[0] else 0.0
+        return float(coarse[-1])
+    steps = np.arange(10 * int(above[0]) + 1, 10 * int(above[0]) + 11)  # its last step, in 0.01 rad
+    past = np.flatnonzero(worst(steps * 0.01) > tol)
+    last = int(steps[past[0]] if len(past) else steps[-1]) - 1
+    return float(last * 0.01)
 
 
 def integrand_orders(omega: NDArray[np.float64], tol: float | None = None, n_max: int | None = None,
@@ -151,6 +160,8 @@ def integrand_orders(omega: NDArray[np.float64], tol: float | None = None, n_max
         m = np.maximum(1, np.ceil(omega / gauss_reach(n, tol))).astype(np.int64)
         better = (best_n == 0) | (m * n < best_m * best_n)
         best_m, best_n = np.where(better, m, best_m), np.where(better, n, best_n)
+        if np.all(m == 1):  # every face within one rule of n points: higher orders only add points
+            break
     return best_m, best_n
 
 
@@ -239,9 +250,13 @@ SURFACE_TOL = 1e-8
 SURFACE_DOUBLINGS = 6
 SURFACE_POINTS = 2_000_000
 #: the most Gauss points along a sub-triangle's edge where the rule follows the integrand: a
-#: high order needs fewer points a period of the integrand (about 5 at 10 points, 3.5 at 24,
-#: for 1e-9), so a face's samples are (m n)^2 with n up to this on an m-fold lattice
-INTEGRAND_N_MAX = 24
+#: high order needs fewer points a period of the integrand (for 1e-9 about 5 at 10 points, 2.9
+#: at 24, 2.1 at 64, 1.9 at 128; the limit is pi / 2), so a face's samples are (m n)^2 with n up
+#: to this on an m-fold lattice. On the paper's dish (5 m faces) orders above 24 take the
+#: samples at 3 GHz from 1.89 M to 1.11 M and at 12 GHz from 26.9 M to 11.5 M, with the field
+#: unchanged to 2e-12 (benchmarks/bench_quadrature.py --n-max); only faces that many periods
+#: long reach them (:func:`integrand_orders` stops at the order every face fits in)
+INTEGRAND_N_MAX = 128
 #: the least tilt allowance (:func:`slope_allowance`), units of k: 2 mrad of tilt
 MIN_SLOPE_ALLOWANCE = 2.0**-8
 #: the fewest Gauss points along a face's edge where the rule thins it: at three or four points

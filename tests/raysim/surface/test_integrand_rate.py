@@ -99,7 +99,7 @@ def test_the_field_matches_a_finer_uniform_quadrature_with_fewer_samples():
     assert err_coarse > 30 * err
 
 
-@pytest.mark.parametrize("n", [6, 10, 17, 24])
+@pytest.mark.parametrize("n", [6, 10, 17, 24, 64, 128])
 def test_gauss_reach_is_where_the_rule_stops_integrating_a_phase_ramp(n):
     """Against the integral of exp(j omega x) over [-1, 1], 2 sin(omega) / omega: within the
     tolerance up to the reach, beyond it within half a radian; the reach approaches 2n from below."""
@@ -128,6 +128,27 @@ def test_a_face_gets_points_that_follow_its_phase_and_high_orders_where_it_turns
     # ten-point rules need five
     periods = omega[-1] / np.pi
     assert n[-1] >= 20 and 2.5 < (m * n)[-1] / periods < 4.0
+
+
+def test_faces_many_periods_long_take_orders_past_24_and_keep_the_field():
+    """At 12 GHz a 2.5 m face is a hundred wavelengths: the rule's highest orders follow the
+    integrand with about two points a period, and the field is that of a rule held to 1e-13 per
+    face on orders up to 24 (a different set of points), with two fifths fewer samples."""
+    rng = np.random.default_rng(11)
+    dish = paraboloid(D, F, FACE)
+    wave = po.Illumination.plane_wave(12e9, (0, 0, -1), (1, 0, 0))
+    points = sphere_points((0, 0, F), 2.0, 60, rng)
+    points = points[points[:, 2] < F + 1.0]
+    targets = targets_around(points, (0.0, 0.0, F), wave.k_hat)
+    rule = plan(dish, wave.wavelength, 1.5, targets)
+    assert rule.orders[1].max() > 24
+    omega = np.pi * rule.edge_length * integrand_rate(dish, targets) / wave.wavelength
+    tight = FaceQuadrature(dish, rule.spacing, face_orders=integrand_orders(omega, tol=1e-13, n_max=24))
+    assert rule.n_samples < 0.7 * tight.n_samples
+    many = omega > 100.0  # faces of more than sixty periods: at most 2.5 points a period
+    assert np.any(many) and np.all((rule.orders[0] * rule.orders[1])[many] < 2.5 * omega[many] / np.pi)
+    reference = field(dish, wave, tight, points)
+    assert relative_error(dish, wave, rule, points, reference) < 1e-9
 
 
 def test_a_deformed_twin_gets_the_ideal_samples_and_a_big_tilt_more():
