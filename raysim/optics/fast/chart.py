@@ -178,6 +178,39 @@ def resample(G: NDArray[np.complex128], m: int, out: NDArray[np.complex128] | No
     return sfft.ifft2(out, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=True)
 
 
+def resample_rows(G: NDArray[np.complex128], m: int, rows: int, out: NDArray[np.complex128] | None = None,
+                  scratch: Any = None, overwrite: bool = False) -> NDArray[np.complex128]:
+    """Rows 0 .. rows - 1 (..., rows, m, c) of :func:`resample` (``G`` (..., n, n, c) refined
+    to m x m), at about half the cost when ``rows`` is about m / 2: the spectra are zero-padded
+    and transformed along theta first, and only the rows wanted are then transformed along phi
+    (the aggregation reads a refined child at its parent's rows theta <= pi alone). The same
+    transforms as :func:`resample`'s, taken in another order: the values agree to rounding.
+    ``out``: a (..., rows, m, c) buffer the result may be built in (read the returned array);
+    ``scratch``: a :class:`~raysim.optics.fast.scratch.Scratch` whose role "theta" holds the
+    first stage, else a new array; ``overwrite``: ``G`` may be overwritten."""
+    n = G.shape[-2]
+    if m == n:
+        return G[..., :rows, :, :]
+    lead, c, h = G.shape[:-3], G.shape[-1], n // 2
+    S = sfft.fft2(G, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=overwrite)
+    S *= (m * m) / (n * n)  # the inverse transforms' 1 / m^2 against the forward one's n^2
+    # theta's frequencies padded to m, phi's n - 1 kept ones packed (0 .. h - 1, then -h + 1 .. -1)
+    shape = (*lead, m, n - 1, c)
+    T = np.empty(shape, dtype=np.complex128) if scratch is None else scratch.array("theta", shape)
+    T[..., h:m - h + 1, :, :] = 0.0
+    T[..., :h, :h, :] = S[..., :h, :h, :]
+    T[..., :h, h:, :] = S[..., :h, n - h + 1:, :]
+    T[..., m - h + 1:, :h, :] = S[..., n - h + 1:, :h, :]
+    T[..., m - h + 1:, h:, :] = S[..., n - h + 1:, n - h + 1:, :]
+    T = sfft.ifft(T, axis=-3, workers=FFT_WORKERS, overwrite_x=True)
+    if out is None:
+        out = np.empty((*lead, rows, m, c), dtype=np.complex128)
+    out[..., :, h:m - h + 1, :] = 0.0
+    out[..., :, :h, :] = T[..., :rows, :h, :]
+    out[..., :, m - h + 1:, :] = T[..., :rows, h:, :]
+    return sfft.ifft(out, axis=-2, workers=FFT_WORKERS, overwrite_x=True)
+
+
 def restrict(X: NDArray[np.complex128], n: int, overwrite: bool = False) -> NDArray[np.complex128]:
     """The transpose of :func:`resample` (m x m -> n x n): weights on the fine grid taken back to
     the coarse one (both DFT matrices are symmetric, so the transpose of zero-padding the

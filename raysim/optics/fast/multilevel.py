@@ -50,6 +50,7 @@ from raysim.optics.fast.chart import (
     lagrange,
     mirror,
     resample,
+    resample_rows,
     size_for,
     stencil_for,
     tensor_index,
@@ -391,14 +392,19 @@ def aggregate(G: NDArray[np.complex128] | LeafGrids, child: int, the_plan: Plan,
 
 def _refined(G: NDArray[np.complex128] | LeafGrids, c0: int, c1: int, n: int,
              scratch: Scratch | None) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
-    """Children c0 .. c1 - 1 of ``G`` refined to n x n: (their grids, (c1 - c0) n^2 rows of six
-    reals, one class of grid size after another; where each child's grid is in them)."""
-    shape = (c1 - c0, n, n, 3)
-    buffer = None if scratch is None else scratch.array("fine", shape)
+    """Children c0 .. c1 - 1 of ``G`` refined to n x n, at the rows theta <= pi the parents
+    compute (:func:`~raysim.optics.fast.chart.resample_rows`): (their grids, (c1 - c0)
+    half_rows(n) n rows of six reals, one class of grid size after another; where each child's
+    grid is in them)."""
+    rows = half_rows(n)
+    shape = (c1 - c0, rows, n, 3)
+    fine = np.empty(shape, dtype=np.complex128) if scratch is None else scratch.array("fine", shape)
+    overwrite = scratch is not None
     if not isinstance(G, LeafGrids):
-        fine = resample(G[c0:c1], n, out=buffer, overwrite=scratch is not None)
+        refined = resample_rows(G[c0:c1], n, rows, out=fine, scratch=scratch, overwrite=overwrite)
+        if not np.may_share_memory(refined, fine):  # the grids were already n x n
+            fine[...] = refined
         return fine.view(np.float64).reshape(-1, 6), np.arange(c1 - c0, dtype=np.int32)
-    fine = np.empty(shape, dtype=np.complex128) if buffer is None else buffer
     where = np.empty(c1 - c0, dtype=np.int32)
     at = 0
     for _, members, grids in G.classes:
@@ -406,7 +412,7 @@ def _refined(G: NDArray[np.complex128] | LeafGrids, c0: int, c1: int, n: int,
         if i1 == i0:
             continue
         block = fine[at:at + i1 - i0]
-        refined = resample(grids[i0:i1], n, out=block, overwrite=scratch is not None)
+        refined = resample_rows(grids[i0:i1], n, rows, out=block, scratch=scratch, overwrite=overwrite)
         if not np.may_share_memory(refined, block):  # the transform returned a new array
             block[...] = refined
         where[members[i0:i1] - c0] = np.arange(at, at + i1 - i0)

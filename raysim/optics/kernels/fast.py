@@ -58,10 +58,10 @@ def interpolate_targets(
 
 @wp.kernel
 def rephase_merge(
-    fine: wp.array2d(dtype=wp.float64),  # (children * n_full, 6): refined child grids, complex pairs
+    fine: wp.array2d(dtype=wp.float64),  # (children * n_nodes, 6): refined child grids at the computed rows
     where: wp.array(dtype=wp.int32),  # (children,): the grid of fine that holds each child's
     n_nodes: int,  # nodes computed per grid: its rows theta <= pi
-    n_full: int,  # nodes of a whole grid
+    n_full: int,  # nodes of a whole parent grid
     slots: wp.array2d(dtype=wp.int32),  # (n_nodes, 2): the whole grid's rows a node fills
     first: wp.array(dtype=wp.int32),  # (parents + 1,): children of parent q are first[q]..first[q+1]-1
     child_centres: wp.array2d(dtype=wp.float64),  # (children, 3) m
@@ -74,9 +74,10 @@ def rephase_merge(
 ):
     """The parent grids: each child's refined grid times exp(+j k (|P - c_parent| - |P - c_child|)),
     summed over the children in order (one thread per computed parent node). Only the rows
-    theta <= pi are computed; each value also fills its mirror node (the same point of the
-    sphere: :func:`raysim.optics.fast.multilevel.mirror_slots`), which the refined children
-    hold alike, so the whole grid is what computing every node would give, at half the cost."""
+    theta <= pi are computed, and the children are refined at those rows alone; each value also
+    fills its mirror node (the same point of the sphere:
+    :func:`raysim.optics.fast.multilevel.mirror_slots`), so the whole grid is what computing
+    every node would give, at half the cost."""
     t = wp.tid() + offset
     q = t // n_nodes
     node = t - q * n_nodes
@@ -87,7 +88,7 @@ def rephase_merge(
     for c in range(first[q], first[q + 1]):
         r_child = wp.length(P - wp.vec3d(child_centres[c, 0], child_centres[c, 1], child_centres[c, 2]))
         e = cis(k * (r_parent - r_child), table)  # exp(+j k (r_p - r_c)) = e[0] + j e[1]
-        row = where[c - base] * n_full + node
+        row = where[c - base] * n_nodes + node
         for a in range(3):
             re = fine[row, 2 * a]
             im = fine[row, 2 * a + 1]
