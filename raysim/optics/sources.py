@@ -24,7 +24,7 @@ from __future__ import annotations
 import hashlib
 import os
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -179,6 +179,15 @@ class Sources:
         """Raw sums of the elements at ``points`` (n, 3), m, reflector frame. ``domain``: the
         whole job's points (:func:`raysim.optics.fast.chart.domain_of`), so that the fast
         radiator gives every block the bits of the whole."""
+        return self.start(points, progress, domain)()
+
+    def start(self, points: ArrayLike, progress: Progress | None = None,
+              domain: Domain | None = None) -> Callable[[], Radiated]:
+        """:meth:`radiate` in two halves: the elements are made and handed to the radiators,
+        and the fast radiator's trees planned (and shared through ``plans``), here; the sums
+        are run by the function returned. Sources sharing ``plans`` started one after another
+        may have their sums run at once on separate threads, with the bits of running them in
+        that order."""
         report = progress or (lambda stage, fraction: None)
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         po = self._radiator(pts, domain)
@@ -193,14 +202,23 @@ class Sources:
 
             po.add_packed(src, "electric", sub, extent=extent)
             done += size
-        sums = {"electric": po.sums_of("electric")}
-        self.methods.update(getattr(po, "method", {}))
-        if self.edges is None:
-            return Radiated(sums, po.pairs, po.seconds)
-        start = time.perf_counter()
-        fr = self._radiator(pts, domain, FRINGE_BLOCK)
-        if self.fringe is not None:
-            fr.add_packed(self.fringe[0], "fringe", extent=self.fringe[1])
-        sums["fringe"] = fr.sums_of("fringe")
-        self.methods.update(getattr(fr, "method", {}))
-        return Radiated(sums, po.pairs, po.seconds, fr.pairs, time.perf_counter() - start)
+        fr = None
+        if self.edges is not None:
+            fr = self._radiator(pts, domain, FRINGE_BLOCK)
+            if self.fringe is not None:
+                fr.add_packed(self.fringe[0], "fringe", extent=self.fringe[1])
+        for radiator in (po, fr):
+            if hasattr(radiator, "prepare"):
+                radiator.prepare()
+
+        def sums() -> Radiated:
+            out = {"electric": po.sums_of("electric")}
+            self.methods.update(getattr(po, "method", {}))
+            if fr is None:
+                return Radiated(out, po.pairs, po.seconds)
+            start = time.perf_counter()
+            out["fringe"] = fr.sums_of("fringe")
+            self.methods.update(getattr(fr, "method", {}))
+            return Radiated(out, po.pairs, po.seconds, fr.pairs, time.perf_counter() - start)
+
+        return sums

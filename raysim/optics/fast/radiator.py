@@ -129,6 +129,8 @@ class FastRadiator:
         self.batches: dict[str, int] = {}  # batches of a kind summed and let go
         self.summed: dict[str, NDArray[np.float64]] = {}  # their sums, added up
         self.method: dict[str, str] = {}
+        self.planned: dict[str, multilevel.Plan | None] = {}  # each kind's tree for the elements kept
+        self.keys: dict[str, tuple] = {}  # and their key in ``cache``
         self.pairs = 0
         self.seconds = 0.0
 
@@ -146,6 +148,8 @@ class FastRadiator:
         self.direct._check_phase((a[:3].min(axis=1), a[:3].max(axis=1)))
         self.sources.setdefault(kind, []).append(np.asarray(a, dtype=np.float64))
         self.leaf_order.pop(kind, None)
+        self.planned.pop(kind, None)
+        self.keys.pop(kind, None)
         self.results.pop(kind, None)
         self.pairs += a.shape[1] * self.n
         if self._batched(kind) and sum(part.nbytes for part in self.sources[kind]) >= self.batch_bytes:
@@ -166,6 +170,8 @@ class FastRadiator:
         self.batches[kind] = self.batches.get(kind, 0) + 1
         self.sources[kind] = []
         self.leaf_order.pop(kind, None)
+        self.planned.pop(kind, None)
+        self.keys.pop(kind, None)
         self.seconds += time.perf_counter() - start
 
     def add(self, elements: Any, progress: Progress | None = None) -> None:
@@ -193,18 +199,45 @@ class FastRadiator:
             self.seconds += time.perf_counter() - start
         return self.results[kind]
 
+    def _key(self, kind: str) -> tuple:
+        """The ``cache``'s key of the elements of ``kind`` kept: the kept grids belong to these
+        very elements, so it holds their bytes' digest, not their count."""
+        if kind not in self.keys:
+            digest = hashlib.blake2b(digest_size=16)
+            for part in self.sources[kind]:
+                digest.update(np.ascontiguousarray(part).data)  # no copy
+            self.keys[kind] = (kind, self.domain, self.tol, digest.digest())
+        return self.keys[kind]
+
     def _run(self, kind: str) -> NDArray[np.float64]:
-        the_plan = None
-        # the kept grids belong to these very elements: keyed on their bytes, not their count
-        digest = hashlib.blake2b(digest_size=16)
-        for part in self.sources[kind]:
-            digest.update(np.ascontiguousarray(part).data)  # no copy
-        key = (kind, self.domain, self.tol, digest.digest())
+        key = self._key(kind)
         if self.cache is not None and key in self.cache:
             the_plan, store = self.cache[key]
             self.method[kind] = describe(the_plan)
             return multilevel.to_targets(self._grids(kind, the_plan, store), the_plan, self.angles,
                                          self.points, self.k, self.device, self.domain, store)
+        the_plan = self._plan(kind)
+        if the_plan is None or (the_plan.cost >= the_plan.direct_cost and not self.force):
+            self.method[kind] = "direct"
+            one = Radiator(self.points, self.k, self.device, block=self.direct.block)
+            for part in self.sources[kind]:
+                one.add_packed(part, kind)
+            return one.sums_of(kind)
+        self.method[kind] = describe(the_plan)
+        assert self.domain is not None and self.angles is not None
+        store: dict = {}
+        if self.cache is not None:
+            self.cache[key] = (the_plan, store)
+        return multilevel.to_targets(self._grids(kind, the_plan, store), the_plan, self.angles,
+                                     self.points, self.k, self.device, self.domain, store)
+
+    def _plan(self, kind: str) -> multilevel.Plan | None:
+        """The tree of the elements of ``kind`` kept (None: the direct sum serves them), planned
+        once for them: another radiator's from ``plans`` where it holds them, else a new one,
+        shared there."""
+        if kind in self.planned:
+            return self.planned[kind]
+        the_plan = None
         if self.domain is not None and self.angles is not None and kind in FAST_KINDS:
             # the tree is planned on the pieces as they were added, without an (n, 3) copy of
             # their positions: at high frequency the planning, not the walk, sets the peak
@@ -219,19 +252,27 @@ class FastRadiator:
                 the_plan = plan_for(pieces, self.domain, self.k, self.tol, kind=kind)
                 if self.plans is not None and the_plan is not None:
                     self.plans[tree] = the_plan
-        if the_plan is None or (the_plan.cost >= the_plan.direct_cost and not self.force):
-            self.method[kind] = "direct"
-            one = Radiator(self.points, self.k, self.device, block=self.direct.block)
-            for part in self.sources[kind]:
-                one.add_packed(part, kind)
-            return one.sums_of(kind)
-        self.method[kind] = describe(the_plan)
-        assert self.domain is not None and self.angles is not None
-        store: dict = {}
-        if self.cache is not None:
-            self.cache[key] = (the_plan, store)
-        return multilevel.to_targets(self._grids(kind, the_plan, store), the_plan, self.angles,
-                                     self.points, self.k, self.device, self.domain, store)
+        self.planned[kind] = the_plan
+        return the_plan
+
+    def prepare(self) -> None:
+        """Plan every kept kind's tree now (sharing it through ``plans``) and load the kernels
+        the sums will launch, without summing. Radiators that share ``plans`` prepared one
+        after another in a fixed order may then sum at once on separate threads: which tree
+        each one sums on, and so every bit of its sums, is what summing them in that order
+        would give."""
+        from raysim.optics import runtime
+        from raysim.optics.kernels import fast
+
+        wp = runtime.init()
+        for kind, pieces in self.sources.items():
+            if not pieces or kind in self.results:
+                continue
+            if self.cache is not None and self._key(kind) in self.cache:
+                continue  # summed before: its grids or sums are kept
+            if self._plan(kind) is not None:
+                for kernel in (*_segments(kind), fast.rephase_merge):
+                    wp.load_module(kernel.module, device=self.device)
 
     def _in_leaf_order(self, kind: str, the_plan: multilevel.Plan) -> NDArray[np.float64]:
         """The kind's elements as one array in ``the_plan``'s leaf order, held in place of the

@@ -150,6 +150,37 @@ def test_a_moved_copy_reuses_the_tree_while_its_grids_hold_it(lift_m: float, sha
     assert _rel_rms(out, _direct(pts, moved, "electric")) < 1e-6
 
 
+def test_prepared_copies_sum_at_once_on_the_first_ones_tree_with_the_same_bits() -> None:
+    """simulate's two reflectors: each radiator is prepared (its tree planned and shared) in a
+    fixed order, then both sum on two threads at once. The second sums on the first one's
+    tree, and every bit of both sums is what summing them one after the other gives."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    pts = _grid_points()
+    src = _elements("electric")
+    moved = src.copy()
+    moved[2] += 3e-3 * np.cos(moved[0])
+
+    def prepared(plans: dict) -> list[FastRadiator]:
+        out = []
+        for elements in (src, moved):
+            r = FastRadiator(pts, K, tol=1e-6, centre=CENTRE, force=True, plans=plans)
+            r.add_packed(elements, "electric")
+            r.prepare()
+            out.append(r)
+        return out
+
+    plans: dict = {}
+    first, second = prepared(plans)
+    (tree,) = plans.values()
+    assert first.planned["electric"] is tree and second.planned["electric"] is tree
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        together = list(pool.map(lambda r: r.sums_of("electric"), (first, second)))
+    apart = [r.sums_of("electric") for r in prepared({})]
+    assert all(np.array_equal(a, b) for a, b in zip(together, apart, strict=True))
+    assert _rel_rms(together[1], _direct(pts, moved, "electric")) < 1e-6
+
+
 def test_batches_hold_a_batch_of_elements_and_sum_within_tolerance() -> None:
     """Elements added in four strips of the dish, with room kept for two strips: the radiator
     sums the first two as a batch on their own tree as soon as they are in and lets them go,
