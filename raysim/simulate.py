@@ -530,17 +530,21 @@ class _WaveContext:
         arrays: dict[str, NDArray[np.float64]] = {}
         figures = {"pairs": 0.0, "seconds": 0.0, "pairs_edges": 0.0, "seconds_edges": 0.0}
         # each reflector's elements made and its trees planned, the ideal's first (the deformed
-        # one sums on them where they hold it); then both sums at once on the CPU, where one
-        # walk leaves about a sixth of two cores idle (bits as summing one after the other)
-        started = [(name, sources.start(self.points[name][lo:hi], _stage(report, 0.5 * i, 0.5, name),
-                                        domain=self.domains[name]))
-                   for i, (name, sources) in enumerate(self.sources.items())]
+        # one sums on them where they hold it), and each one's sums started on a thread of its
+        # own as soon as they are planned: on the CPU one walk leaves about a sixth of two cores
+        # idle, and the deformed reflector's elements are made while the ideal's sum runs (the
+        # bits are those of one after the other; on a GPU they run one after the other)
         at_once = all(sources.device == "cpu" for sources in self.sources.values())
         begin = time.perf_counter()
-        with ThreadPoolExecutor(max_workers=len(started) if at_once else 1) as pool:
-            radiated = list(pool.map(lambda item: item[1](), started))
+        with ThreadPoolExecutor(max_workers=len(self.sources)) as pool:
+            pending = []
+            for i, (name, sources) in enumerate(self.sources.items()):
+                run = sources.start(self.points[name][lo:hi], _stage(report, 0.5 * i, 0.5, name),
+                                    domain=self.domains[name])
+                pending.append((name, pool.submit(run) if at_once else run()))
+            radiated = {name: out.result() if at_once else out for name, out in pending}
         wall = time.perf_counter() - begin
-        for (name, _), out in zip(started, radiated, strict=True):
+        for name, out in radiated.items():
             arrays[f"po_{name}"] = out.sums["electric"]
             if self.edges:
                 arrays[f"edges_{name}"] = out.sums["fringe"]
