@@ -669,8 +669,9 @@ def plan(reflector: Reflector, wavelength: float, samples_per_wavelength: float,
     ``targets``, fewer where the integrand oscillates slower than that: each face the fewest
     points along its edge whose Gauss rules follow the phase its own rate
     (:func:`integrand_rate`) turns through across it within :data:`INTEGRAND_TOL`
-    (:func:`integrand_orders`), at least :data:`INTEGRAND_FLOOR`, and never more than the
-    uniform rule's."""
+    (:func:`integrand_orders`), at least :data:`INTEGRAND_FLOOR`; never more in all than the
+    uniform rule's (where its own rules would take more, each face is held to the uniform
+    rule's points)."""
     if not samples_per_wavelength > 0:
         raise RaysimError(f"samples per wavelength must be > 0, got {samples_per_wavelength}")
     spacing = wavelength / samples_per_wavelength
@@ -684,7 +685,13 @@ def plan(reflector: Reflector, wavelength: float, samples_per_wavelength: float,
     m, n = integrand_orders(0.5 * k * length * rate)
     m_u, n_u = quadrature.orders
     m = surface_orders(reflector, m, n, rate, k, m_u * n_u)
-    uniform = m_u * n_u <= m * n
-    m, n = np.where(uniform, m_u, m), np.where(uniform, n_u, n)
+    # a face the integrand turns on faster than the uniform rule follows (a wave far off the
+    # axis) keeps its own rule while the whole stays within the uniform rule's samples: 15 deg
+    # off axis on the paper's dish at 3 GHz, the uniform rule on those few faces left 4.8e-6 of
+    # the field, their own rules 4e-11, for 0.2 % more samples. Beyond that total (targets
+    # reaching the surface) every face is held to the uniform rule's points
+    if np.sum(np.square(m * n)) > np.sum(np.square(m_u * n_u)):
+        uniform = m_u * n_u <= m * n
+        m, n = np.where(uniform, m_u, m), np.where(uniform, n_u, n)
     face_spacing = np.maximum(length / (m * n), spacing)
     return FaceQuadrature(reflector, spacing, face_spacing=face_spacing, face_orders=(m, n))

@@ -233,3 +233,29 @@ def test_a_bump_between_the_corners_is_seen():
     assert deformed.n_samples > 1.3 * ideal.n_samples  # the rate about 1.2 times the ideal's
     reference = field(bumped, wave, plan(bumped, wave.wavelength, 3.0), points)
     assert relative_error(bumped, wave, deformed, points, reference) < 1e-6
+
+
+def test_a_wave_far_off_the_axis_keeps_each_face_on_its_own_rule():
+    """15 deg off the axis the integrand turns faster than the uniform rule follows on some
+    faces; while the whole stays within the uniform rule's samples those faces keep their own
+    rules, and the field is that of a rule held to 1e-13 per face (other points, 3.5e-12 apart),
+    where the uniform rule on those eleven faces leaves 7.1e-7 of it."""
+    rng = np.random.default_rng(13)
+    dish = paraboloid(D, F, FACE)
+    t = np.radians(15.0)
+    wave = po.Illumination.plane_wave(1.5e9, (np.sin(t), 0.0, -np.cos(t)), (np.cos(t), 0.0, np.sin(t)))
+    points = sphere_points((0, 0, F), 2.0, 80, rng)
+    points = points[points[:, 2] < F + 1.0]
+    targets = targets_around(points, (0.0, 0.0, F), wave.k_hat)
+    rule, uniform = plan(dish, wave.wavelength, 1.5, targets), plan(dish, wave.wavelength, 1.5)
+    assert rule.n_samples < uniform.n_samples
+    (m, n), (m_u, n_u) = rule.orders, uniform.orders
+    over = m * n > m_u * n_u
+    assert np.any(over)
+    capped = FaceQuadrature(dish, rule.spacing, face_orders=(np.where(over, m_u, m), np.where(over, n_u, n)))
+    omega = np.pi * rule.edge_length * integrand_rate(dish, targets) / wave.wavelength
+    tight = FaceQuadrature(dish, rule.spacing, face_orders=integrand_orders(omega, tol=1e-13, n_max=24))
+    reference = field(dish, wave, tight, points)
+    err = relative_error(dish, wave, rule, points, reference)
+    assert err < 1e-9
+    assert relative_error(dish, wave, capped, points, reference) > 1e-7  # measured 7.1e-7
