@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import os
 import sys
+import threading
 import time
 import types
 from collections.abc import Callable
@@ -39,7 +40,7 @@ from raysim.errors import RaysimError, SceneError
 from raysim.maps.fieldmap import fieldmap
 from raysim.maps.sphere import theta_rim
 from raysim.methods import METHODS, WAVE_METHODS
-from raysim.optics import go
+from raysim.optics import go, runtime
 from raysim.optics.fast import DEFAULT_TOL
 from raysim.progress import Progress
 from raysim.scene import Scene
@@ -536,13 +537,18 @@ class _WaveContext:
         # bits are those of one after the other; on a GPU they run one after the other)
         at_once = all(sources.device == "cpu" for sources in self.sources.values())
         begin = time.perf_counter()
+        stop = threading.Event()  # set when this thread unwinds: the other sums stop at their next launch
         with ThreadPoolExecutor(max_workers=len(self.sources)) as pool:
-            pending = []
-            for i, (name, sources) in enumerate(self.sources.items()):
-                run = sources.start(self.points[name][lo:hi], _stage(report, 0.5 * i, 0.5, name),
-                                    domain=self.domains[name])
-                pending.append((name, pool.submit(run) if at_once else run()))
-            radiated = {name: out.result() if at_once else out for name, out in pending}
+            try:
+                pending = []
+                for i, (name, sources) in enumerate(self.sources.items()):
+                    run = sources.start(self.points[name][lo:hi], _stage(report, 0.5 * i, 0.5, name),
+                                        domain=self.domains[name])
+                    pending.append((name, pool.submit(runtime.cancellable, stop, run) if at_once else run()))
+                radiated = {name: out.result() if at_once else out for name, out in pending}
+            except BaseException:
+                stop.set()
+                raise
         wall = time.perf_counter() - begin
         for name, out in radiated.items():
             arrays[f"po_{name}"] = out.sums["electric"]

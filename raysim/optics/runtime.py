@@ -11,8 +11,9 @@ import contextlib
 import os
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from contextvars import ContextVar
 from pathlib import Path
 from typing import Any
 
@@ -99,6 +100,27 @@ def cpu_threads() -> int:
 ACCUMULATING_SLICES = 8
 
 
+class Cancelled(Exception):
+    """Raised by :func:`launch` in work run by :func:`cancellable` once its event is set: the
+    caller that set it is already unwinding with its own exception."""
+
+
+#: the event of the :func:`cancellable` work running in this context (None: not cancellable)
+_CANCEL: ContextVar[threading.Event | None] = ContextVar("raysim_cancel", default=None)
+
+
+def cancellable(event: threading.Event, work: Callable[[], Any]) -> Any:
+    """``work()``, whose kernel launches raise :class:`Cancelled` once ``event`` is set: work
+    handed to another thread (one reflector's sum while the other's elements are made) stops
+    within one launch of its caller's error or Ctrl-C, instead of running to its end while the
+    caller waits for its thread."""
+    token = _CANCEL.set(event)
+    try:
+        return work()
+    finally:
+        _CANCEL.reset(token)
+
+
 def launch(kernel: Any, dim: int, inputs: Sequence[Any], device: str, min_chunk: int = 4096,
            private: Sequence[int] = ()) -> None:
     """Launch a 1-D ``kernel`` over ``dim`` items; on the CPU, in slices across threads.
@@ -112,6 +134,9 @@ def launch(kernel: Any, dim: int, inputs: Sequence[Any], device: str, min_chunk:
     stays bit-identical).
     """
     wp = init()
+    event = _CANCEL.get()
+    if event is not None and event.is_set():
+        raise Cancelled("the work was cancelled by its caller")
     if dim <= 0:
         return
     threads = cpu_threads() if device == "cpu" else 1
