@@ -27,7 +27,7 @@ import threading
 import time
 import types
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -545,6 +545,9 @@ class _WaveContext:
                     run = sources.start(self.points[name][lo:hi], _stage(report, 0.5 * i, 0.5, name),
                                         domain=self.domains[name])
                     pending.append((name, pool.submit(runtime.cancellable, stop, run) if at_once else run()))
+                if at_once:  # the first error from either thread ends the wait
+                    for out in wait([out for _, out in pending], return_when=FIRST_EXCEPTION).done:
+                        out.result()  # raises a thread's error
                 radiated = {name: out.result() if at_once else out for name, out in pending}
             except BaseException:
                 stop.set()
