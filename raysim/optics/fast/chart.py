@@ -159,35 +159,20 @@ def resample(G: NDArray[np.complex128], m: int, out: NDArray[np.complex128] | No
     spectra zero-padded. The Nyquist row and column are dropped (a grid chosen by
     :func:`size_for` holds nothing there). ``out``: a (..., m, m, c) buffer the result may be
     built in (one reused between calls, :mod:`raysim.optics.fast.scratch`; read the returned
-    array, which is ``G`` itself when m = n); ``overwrite``: ``G`` may be overwritten (its
-    spectrum is taken in place)."""
-    n = G.shape[-2]
-    if m == n:
-        return G
-    S = sfft.fft2(G, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=overwrite)
-    S *= (m * m) / (n * n)  # the inverse transform's 1 / m^2 against the forward one's n^2
-    if out is None:
-        out = np.zeros((*G.shape[:-3], m, m, G.shape[-1]), dtype=np.complex128)
-    else:  # zero what the blocks leave: the middle rows, and the middle columns of the others
-        h = n // 2
-        out[..., h:m - h + 1, :, :] = 0.0
-        out[..., :h, h:m - h + 1, :] = 0.0
-        out[..., m - h + 1:, h:m - h + 1, :] = 0.0
-    for coarse, fine in kept_blocks(n, m):
-        out[fine] = S[coarse]
-    return sfft.ifft2(out, axes=(-3, -2), workers=FFT_WORKERS, overwrite_x=True)
+    array, a view of ``G`` when m = n); ``overwrite``: ``G`` may be overwritten (its spectrum
+    is taken in place). :func:`resample_rows` with every row."""
+    return resample_rows(G, m, m, out=out, overwrite=overwrite)
 
 
 def resample_rows(G: NDArray[np.complex128], m: int, rows: int, out: NDArray[np.complex128] | None = None,
                   scratch: Any = None, overwrite: bool = False) -> NDArray[np.complex128]:
-    """Rows 0 .. rows - 1 (..., rows, m, c) of :func:`resample` (``G`` (..., n, n, c) refined
-    to m x m), at about half the cost when ``rows`` is about m / 2: the spectra are zero-padded
-    and transformed along theta first, and only the rows wanted are then transformed along phi
-    (the aggregation reads a refined child at its parent's rows theta <= pi alone). The same
-    transforms as :func:`resample`'s, taken in another order: the values agree to rounding.
-    ``out``: a (..., rows, m, c) buffer the result may be built in (read the returned array);
-    ``scratch``: a :class:`~raysim.optics.fast.scratch.Scratch` whose role "theta" holds the
-    first stage, else a new array; ``overwrite``: ``G`` may be overwritten."""
+    """Rows 0 .. rows - 1 (..., rows, m, c) of ``G`` (..., n, n, c) refined to m x m
+    (:func:`resample`): the spectra are zero-padded and transformed along theta first, and only
+    the rows wanted are then transformed along phi, so about half the cost of the whole grid
+    when ``rows`` is about m / 2 (the aggregation reads a refined child at its parent's rows
+    theta <= pi alone). ``out``: a (..., rows, m, c) buffer the result may be built in (read
+    the returned array); ``scratch``: a :class:`~raysim.optics.fast.scratch.Scratch` whose role
+    "theta" holds the first stage, else a new array; ``overwrite``: ``G`` may be overwritten."""
     n = G.shape[-2]
     if m == n:
         return G[..., :rows, :, :]
