@@ -46,14 +46,15 @@ from raysim.optics.fast.chart import (
     degree_for,
     grid_points,
     half_rows,
-    kept_blocks,
     lagrange,
     mirror,
     resample,
     resample_rows,
+    series_at,
     size_for,
     stencil_for,
     tensor_index,
+    turn_of,
 )
 from raysim.optics.fast.scratch import Scratch
 
@@ -497,56 +498,58 @@ def grid_sums(grids: Iterable[tuple[int, int, NDArray[np.complex128]]], the_plan
               k: float) -> NDArray[np.float64]:
     """The raw sums (R * Q, 6) on ``domain``'s whole tensor grid (R thetas x Q phis, row-major):
     each cluster's Fourier series (its grid's FFT, the Nyquist row and column dropped) summed
-    at the grid's angles by two matrix products, times exp(-j k |P - c|), clusters summed.
+    at the grid's thetas, then at its phis (:func:`~raysim.optics.fast.chart.series_at`: inverse
+    FFTs where the angles are uniform and their step divides the turn, as a sphere grid's do),
+    then times exp(-j k |P - c|) and summed over the clusters in order, target by target
+    (:func:`raysim.optics.kernels.fast.add_phased`).
 
     The series of one chunk of stop grids are summed on a second thread while the next chunk
     is built (the aggregation's kernels and transforms), so this step's numpy work, mostly on
     one core, overlaps work that keeps both busy; the chunks are still summed one after
     another in order, so the bits are those of a plain loop."""
-    basis = series_basis(the_plan.sizes[the_plan.stop], domain)
+    wp = runtime.init()
+    from raysim.optics.kernels import radiation
+
     points = tensor_points(domain)
-    total = np.zeros((basis[1].shape[0], 3, basis[2].shape[1]), dtype=np.complex128)
-    scratch = Scratch()
+    out = wp.zeros((len(points), 6), dtype=wp.float64, device="cpu")
+    shared = (warray(points, "cpu"), warray(radiation.cis_table(), "cpu", wp.vec2d))
     with ThreadPoolExecutor(max_workers=1) as summer:
         pending = None
         for q0, q1, G in grids:
             if pending is not None:
                 pending.result()  # one chunk summed at a time: at most two chunks of grids held
-            pending = summer.submit(_add_series, total, G, q0, q1, the_plan, basis, points, k, scratch)
+            pending = summer.submit(_add_series, out, G, q0, q1, the_plan, domain, shared, k)
         if pending is not None:
             pending.result()
-    R, _, Q = total.shape
-    total = np.moveaxis(total, 1, 2).reshape(R * Q, 3)
-    return np.concatenate([total.real, total.imag], axis=1)
+    return out.numpy()
 
 
-def _add_series(total: NDArray[np.complex128], G: NDArray[np.complex128], q0: int, q1: int, the_plan: Plan,
-                basis: tuple[NDArray[np.int64], NDArray[np.complex128], NDArray[np.complex128]],
-                points: NDArray[np.float64], k: float, scratch: Scratch) -> None:
-    """Add the series of stop clusters q0 .. q1 - 1 (their grids ``G``) on the tensor grid of
-    ``points`` (R * Q, 3) m to ``total`` (R, 3, Q), a few clusters at a time
-    (:data:`CHUNK_BYTES`), in order; ``basis``: :func:`series_basis` of the stop grids."""
+def _add_series(out: Any, G: NDArray[np.complex128], q0: int, q1: int, the_plan: Plan, domain: Domain,
+                shared: tuple[Any, Any], k: float) -> None:
+    """Add the series of stop clusters q0 .. q1 - 1 (their grids ``G``) on ``domain``'s tensor
+    grid to ``out`` (R * Q, 6), a few clusters at a time (:data:`CHUNK_BYTES`), in order;
+    ``shared``: the grid's points and the phase table as Warp arrays."""
+    from raysim.optics.kernels import fast
+
     level = the_plan.levels[the_plan.stop]
     n = the_plan.sizes[the_plan.stop]
-    keep, E_theta, E_phi_T = basis
-    R, Q = E_theta.shape[0], E_phi_T.shape[1]
-    nk = len(keep)
-    per = max(1, int(CHUNK_BYTES // (16 * 3 * R * Q * 2)))
+    thetas, phis = domain.thetas, domain.phis
+    assert thetas is not None and phis is not None
+    M = len(thetas) * len(phis)
+    # a cluster's transforms: its spectrum, the series at the thetas over a whole period, then
+    # at the phis over a whole period (the periods, or the counts where the angles are no Turn)
+    period = [t.period if (t := turn_of(a)) is not None else len(a) for a in (thetas, phis)]
+    held = n * n + max(period[0], len(thetas)) * n + len(thetas) * max(period[1], len(phis))
+    per = max(1, int(CHUNK_BYTES // (48 * held)))
     for c0 in range(q0, q1, per):
         c1 = min(c0 + per, q1)
-        c = c1 - c0
         S = sfft.fft2(G[c0 - q0:c1 - q0], axes=(1, 2), workers=FFT_WORKERS)
-        # the kept coefficients, in the (k_theta, cluster, component, k_phi) order the two
-        # plain matrix products (one BLAS call each, theta first, then phi) read them in
-        A = scratch.array("coefficients", (nk, c, 3, nk))
-        for coarse, packed in kept_blocks(n, nk):
-            A.transpose(1, 0, 3, 2)[packed] = S[coarse]
-        A *= 1.0 / (n * n)
-        T = np.matmul(E_theta, A.reshape(nk, c * 3 * nk), out=scratch.array("theta", (R, c * 3 * nk)))
-        W = np.matmul(T.reshape(R * c * 3, nk), E_phi_T, out=scratch.array("series", (R * c * 3, Q)))
-        r = distances(points, level.centres[c0:c1])
-        phase = np.exp(-1j * k * r).reshape(c, R, Q).transpose(1, 0, 2)  # (R, c, Q)
-        total += np.einsum("rcaq,rcq->raq", W.reshape(R, c, 3, Q), phase)  # no (R, c, 3, Q) product
+        S *= 1.0 / (n * n)
+        W = np.ascontiguousarray(series_at(series_at(S, 1, thetas), 2, phis))  # (c, R, Q, 3)
+        del S
+        runtime.launch(fast.add_phased, M, [
+            warray(W.view(np.float64).reshape(-1, 6), "cpu"), M, warray(level.centres[c0:c1], "cpu"),
+            shared[0], k, shared[1], out], "cpu", min_chunk=256)
 
 
 def series_basis(n: int, domain: Domain) -> tuple[NDArray[np.int64], NDArray[np.complex128],

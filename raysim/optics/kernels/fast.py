@@ -1,7 +1,9 @@
-"""Warp kernels of the fast radiator (:mod:`raysim.optics.fast`): the stop level to the targets.
+"""Warp kernels of the fast radiator (:mod:`raysim.optics.fast`): the stop level to the targets,
+and the re-phasing that merges children into their parents.
 
-Each target t adds, over the clusters c given (a chunk of the stop level), the p x p Lagrange
-interpolation of the cluster's refined grid (phase of its centre taken out) times
+In the last step each target t adds, over the clusters c given (a chunk of the stop level), the
+cluster's field at it (phase of its centre taken out: the p x p Lagrange interpolation of its
+refined grid, or its Fourier series summed on a tensor grid of targets) times
 exp(-j k |P_t - c|) to ``out[t]``. One thread per target, clusters and chunks in a fixed order:
 a target's value never depends on the other targets.
 """
@@ -54,6 +56,37 @@ def interpolate_targets(
                        e[0] * acc[3] - e[1] * acc[2], e[0] * acc[5] - e[1] * acc[4])
     for q in range(6):
         out[t, q] = out[t, q] + total[q] * F64_ONE
+
+
+@wp.kernel
+def add_phased(
+    series: wp.array2d(dtype=wp.float64),  # (C * M, 6): cluster c's series at target t in row c M + t
+    n_targets: int,  # M
+    centres: wp.array2d(dtype=wp.float64),  # (C, 3) m
+    points: wp.array2d(dtype=wp.float64),  # (M, 3) m
+    k: wp.float64,
+    table: wp.array(dtype=wp.vec2d),
+    out: wp.array2d(dtype=wp.float64),  # (M, 6): Re x, y, z, Im x, y, z, added to
+    offset: int,
+):
+    """The last step on a tensor grid of targets: each cluster's series at the target (its
+    centre's phase taken out, complex x, y, z as (Re, Im) pairs) times exp(-j k |P_t - c|),
+    summed over the clusters in order and added to ``out[t]`` (one thread per target)."""
+    t = wp.tid() + offset
+    P = wp.vec3d(points[t, 0], points[t, 1], points[t, 2])
+    total = vec6d()
+    for c in range(centres.shape[0]):
+        d = P - wp.vec3d(centres[c, 0], centres[c, 1], centres[c, 2])
+        e = cis(k * wp.sqrt(wp.dot(d, d)), table)  # exp(-j k r) = e[0] - j e[1]
+        row = c * n_targets + t
+        total += vec6d(e[0] * series[row, 0] + e[1] * series[row, 1],
+                       e[0] * series[row, 2] + e[1] * series[row, 3],
+                       e[0] * series[row, 4] + e[1] * series[row, 5],
+                       e[0] * series[row, 1] - e[1] * series[row, 0],
+                       e[0] * series[row, 3] - e[1] * series[row, 2],
+                       e[0] * series[row, 5] - e[1] * series[row, 4])
+    for q in range(6):
+        out[t, q] = out[t, q] + total[q]
 
 
 @wp.kernel

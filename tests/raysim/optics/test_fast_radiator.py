@@ -330,6 +330,66 @@ def test_spectral_grid_refines_a_plane_wave_to_rounding() -> None:
     assert errors[2] < 1e-12
 
 
+@pytest.mark.parametrize("turn", [
+    (0.3, 40),  # a Turn of period 40 read at angles from 0.3: the stop grids' n exceed and fold onto it
+    (0.1, 720),  # a long period, few of its angles: the series by inverse FFT over the whole period
+    None,  # angles that are no Turn: the product with the basis
+])
+def test_a_grids_series_at_any_angles_gives_the_analytic_wave(turn) -> None:
+    """The last step's series (:func:`~raysim.optics.fast.chart.series_at`, along theta and then
+    phi, an FFT of the grid first) of a plane wave sampled on the n x n chart gives the analytic
+    wave at the targets' angles, whether it runs as inverse FFTs (forced here by a cost of 0 an
+    FFT point; folded where the period is shorter than n) or as products with the basis."""
+    from raysim.optics.fast import chart
+
+    domain = Domain(CENTRE, R, 1)
+    k0 = np.array([3.0, -2.0, 4.0])
+    n = 48
+    grid = mirror(np.exp(1j * (grid_points(n, domain, half_rows(n)) - np.array(CENTRE)) @ k0)
+                  .reshape(1, half_rows(n), n, 1), n)
+    S = np.fft.fft2(grid, axes=(1, 2)) / n**2
+    if turn is None:
+        thetas, phis = np.sort(np.random.default_rng(3).uniform(0, np.pi, 7)), np.array([0.2, 1.0, 4.0])
+    else:
+        x0, period = turn
+        thetas = x0 + 2 * np.pi * np.arange(9) / period
+        phis = 2 * x0 + 2 * np.pi * np.arange(period // 2) / period
+        assert chart.turn_of(thetas) == chart.Turn(thetas[0], period, 9)
+    out = {}
+    for cost in (0.0, 1e9):
+        chart.FFT_POINT_COST, saved = cost, chart.FFT_POINT_COST
+        try:
+            out[cost] = chart.series_at(chart.series_at(S, 1, thetas), 2, phis)[0, :, :, 0]
+        finally:
+            chart.FFT_POINT_COST = saved
+    th, ph = np.meshgrid(thetas, phis, indexing="ij")
+    dirs = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), -np.cos(th)], axis=-1)
+    analytic = np.exp(1j * R * dirs @ k0)
+    for values in out.values():
+        assert np.max(np.abs(values - analytic)) < 1e-12
+
+
+@pytest.mark.parametrize("fft_point_cost", [0.0, 1e9])
+@pytest.mark.parametrize("grid", [
+    {"n_theta": 24, "n_phi": 48},
+    {"n_theta": 6, "n_phi": 10},  # periods 24 and 10, shorter than the stop grids: folded
+    {"n_theta": 20, "n_phi": 30, "theta_max": np.radians(85.0), "phi_min": 0.5, "phi_max": 2.0},  # no Turn
+])
+def test_the_last_step_on_any_sphere_grid(grid: dict, fft_point_cost: float, monkeypatch) -> None:
+    """The series of the stop clusters on a sphere grid, summed by inverse FFTs where its angles
+    divide the turn (every Turn taken that way, cost 0) or by products with the basis (never,
+    cost 1e9), is within tolerance of the direct sum on grids whose periods are longer or
+    shorter than the stop grids and on angles that are no Turn."""
+    from raysim.optics.fast import chart
+
+    monkeypatch.setattr(chart, "FFT_POINT_COST", fft_point_cost)
+    pts = SphereGrid(R, **grid).points(F).reshape(-1, 3)
+    src = _elements("electric")
+    out, method = _fast(pts, src, "electric", 1e-6)
+    assert method.startswith("fast") and "series on the grid" in method
+    assert _rel_rms(out, _direct(pts, src, "electric")) < 1e-6
+
+
 def test_diffraction_elements_take_the_direct_sum() -> None:
     """go+edge's elements integrate along edge segments: not point sources, so direct."""
     pts = _grid_points(6, 12)
