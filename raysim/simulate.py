@@ -511,12 +511,21 @@ class _WaveContext:
 
         self.radiator, self.radiator_tol = options.radiator, options.radiator_tol
         plans: dict = {}  # the ideal reflector's trees, reused by the deformed one where they hold it
-        # the whole job's points set each reflector's quadrature (the integrand's rate on them)
-        self.sources: dict[str, Sources] = {
-            name: Sources(r, wave, self.spw, self.edges, device, keep, radiator=options.radiator,
-                          tol=options.radiator_tol, plans=plans,
-                          targets=targets_around(self.points[name], (0.0, 0.0, float(r.F)), wave.k_hat))
-            for name, r in (("ideal", ideal), ("deformed", deformed))}
+        reflectors = {"ideal": ideal, "deformed": deformed}
+
+        def make(name: str) -> Sources:
+            # the whole job's points set each reflector's quadrature (the integrand's rate on them)
+            r = reflectors[name]
+            return Sources(r, wave, self.spw, self.edges, device, keep, radiator=options.radiator,
+                           tol=options.radiator_tol, plans=plans,
+                           targets=targets_around(self.points[name], (0.0, 0.0, float(r.F)), wave.k_hat))
+
+        # the ideal reflector's sources now; the deformed one's when first asked for
+        # (:meth:`source`), which :meth:`evaluate` does while the ideal's sum runs: its
+        # quadrature, read face by face on the deformed surface, takes seconds at 12 GHz
+        self._make = make
+        self._sources: dict[str, Sources] = {"ideal": make("ideal")}
+        self.device = self._sources["ideal"].device
         # the whole grid's chart domain: every block of points is summed on the same grids
         self.domains = {name: domain_of(self.points[name], (0.0, 0.0, float(r.F)))
                         for name, r in (("ideal", ideal), ("deformed", deformed))}
@@ -533,17 +542,18 @@ class _WaveContext:
         # each reflector's elements made and its trees planned, the ideal's first (the deformed
         # one sums on them where they hold it), and each one's sums started on a thread of its
         # own as soon as they are planned: on the CPU one walk leaves about a sixth of two cores
-        # idle, and the deformed reflector's elements are made while the ideal's sum runs (the
-        # bits are those of one after the other; on a GPU they run one after the other)
-        at_once = all(sources.device == "cpu" for sources in self.sources.values())
+        # idle, and the deformed reflector's quadrature and elements are made while the ideal's
+        # sum runs (the bits are those of one after the other; on a GPU they run one after the
+        # other)
+        at_once = self.device == "cpu"
         begin = time.perf_counter()
         stop = threading.Event()  # set when this thread unwinds: the other sums stop at their next launch
-        with ThreadPoolExecutor(max_workers=len(self.sources)) as pool:
+        with ThreadPoolExecutor(max_workers=2) as pool:
             try:
                 pending = []
-                for i, (name, sources) in enumerate(self.sources.items()):
-                    run = sources.start(self.points[name][lo:hi], _stage(report, 0.5 * i, 0.5, name),
-                                        domain=self.domains[name])
+                for i, name in enumerate(("ideal", "deformed")):
+                    stage = _stage(report, 0.5 * i, 0.5, name)
+                    run = self.source(name).start(self.points[name][lo:hi], stage, domain=self.domains[name])
                     pending.append((name, pool.submit(runtime.cancellable, stop, run) if at_once else run()))
                 if at_once:  # the first error from either thread ends the wait
                     for out in wait([out for _, out in pending], return_when=FIRST_EXCEPTION).done:
@@ -565,8 +575,15 @@ class _WaveContext:
             figures["seconds_edges"] *= wall / busy
         return arrays, figures
 
+    def source(self, name: str) -> Any:
+        """The :class:`~raysim.optics.sources.Sources` of reflector ``name`` (``ideal`` or
+        ``deformed``), made on first use."""
+        if name not in self._sources:
+            self._sources[name] = self._make(name)
+        return self._sources[name]
+
     def attrs(self) -> dict[str, Any]:
-        ideal, deformed = self.sources["ideal"], self.sources["deformed"]
+        ideal, deformed = self.source("ideal"), self.source("deformed")
         for sources in (ideal, deformed):
             sources.prime()
         from raysim.surface.quadrature import INTEGRAND_TOL
@@ -586,7 +603,7 @@ class _WaveContext:
         return {"mesh": self.mesh, "focal_length": self.F, "diameter": self.D, "engine": engine}
 
     def digest(self) -> str:
-        return "-".join(self.sources[name].digest() for name in ("ideal", "deformed"))
+        return "-".join(self.source(name).digest() for name in ("ideal", "deformed"))
 
 
 def _finish_wave(method: str) -> Callable[..., Run]:

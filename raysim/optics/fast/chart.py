@@ -232,6 +232,23 @@ def turn_of(angles: ArrayLike) -> Turn | None:
 FFT_POINT_COST = 10.0
 
 
+def by_fft(n: int, turn: Turn | None, count: int) -> bool:
+    """Whether :func:`series_at` sums an n-point spectrum at ``count`` angles (``turn``: their
+    :class:`Turn`, or None) by an inverse FFT rather than by the product with the basis."""
+    return turn is not None and FFT_POINT_COST * turn.period * math.log2(max(turn.period, 2)) < n * count
+
+
+def series_cost(n: int, angles: ArrayLike) -> float:
+    """Complex multiply-adds of :func:`series_at` per column (one leading and trailing index) of
+    an n-point spectrum at ``angles``, as it will run."""
+    count = len(np.atleast_1d(angles))
+    turn = turn_of(angles)
+    if by_fft(n, turn, count):
+        assert turn is not None
+        return FFT_POINT_COST * turn.period * math.log2(max(turn.period, 2))
+    return float(n * count)
+
+
 def series_at(S: NDArray[np.complex128], axis: int, angles: ArrayLike) -> NDArray[np.complex128]:
     """The Fourier series along ``axis`` of the coefficients ``S`` (an n-point DFT's order:
     frequencies 0 .. n/2 - 1, the Nyquist one, then -(n/2 - 1) .. -1; the Nyquist one is
@@ -246,7 +263,7 @@ def series_at(S: NDArray[np.complex128], axis: int, angles: ArrayLike) -> NDArra
     h = n // 2
     x = np.asarray(angles, dtype=np.float64)
     turn = turn_of(x)
-    if turn is None or FFT_POINT_COST * turn.period * math.log2(max(turn.period, 2)) >= n * len(x):
+    if not by_fft(n, turn, len(x)):
         m = np.r_[0:h, 0, -(h - 1):0]
         basis = np.exp(1j * np.outer(x, m))  # (count, n)
         basis[:, h] = 0.0  # the Nyquist frequency

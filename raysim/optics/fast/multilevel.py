@@ -51,6 +51,7 @@ from raysim.optics.fast.chart import (
     resample,
     resample_rows,
     series_at,
+    series_cost,
     size_for,
     stencil_for,
     tensor_index,
@@ -257,9 +258,10 @@ def _last_cost(n: int, u: int, p: int, domain: Domain) -> float:
     """Pair-equivalents of the last step for one cluster of grid size n: refinement u and
     stencil p, or (u = 0) the series on the domain's tensor grid."""
     M = domain.count
-    if u == 0:
-        R = len(domain.thetas or ())
-        return _fft_cost(n) + 3.0 * (R * n * n + M * n) * COST_BLAS + M * (COST_EXP + 2 * COST_NUMPY)
+    if u == 0:  # the grid's FFT, the series along theta (3 n columns), then phi (3 R), the phases
+        thetas, phis = domain.thetas or (), domain.phis or ()
+        series = 3.0 * (n * series_cost(n, thetas) + len(thetas) * series_cost(n, phis))
+        return _fft_cost(n) + series * COST_BLAS + M * COST_EXP
     return _fft_cost(u * n) + M * (p * p * COST_STENCIL + COST_EXP)
 
 
