@@ -390,6 +390,24 @@ def test_the_last_step_on_any_sphere_grid(grid: dict, fft_point_cost: float, mon
     assert _rel_rms(out, _direct(pts, src, "electric")) < 1e-6
 
 
+@pytest.mark.parametrize("n", [8, 36, 56])
+def test_the_leaf_steps_distinct_nodes_are_every_point_of_the_computed_rows_once(n: int) -> None:
+    """The leaf step computes each distinct point of the grid's rows theta <= pi once: the
+    poles' rows (theta = 0 and pi) collapse to one point each, every other node is a point of
+    its own, and every computed node lies on one of the distinct ones."""
+    from raysim.optics.fast.multilevel import distinct_nodes
+
+    domain = Domain(CENTRE, R, 1)
+    computed = grid_points(n, domain, half_rows(n))
+    distinct = computed[distinct_nodes(n)]
+    gaps = np.linalg.norm(computed[:, None, :] - distinct[None, :, :], axis=2)
+    assert np.all(gaps.min(axis=1) < 1e-12 * R)  # every node is one of them
+    between = gaps[distinct_nodes(n)]  # (distinct, distinct)
+    np.fill_diagonal(between, np.inf)
+    assert between.min() > 1e-3 * R  # and they are distinct points
+    assert len(distinct) == half_rows(n) * n - 2 * (n - 1)
+
+
 def test_diffraction_elements_take_the_direct_sum() -> None:
     """go+edge's elements integrate along edge segments: not point sources, so direct."""
     pts = _grid_points(6, 12)
