@@ -294,8 +294,9 @@ REFINE_METHODS = ("auto", "defect", "gauss-newton")
 #: (1.75 % RRMS); with the leaves on grids of their own sizes the estimates fall (2.15e8 and
 #: 6.9e8 a radiation): 0.3 GHz 2 x 51 in 453 s (1.66 %), 0.6 GHz 1 x 31 in 504 s (0.76 %); with
 #: PO's Gauss orders set by the rule's own error (7 December 2026; 2.0e8, 5.3e8 and 1.1e9 a
-#: radiation) 0.3 GHz 2 x 53 in 344 s (1.50 %) and 1 GHz 1 x 20 in 378 s (0.42 %); the
-#: budget stays
+#: radiation) 0.3 GHz 2 x 53 in 344 s (1.50 %) and 1 GHz 1 x 20 in 378 s (0.42 %); with the
+#: fast sums' steps held to tol / sqrt(8) (1.8e8, 4.8e8 and 9.5e8) 0.3 GHz 2 x 59 in 302 s
+#: (1.42 %); the budget stays
 AUTO_BUDGET_PAIRS = 4.4e10
 #: the fewest LSQR iterations in all "auto" runs Gauss-Newton with: on the paper's dish the
 #: weak directions need tens of iterations (one step of 27 at 0.6 GHz takes the defect

@@ -13,7 +13,9 @@ One n per level (its widest cluster's), so every cluster of a level shares one g
    (bit-reproducible), again at the rows theta <= pi, the others by the symmetry;
 3. at the stop level, times exp(-j k |P - c|) and summed over the clusters: on a tensor grid
    of targets (a sphere grid, or a block of one) each cluster's Fourier series evaluated
-   exactly on the whole grid by two matrix products; elsewhere each grid refined a few times
+   exactly on the whole grid (along theta by a matrix product, along phi by an inverse FFT
+   where the angles divide the turn: :func:`~raysim.optics.fast.chart.series_at`); elsewhere
+   each grid refined a few times
    (the plan's ``oversampling``) and interpolated to the targets by p x p Lagrange.
 
 The tree is walked depth first, a chunk of clusters at a time (:meth:`Plan.chunks`): a chunk of
