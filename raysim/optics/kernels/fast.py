@@ -18,6 +18,18 @@ from raysim.optics.kernels.radiation import cis, vec6d
 wp.set_module_options({"enable_backward": False})
 
 
+@wp.func
+def dephased(acc: vec6d, P: wp.vec3d, centres: wp.array2d(dtype=wp.float64), c: int, k: wp.float64,
+             table: wp.array(dtype=wp.vec2d)) -> vec6d:
+    """A cluster's field at P with its centre's phase taken out, ``acc`` (Re x, Im x, Re y,
+    Im y, Re z, Im z), times exp(-j k |P - c|): the field itself, as (Re x, y, z, Im x, y, z)."""
+    d = P - wp.vec3d(centres[c, 0], centres[c, 1], centres[c, 2])
+    e = cis(k * wp.sqrt(wp.dot(d, d)), table)  # exp(-j k r) = e[0] - j e[1]
+    return vec6d(e[0] * acc[0] + e[1] * acc[1], e[0] * acc[2] + e[1] * acc[3],
+                 e[0] * acc[4] + e[1] * acc[5], e[0] * acc[1] - e[1] * acc[0],
+                 e[0] * acc[3] - e[1] * acc[2], e[0] * acc[5] - e[1] * acc[4])
+
+
 @wp.kernel
 def interpolate_targets(
     grids: wp.array4d(dtype=wp.float64),  # (C, m, m, 6): complex x, y, z as (Re, Im) pairs
@@ -48,12 +60,7 @@ def interpolate_targets(
                 for q in range(6):
                     inner[q] = inner[q] + w * grids[c, row, col, q]
             acc += wu[t, a] * inner
-        # acc holds (Re x, Im x, Re y, Im y, Re z, Im z)
-        d = P - wp.vec3d(centres[c, 0], centres[c, 1], centres[c, 2])
-        e = cis(k * wp.sqrt(wp.dot(d, d)), table)  # exp(-j k r) = e[0] - j e[1]
-        total += vec6d(e[0] * acc[0] + e[1] * acc[1], e[0] * acc[2] + e[1] * acc[3],
-                       e[0] * acc[4] + e[1] * acc[5], e[0] * acc[1] - e[1] * acc[0],
-                       e[0] * acc[3] - e[1] * acc[2], e[0] * acc[5] - e[1] * acc[4])
+        total += dephased(acc, P, centres, c, k, table)
     for q in range(6):
         out[t, q] = out[t, q] + total[q] * F64_ONE
 
@@ -76,15 +83,10 @@ def add_phased(
     P = wp.vec3d(points[t, 0], points[t, 1], points[t, 2])
     total = vec6d()
     for c in range(centres.shape[0]):
-        d = P - wp.vec3d(centres[c, 0], centres[c, 1], centres[c, 2])
-        e = cis(k * wp.sqrt(wp.dot(d, d)), table)  # exp(-j k r) = e[0] - j e[1]
         row = c * n_targets + t
-        total += vec6d(e[0] * series[row, 0] + e[1] * series[row, 1],
-                       e[0] * series[row, 2] + e[1] * series[row, 3],
-                       e[0] * series[row, 4] + e[1] * series[row, 5],
-                       e[0] * series[row, 1] - e[1] * series[row, 0],
-                       e[0] * series[row, 3] - e[1] * series[row, 2],
-                       e[0] * series[row, 5] - e[1] * series[row, 4])
+        acc = vec6d(series[row, 0], series[row, 1], series[row, 2], series[row, 3], series[row, 4],
+                    series[row, 5])
+        total += dephased(acc, P, centres, c, k, table)
     for q in range(6):
         out[t, q] = out[t, q] + total[q]
 
