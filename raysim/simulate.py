@@ -525,6 +525,7 @@ class _WaveContext:
         # quadrature, read face by face on the deformed surface, takes seconds at 12 GHz
         self._make = make
         self._sources: dict[str, Sources] = {"ideal": make("ideal")}
+        self._making = threading.Lock()  # blocks evaluated at once by a worker's threads make it once
         self.device = self._sources["ideal"].device
         # the whole grid's chart domain: every block of points is summed on the same grids
         self.domains = {name: domain_of(self.points[name], (0.0, 0.0, float(r.F)))
@@ -578,8 +579,9 @@ class _WaveContext:
     def source(self, name: str) -> Any:
         """The :class:`~raysim.optics.sources.Sources` of reflector ``name`` (``ideal`` or
         ``deformed``), made on first use."""
-        if name not in self._sources:
-            self._sources[name] = self._make(name)
+        with self._making:
+            if name not in self._sources:
+                self._sources[name] = self._make(name)
         return self._sources[name]
 
     def attrs(self) -> dict[str, Any]:
