@@ -258,8 +258,11 @@ def series_at(S: NDArray[np.complex128], axis: int, angles: ArrayLike) -> NDArra
     of the period's length (the coefficients shifted by exp(j m x0) and, on a period shorter
     than n, folded onto their frequencies modulo it: still exact); otherwise (a few angles of a
     long period, as a sphere grid's thetas over a quarter turn, or angles that are no Turn) the
-    product with the basis exp(j m x) (angles by n), one matrix product per leading index."""
+    product with the basis exp(j m x) (angles by n), one matrix product per leading index.
+    n is even, as :func:`size_for` makes every grid."""
     n = S.shape[axis]
+    if n % 2:
+        raise ValueError(f"series_at: the spectrum's length must be even, got {n}")
     h = n // 2
     x = np.asarray(angles, dtype=np.float64)
     turn = turn_of(x)

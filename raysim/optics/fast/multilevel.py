@@ -45,6 +45,7 @@ from raysim.optics.fast.chart import (
     OVERSAMPLINGS,
     Axis,
     Domain,
+    by_fft,
     degree_for,
     grid_points,
     half_rows,
@@ -557,8 +558,10 @@ def _add_series(out: Any, G: NDArray[np.complex128], q0: int, q1: int, the_plan:
     M = len(thetas) * len(phis)
     # a cluster's transforms: its spectrum, the series at the thetas over a whole period, then
     # at the phis over a whole period (the periods, or the counts where the angles are no Turn)
-    period = [t.period if (t := turn_of(a)) is not None else len(a) for a in (thetas, phis)]
-    held = n * n + max(period[0], len(thetas)) * n + len(thetas) * max(period[1], len(phis))
+    # (the period where that axis's series runs as an FFT, the angles' count where as a product)
+    extent = [t.period if (t := turn_of(a)) is not None and by_fft(n, t, len(a)) else len(a)
+              for a in (thetas, phis)]
+    held = n * n + extent[0] * n + len(thetas) * extent[1]
     per = max(1, int(CHUNK_BYTES // (48 * held)))
     for c0 in range(q0, q1, per):
         c1 = min(c0 + per, q1)

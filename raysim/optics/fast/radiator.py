@@ -325,7 +325,9 @@ def plan_for(pieces: Sequence[NDArray[np.float64]], domain: Domain, k: float, to
     The steps' errors are those of different grids (each level's truncated spectrum, re-phased
     onto another centre), uncorrelated, so they add as a root sum of squares, not linearly; the
     grids' rule bounds the worst cluster in its worst direction, and the field's error,
-    measured against the direct sum, stays 5 to 30 times under ``tol`` (docs/engines.md).
+    measured against the direct sum, stays under ``tol``: 7 to 80 times under on the paper's
+    dish from 0.1 to 12 GHz, 2.3 times at the least measured (the Jacobian's sums to scattered
+    points on a sphere of 0.6 F; docs/engines.md).
     ``kind``: whose pair function the leaf step runs (its cost weighs the leaves against the
     levels above; a transposed sum plans as the kind it transposes)."""
     last = tuple((u, stencil_for(tol / 4.0, u)) for u in OVERSAMPLINGS)
