@@ -505,13 +505,12 @@ class _WaveContext:
         self.edges = _wave_edges(method, options)
         self.spw = options.samples_per_wavelength or po.DEFAULT_SAMPLES_PER_WAVELENGTH
         wave = _wave(scene)
-        self.points = {name: scene.sphere.points(r.F).reshape(-1, 3)
-                       for name, r in (("ideal", ideal), ("deformed", deformed))}
+        reflectors = {"ideal": ideal, "deformed": deformed}
+        self.points = {name: scene.sphere.points(r.F).reshape(-1, 3) for name, r in reflectors.items()}
         from raysim.optics.fast.chart import domain_of
 
         self.radiator, self.radiator_tol = options.radiator, options.radiator_tol
         plans: dict = {}  # the ideal reflector's trees, reused by the deformed one where they hold it
-        reflectors = {"ideal": ideal, "deformed": deformed}
 
         def make(name: str) -> Sources:
             # the whole job's points set each reflector's quadrature (the integrand's rate on them)
@@ -529,7 +528,7 @@ class _WaveContext:
         self.device = self._sources["ideal"].device
         # the whole grid's chart domain: every block of points is summed on the same grids
         self.domains = {name: domain_of(self.points[name], (0.0, 0.0, float(r.F)))
-                        for name, r in (("ideal", ideal), ("deformed", deformed))}
+                        for name, r in reflectors.items()}
         self.mesh = scene_attrs(scene, deformed, ideal)
         self.F, self.D = float(deformed.F), float(deformed.D)
         self.quadrature = quadrature_note(ideal.F - scene.sphere.radius, wave.wavelength,

@@ -232,10 +232,15 @@ def turn_of(angles: ArrayLike) -> Turn | None:
 FFT_POINT_COST = 10.0
 
 
+def _fft_madds(period: int) -> float:
+    """An inverse FFT of ``period`` points in complex multiply-adds of a matrix product."""
+    return FFT_POINT_COST * period * math.log2(max(period, 2))
+
+
 def by_fft(n: int, turn: Turn | None, count: int) -> bool:
     """Whether :func:`series_at` sums an n-point spectrum at ``count`` angles (``turn``: their
     :class:`Turn`, or None) by an inverse FFT rather than by the product with the basis."""
-    return turn is not None and FFT_POINT_COST * turn.period * math.log2(max(turn.period, 2)) < n * count
+    return turn is not None and _fft_madds(turn.period) < n * count
 
 
 def series_cost(n: int, angles: ArrayLike) -> float:
@@ -243,10 +248,7 @@ def series_cost(n: int, angles: ArrayLike) -> float:
     an n-point spectrum at ``angles``, as it will run."""
     count = len(np.atleast_1d(angles))
     turn = turn_of(angles)
-    if by_fft(n, turn, count):
-        assert turn is not None
-        return FFT_POINT_COST * turn.period * math.log2(max(turn.period, 2))
-    return float(n * count)
+    return _fft_madds(turn.period) if turn is not None and by_fft(n, turn, count) else float(n * count)
 
 
 def series_at(S: NDArray[np.complex128], axis: int, angles: ArrayLike) -> NDArray[np.complex128]:
@@ -278,17 +280,17 @@ def series_at(S: NDArray[np.complex128], axis: int, angles: ArrayLike) -> NDArra
     shape = list(S.shape)
     shape[axis] = P
     B = np.zeros(shape, dtype=np.complex128)
+    along = [1] * S.ndim
+    along[axis] = -1
     shift = np.exp(1j * m * turn.x0)
-    along = [None] * S.ndim
 
     def at(i: Any) -> tuple:
         index: list[Any] = [slice(None)] * S.ndim
         index[axis] = i
         return tuple(index)
 
-    def by(w: NDArray[np.complex128]) -> NDArray[np.complex128]:
-        along[axis] = slice(None)
-        return w[tuple(along)]
+    def by(w: NDArray[np.complex128]) -> NDArray[np.complex128]:  # broadcast along the axis
+        return w.reshape(along)
 
     if P >= n - 1:  # the negative frequencies at the period's end, as a DFT orders them
         B[at(slice(0, h))] = S[at(slice(0, h))] * by(shift[h - 1:])
