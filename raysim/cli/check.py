@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from raysim.cli.common import app, progress_bar, say
+from raysim.cli.common import app, note, progress_bar, say
 from raysim.cli.tables import check_json_path, json_option, json_to_stdout, print_table, write_json
 from raysim.errors import RaysimError
 from raysim.optics.fast import DEFAULT_TOL
@@ -32,8 +32,9 @@ def check(
                                        help="Panel gap (m) of a generated dish: its panel layout, or "
                                             "8 rings of 6 to 48 panels."),
     wave: str = typer.Option("auto", "--wave",
-                             help="Wave engine: auto (PO + PTD where affordable, else go+edge), po, "
-                                  "po+ptd or go+edge."),
+                             help="Wave engine: auto (PO + PTD wherever its samples fit the memory, "
+                                  "else go+edge; the expected time is printed first), po, po+ptd "
+                                  "or go+edge (seconds at any frequency)."),
     sphere: str | None = typer.Option(None, "--sphere",
                                       help="Probe-sphere cells NTHETAxNPHI, e.g. 90x360 (default: "
                                            "the scene's)."),
@@ -90,7 +91,7 @@ def check(
                                grid=parse_grid(sphere), N=grid, refine=refine,
                                refine_model=refine_model, device=device, sphere_radius=sphere_radius,
                                focal_length=focal_length, resolution=resolution, progress=report,
-                               mesh_unit=mesh_unit,
+                               mesh_unit=mesh_unit, notice=note,
                                radiator=radiator, radiator_tol=radiator_tol)
     rows, title = summary_rows(ds), "GO against the wave engine"
     write_json(json_path, "check", title, _records(ds), rows, verdict=verdict_lines(ds),

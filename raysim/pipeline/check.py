@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -53,7 +54,7 @@ def check(source: str | os.PathLike[str], *, frequencies: list[float] | None = N
           sphere_radius: float | None = None, focal_length: float | None = None,
           resolution: float | None = None, progress: Progress | None = None,
           radiator: str = "fast", radiator_tol: float = DEFAULT_TOL,
-          mesh_unit: float | None = None) -> xr.Dataset:
+          mesh_unit: float | None = None, notice: Callable[[str], None] | None = None) -> xr.Dataset:
     """Compare GO with a wave engine on ``source`` at each frequency; return the check dataset.
 
     Parameters
@@ -78,6 +79,8 @@ def check(source: str | os.PathLike[str], *, frequencies: list[float] | None = N
     radiator, radiator_tol : how PO + PTD sum their elements' fields, in the wave engine, the
         wave models of the inversions and the engine rule's cost (``fast`` or ``direct``; as
         :func:`raysim.simulate`).
+    notice : called with one line per frequency, before the first simulation: the wave engine,
+        why, and the time the frequency is expected to take (:func:`expected_line`).
     """
     from solver.options import check_options
 
@@ -98,6 +101,8 @@ def check(source: str | os.PathLike[str], *, frequencies: list[float] | None = N
                       f"({dish.fit_rms * 1e6:.3g} um RMS)")
     engines = [inputs.choose_wave(dish, f, wave, device, radiator) for f in freqs]
     _check_runs(dish, freqs, engines, device)
+    for f, engine in zip(freqs, engines, strict=True):
+        (notice or _quiet)(expected_line(f, engine, refine, refine_model))
     results = []
     for k, f in enumerate(freqs):
         part = within(say, k / len(freqs), (k + 1) / len(freqs), f"{f / 1e9:g} GHz")
@@ -111,19 +116,45 @@ def _check_runs(dish: inputs.Dish, freqs, engines, device: str) -> None:
     """Every engine's own checks, before the first simulation."""
     from raysim.simulate import check_options as check_simulation
 
-    for f, (method, _) in zip(freqs, engines, strict=True):
+    for f, engine in zip(freqs, engines, strict=True):
         check_simulation(dish.go.with_overrides(f), method="go", device=device)
-        check_simulation(dish.wave.with_overrides(f), method=method, device=device)
+        check_simulation(dish.wave.with_overrides(f), method=engine.method, device=device)
 
 
-def _one_frequency(dish: inputs.Dish, f: float, engine: tuple[str, str], truth, N: int, refine: int,
+#: the time of one forward run of a PO or PO + PTD refinement's model, per time of the wave data
+#: (both reflectors): its one reflector on the model's own quadrature (5 m faces); a check of the
+#: paper's dish with 3 iterations (5 runs and any halved steps) refined in 3.3 and 3.9 times
+#: the data's time at 1 and 3 GHz
+REFINE_RUN_SHARE = 0.75
+
+
+def expected_line(f: float, engine: inputs.Engine, refine: int, refine_model: str) -> str:
+    """One line on what the check runs at ``f`` Hz and how long it should take: the wave data,
+    and the wave-aware refinement where its model is PO or PO + PTD (``refine`` + 2 forward
+    runs, :func:`solver.nonlinear.refine`, each :data:`REFINE_RUN_SHARE` of the data's time)."""
+    model = engine.method if refine_model == "auto" else refine_model
+    if math.isnan(engine.seconds):
+        return f"{f / 1e9:g} GHz: {engine.method}. {engine.why}"
+    total, refined = engine.seconds, ""
+    if model in ("po", "po+ptd") and refine > 0:
+        total += engine.seconds * REFINE_RUN_SHARE * (refine + 2)
+        refined = f" with its {model} refinement ({refine} iteration{'s' if refine > 1 else ''})"
+    return (f"{f / 1e9:g} GHz: {engine.method}, expected to take about {inputs.duration(total)}"
+            f"{refined}. {engine.why}")
+
+
+def _quiet(line: str) -> None:
+    """A notice nobody asked for."""
+
+
+def _one_frequency(dish: inputs.Dish, f: float, engine: inputs.Engine, truth, N: int, refine: int,
                    refine_model: str, device: str, say: Progress,
                    radiator: tuple[str, float] = ("fast", DEFAULT_TOL)) -> dict:
     """GO and the wave engine at ``f``, the maps' differences, the three inversions;
     ``radiator``: (name, tolerance) of the wave engine's and the wave models' sums."""
     from raysim.simulate import simulate
 
-    method, why = engine
+    method, why = engine.method, engine.why
     seconds: dict[str, float] = {}
     start = time.perf_counter()
     go = simulate(dish.go.with_overrides(f), method="go", device=device,

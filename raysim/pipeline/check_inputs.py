@@ -6,18 +6,18 @@ in m, frequencies in Hz, angles in rad. Every defect a user can cause raises
 :class:`CheckError` with one line, before any simulation starts.
 
 The engine rule (:func:`choose_wave`; :data:`ENGINE_RULE` states it on the page): PO + PTD (rim)
-is the reference wave engine wherever its cost is affordable: the cost of its sums (quadrature
-samples of both reflectors radiated to the sphere's points) as the chosen radiator runs them,
-in direct pair evaluations
-(:func:`raysim.optics.fast.radiator.estimated_cost` for the fast radiator, samples times points
-for the direct sum), within :data:`PO_PAIR_BUDGET` for the device, and its samples within
-simulate's memory cap; above either, go+edge.
-docs/engines.md has the measured accuracies behind it: go+edge agrees with PO + PTD to 0.02 to
-0.6 % in the ideal intensity everywhere, and in FA to 1.6 to 4.7 % of FA's RMS once the
-dish is a few hundred wavelengths across (paper dish at 3 GHz, 25 m dish at 1 and 3 GHz), but
-only to 21 to 59 % on the paper's dish at 0.3 and 1 GHz, where PO + PTD is affordable. So the
-rule never takes go+edge where it is known to be poor unless the budget forces it, and the
-result says which engine ran and why.
+is the reference wave engine at every frequency where its samples fit this machine's memory
+(``simulate``'s cap, :func:`raysim.simulate.max_po_samples`); beyond it, go+edge, whose cost does
+not grow as f^2. Its cost is not a reason to leave it: with the fast radiator the paper's dish
+takes 48 s at 3 GHz and 9 minutes at 12 GHz on two cores, and the check says what it expects to
+take (:func:`expected_seconds`, from the sums' cost as the chosen radiator runs them,
+:func:`raysim.optics.fast.radiator.quadrature_cost`) before it starts, so a user who wants it
+quicker forces ``--wave go+edge``. docs/engines.md has the measured accuracies behind the
+order: go+edge agrees with PO + PTD to 0.006 to 0.6 % in the ideal intensity everywhere, and in
+FA to 0.2 to 4.7 % of FA's RMS once the dish is a few hundred wavelengths across (the paper's
+dish at 3 to 12 GHz, a 25 m dish at 1 and 3 GHz), but only to 21 to 59 % on the paper's dish at
+0.3 and 1 GHz; on a user's own mesh, with its gaps, no one has measured it, which is what the
+check is for.
 """
 
 from __future__ import annotations
@@ -36,23 +36,23 @@ from raysim.surface.deformation import Deformation, NoDeformation, Sum
 from raysim.surface.panels import PanelLayout
 
 #: the engine rule as the check's page and dataset state it (plain text)
-ENGINE_RULE = ("PO + PTD (rim) is the reference wave engine wherever its cost is affordable: the "
-               "pair evaluations of its sums (the quadrature samples of both reflectors radiated "
-               "to the sphere's points, as the chosen radiator runs them) within the device's "
-               "budget, and its samples within simulate's memory cap; above either, go+edge. "
-               "go+edge agrees with PO + PTD to 0.02 to 0.6 % in the ideal intensity, and in FA to "
-               "1.6 to 4.7 % of FA's RMS once the dish is a few hundred wavelengths across, but "
-               "only to 21 to 59 % on the paper's dish at 0.3 and 1 GHz (docs/engines.md), so the "
-               "rule takes go+edge only where the budget forces it.")
+ENGINE_RULE = ("PO + PTD (rim) is the reference wave engine at every frequency where its samples "
+               "fit this machine's memory (simulate's cap); beyond it, go+edge, whose cost does not "
+               "grow as f^2. The check states the time it expects before it starts; --wave go+edge "
+               "is the quick alternative. go+edge agrees with PO + PTD to 0.006 to 0.6 % in the "
+               "ideal intensity, and in FA to 0.2 to 4.7 % of FA's RMS once the dish is a few "
+               "hundred wavelengths across, but only to 21 to 59 % on the paper's dish at 0.3 and "
+               "1 GHz (docs/engines.md).")
 
 MESH_SUFFIXES = (".stl", ".ply", ".obj", ".glb", ".gltf", ".off")
 WAVE_CHOICES = ("auto", "po", "po+ptd", "go+edge")
 DEFORMATIONS = ("auto", "scene", "mix")
 DEFAULT_RMS_M = 100e-6
-#: pair evaluations (PO's pairs in vector lanes, the units of the fast radiator's cost estimate):
-#: about four minutes on two cores (about 145 M a second, measured at 1 and 3 GHz: the paper's
-#: dish at 3 GHz, 3.0e10, took 207 s), the time 1.2e10 pairs took before the lanes kernels / a GPU
-PO_PAIR_BUDGET = {"cpu": 3.6e10, "cuda": 1e12}
+#: pair evaluations a second per CPU thread (the units of the fast radiator's cost estimate), for
+#: the time a check states before it starts: PO + PTD of both reflectors of the paper's dish on
+#: 90 x 360 points took 48 s at 3 GHz (1.1e10), 156 s at 6 GHz (3.9e10) and 553 s at 12 GHz
+#: (1.4e11) on two cores, 1.1e8 to 1.3e8 a thread
+PAIRS_PER_SECOND_PER_THREAD = 1.2e8
 WAVE_FACE_M = 4.0  # quadrature faces of the wave data (the refinement's PO model uses 5 m)
 MESH_UNIT_OPTION = "--mesh-unit"  # how check's user scales a bare mesh file's coordinates
 SPHERE_RADIUS_OF_F = 0.3  # a mesh's probe sphere by default: R = 0.3 F (the paper's 10 / 33)
@@ -385,24 +385,58 @@ def _wave_ideal(dish: Dish):
     return _IDEAL[key]
 
 
+@dataclass(frozen=True)
+class Engine:
+    """The wave engine of one frequency: ``method``, ``why`` in words, and ``seconds`` its data
+    (both reflectors) are expected to take (nan for go+edge, whose seconds are not estimated,
+    and on a GPU)."""
+
+    method: str
+    why: str
+    seconds: float = math.nan
+
+
 def choose_wave(dish: Dish, frequency_hz: float, wave: str, device: str,
-                radiator: str = "fast") -> tuple[str, str]:
-    """(method, why) of the wave engine at ``frequency_hz`` (the rule of this module's
-    docstring, for sums run by ``radiator``); ``wave`` other than ``auto`` forces that engine."""
-    from raysim.simulate import max_po_samples, wave_bytes
+                radiator: str = "fast") -> Engine:
+    """The wave engine at ``frequency_hz`` (the rule of this module's docstring; its why gives
+    the sums' cost as ``radiator`` runs them and, on the CPU, the time it means); ``wave``
+    other than ``auto`` forces that engine."""
+    from raysim.optics.runtime import cpu_threads
+    from raysim.simulate import max_po_samples, physical_memory, wave_bytes
 
     if wave not in WAVE_CHOICES:
         raise CheckError(f"unknown --wave {wave!r}: use one of {', '.join(WAVE_CHOICES)}")
-    if wave != "auto":
-        return wave, "forced by --wave"
+    if wave == "go+edge":
+        return Engine(wave, "forced by --wave")
     cost, direct, samples = wave_cost(dish, frequency_hz, radiator)
+    seconds = expected_seconds(cost, device)
+    if wave != "auto":
+        return Engine(wave, "forced by --wave", seconds)
+    memory = (f"{samples:.2g} samples per reflector as simulate's memory cap counts them, about "
+              f"{wave_bytes(samples) / 1e9:.2g} GB of this machine's {physical_memory() / 1e9:.3g} GB")
     if samples > max_po_samples():
-        return "go+edge", (f"PO + PTD would need {samples:.2g} samples per reflector (about "
-                           f"{wave_bytes(samples) / 1e9:.2g} GB, more than this "
-                           "machine's memory): go+edge, whose cost does not grow as f^2")
-    budget = PO_PAIR_BUDGET["cuda" if str(device).startswith("cuda") else "cpu"]
-    how = "direct" if radiator == "direct" else f"{radiator} radiator, direct {direct:.2g}"
-    if cost <= budget:
-        return "po+ptd", f"PO + PTD affordable: {cost:.2g} pair evaluations ({how}; budget {budget:.2g})"
-    return "go+edge", (f"PO + PTD would need {cost:.2g} pair evaluations ({how}; budget {budget:.2g}): "
-                       "go+edge, whose cost does not grow as f^2")
+        return Engine("go+edge", f"PO + PTD would not fit the memory ({memory}): go+edge, whose cost "
+                                 "does not grow as f^2")
+    how = "direct sum" if radiator == "direct" else f"{radiator} radiator; direct {direct:.2g}"
+    took = "" if math.isnan(seconds) else f", about {duration(seconds)} on {cpu_threads()} CPU threads"
+    return Engine("po+ptd", f"PO + PTD fits the memory ({memory}); "
+                            f"its sums {cost:.2g} pair evaluations ({how}){took}", seconds)
+
+
+def expected_seconds(pairs: float, device: str) -> float:
+    """Seconds ``pairs`` pair evaluations take on ``device`` (:data:`PAIRS_PER_SECOND_PER_THREAD`
+    on each CPU thread); nan on a GPU, whose rate no one has measured yet."""
+    from raysim.optics.runtime import cpu_threads
+
+    if str(device).startswith("cuda"):
+        return math.nan
+    return pairs / (PAIRS_PER_SECOND_PER_THREAD * cpu_threads())
+
+
+def duration(seconds: float) -> str:
+    """``seconds`` in words a user reads at a glance: 40 s, 9 min, 1.5 h."""
+    if seconds < 90:
+        return f"{max(seconds, 1):.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"

@@ -137,6 +137,8 @@ def test_cli_writes_the_page_and_the_dataset_and_keeps_what_was_there(raysim_cli
                                       "--refine", "0", "--refine-model", "none", "-o", str(out))
     assert code == 0, stderr
     assert "GO against the wave engine" in stdout and "at 1 GHz (po+ptd) GO" in stdout
+    # what it runs and how long that should take, said before it starts
+    assert "1 GHz: po+ptd, expected to take about" in stderr and "PO + PTD fits the memory" in stderr
     page = (out / "check.html").read_text()
     assert "data:image/png;base64," in page and "Verdict" in page
     # the engine rule, not the module's frame-and-units paragraph with its Sphinx markup
@@ -176,6 +178,49 @@ def test_a_mesh_that_is_not_a_dish_is_refused(raysim_cli, tmp_path):
         result = raysim_cli("check", str(path), "--frequency", "1e9", "-o", str(tmp_path / "out"))
         assert result.code == 2 and "dish" in result.error(), result.stderr
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("memory_gb, engines", [
+    (25.0, ["po+ptd", "po+ptd", "po+ptd", "go+edge"]),  # the cap near 1.2e9 samples: ~35 GHz
+    (8.0, ["po+ptd", "po+ptd", "go+edge", "go+edge"]),  # a laptop's 8 GB: ~8e7, ~10 GHz
+])
+def test_the_rule_runs_po_ptd_wherever_its_samples_fit_the_memory_whatever_its_time(
+        monkeypatch, memory_gb, engines):
+    """The paper's dish at 1, 6, 12 and 40 GHz: PO + PTD up to the memory, however long it
+    takes (12 GHz: ~1.4e11 pair evaluations, minutes on two cores), go+edge only beyond; the
+    time each is expected to take is in its reason."""
+    from raysim.pipeline import check_inputs
+
+    monkeypatch.setattr("raysim.simulate.physical_memory", lambda: memory_gb * 1e9)
+    dish = check_inputs.load_dish("paper_po")
+    chosen = [check_inputs.choose_wave(dish, f, "auto", "cpu") for f in (1e9, 6e9, 12e9, 40e9)]
+    assert [engine.method for engine in chosen] == engines
+    for engine in chosen:
+        if engine.method == "po+ptd":
+            assert "fits the memory" in engine.why and "CPU threads" in engine.why
+            assert engine.seconds > 0
+        else:
+            assert "would not fit the memory" in engine.why and math.isnan(engine.seconds)
+    # the cost grows with f (the sums as the fast radiator runs them), so does the time said
+    times = [engine.seconds for engine in chosen if engine.method == "po+ptd"]
+    assert times == sorted(times) and times[0] < times[-1] / 5
+
+
+def test_the_expected_time_counts_a_wave_refinement_and_a_forced_engine_is_estimated_too():
+    from raysim.pipeline import check_inputs
+    from raysim.pipeline.check import expected_line
+
+    dish = check_inputs.load_dish("paper_po")
+    forced = check_inputs.choose_wave(dish, 1e9, "po+ptd", "cpu")
+    auto = check_inputs.choose_wave(dish, 1e9, "auto", "cpu")
+    assert forced.why == "forced by --wave" and forced.seconds == pytest.approx(auto.seconds)
+    assert math.isnan(check_inputs.choose_wave(dish, 1e9, "go+edge", "cpu").seconds)
+    assert math.isnan(check_inputs.choose_wave(dish, 1e9, "auto", "cuda").seconds)
+    # the refinement is counted where its model is a wave model, and only there
+    alone = expected_line(1e9, auto, 0, "auto")
+    refined = expected_line(1e9, auto, 3, "auto")
+    assert "refinement" not in alone and "po+ptd refinement (3 iterations)" in refined
+    assert "refinement" not in expected_line(1e9, auto, 3, "go+edge")
 
 
 # --- the paper's dish: the figures measured by separate commands ------------------------------
