@@ -348,27 +348,23 @@ def gap_width(dish: Dish) -> float:
 
 
 # --- the wave engine ------------------------------------------------------------------------
-def wave_cost(dish: Dish, frequency_hz: float, radiator: str = "fast") -> tuple[float, float, int]:
-    """(cost, direct, samples): PO's sums at ``frequency_hz`` for the ideal and the deformed
-    reflector (the ideal's quadrature for both, on the integrand's rate for the sphere's
-    points, as ``simulate`` makes it) to the sphere's points, as ``radiator`` runs them and as
-    the direct sum would, in direct pair evaluations, and the samples of one reflector as
-    ``simulate``'s memory cap counts them (1.5 per wavelength on every face)."""
+def wave_cost(dish: Dish, frequency_hz: float, radiator: str = "fast") -> tuple[float, float]:
+    """(cost, direct): PO's sums at ``frequency_hz`` for the ideal and the deformed reflector
+    (the ideal's quadrature for both, on the integrand's rate for the sphere's points, as
+    ``simulate`` makes it) to the sphere's points, as ``radiator`` runs them and as the direct
+    sum would, in direct pair evaluations. Plans only, on a reflector that fits the memory."""
     from raysim.optics.fast.radiator import quadrature_cost
     from raysim.optics.po import DEFAULT_SAMPLES_PER_WAVELENGTH
-    from raysim.simulate import max_po_samples
     from raysim.surface.quadrature import plan, targets_around
 
     wavelength = 299_792_458.0 / frequency_hz
-    ideal = _wave_ideal(dish)
-    n = plan(ideal, wavelength, DEFAULT_SAMPLES_PER_WAVELENGTH).n_samples
     points = dish.wave.sphere.points(dish.F).reshape(-1, 3)
     k_hat = np.asarray(dish.wave.source.direction, dtype=np.float64)
     targets = targets_around(points, (0.0, 0.0, dish.F), k_hat / np.linalg.norm(k_hat))
-    quad = plan(ideal, wavelength, DEFAULT_SAMPLES_PER_WAVELENGTH, targets)
+    quad = plan(_wave_ideal(dish), wavelength, DEFAULT_SAMPLES_PER_WAVELENGTH, targets)
     cost, direct = quadrature_cost(quad, points, 2.0 * math.pi / wavelength, (0.0, 0.0, dish.F),
-                                   "direct" if n > max_po_samples() else radiator)
-    return 2.0 * cost, 2.0 * direct, n
+                                   radiator)
+    return 2.0 * cost, 2.0 * direct
 
 
 _IDEAL: dict[tuple, object] = {}
@@ -402,21 +398,24 @@ def choose_wave(dish: Dish, frequency_hz: float, wave: str, device: str,
     the sums' cost as ``radiator`` runs them and, on the CPU, the time it means); ``wave``
     other than ``auto`` forces that engine."""
     from raysim.optics.runtime import cpu_threads
-    from raysim.simulate import max_po_samples, physical_memory, wave_bytes
+    from raysim.simulate import max_po_samples, physical_memory, po_samples, wave_bytes
 
     if wave not in WAVE_CHOICES:
         raise CheckError(f"unknown --wave {wave!r}: use one of {', '.join(WAVE_CHOICES)}")
     if wave == "go+edge":
         return Engine(wave, "forced by --wave")
-    cost, direct, samples = wave_cost(dish, frequency_hz, radiator)
-    seconds = expected_seconds(cost, device)
-    if wave != "auto":
-        return Engine(wave, "forced by --wave", seconds)
+    samples = po_samples(dish.wave.D, frequency_hz)  # as simulate's memory cap counts them
+    fits = samples <= max_po_samples()
+    if wave != "auto":  # PO or PO + PTD that does not fit is refused by simulate's own check
+        cost = wave_cost(dish, frequency_hz, radiator)[0] if fits else math.nan
+        return Engine(wave, "forced by --wave", expected_seconds(cost, device))
     memory = (f"{samples:.2g} samples per reflector as simulate's memory cap counts them, about "
               f"{wave_bytes(samples) / 1e9:.2g} GB of this machine's {physical_memory() / 1e9:.3g} GB")
-    if samples > max_po_samples():
+    if not fits:
         return Engine("go+edge", f"PO + PTD would not fit the memory ({memory}): go+edge, whose cost "
                                  "does not grow as f^2")
+    cost, direct = wave_cost(dish, frequency_hz, radiator)
+    seconds = expected_seconds(cost, device)
     how = "direct sum" if radiator == "direct" else f"{radiator} radiator; direct {direct:.2g}"
     took = "" if math.isnan(seconds) else f", about {duration(seconds)} on {cpu_threads()} CPU threads"
     return Engine("po+ptd", f"PO + PTD fits the memory ({memory}); "

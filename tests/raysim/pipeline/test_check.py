@@ -206,6 +206,30 @@ def test_the_rule_runs_po_ptd_wherever_its_samples_fit_the_memory_whatever_its_t
     assert times == sorted(times) and times[0] < times[-1] / 5
 
 
+def test_the_rule_never_picks_po_ptd_where_simulate_would_refuse_it(monkeypatch):
+    """Around the memory's edge (8 GB: about 9.3 GHz on the paper's dish) the rule and
+    simulate's own size check agree frequency by frequency: a check never stops with an error
+    where it should have run go+edge (the rule once counted the quadrature's samples, 20 %
+    fewer than simulate's cap does, and would have picked PO + PTD up to 10.3 GHz)."""
+    from raysim.errors import RaysimError
+    from raysim.pipeline import check_inputs
+    from raysim.simulate import check_wave_size
+
+    monkeypatch.setattr("raysim.simulate.physical_memory", lambda: 8e9)
+    dish = check_inputs.load_dish("paper_po")
+    picked = []
+    for f in (8.8e9, 9.2e9, 9.6e9, 10.0e9):
+        engine = check_inputs.choose_wave(dish, f, "auto", "cpu")
+        try:
+            check_wave_size("po+ptd", dish.wave.D, f)
+            fits = True
+        except RaysimError:
+            fits = False
+        assert (engine.method == "po+ptd") == fits, (f, engine)
+        picked.append(engine.method)
+    assert picked[0] == "po+ptd" and picked[-1] == "go+edge"
+
+
 def test_the_expected_time_counts_a_wave_refinement_and_a_forced_engine_is_estimated_too():
     from raysim.pipeline import check_inputs
     from raysim.pipeline.check import expected_line
