@@ -1,9 +1,9 @@
 """``raysim check`` on the paper's dish (D = 110 m, F = 33 m, R = 10 m, Eq. 8) at 0.3, 1 and 3 GHz:
 each step's time (GO, the wave engine, the three inversions) and the check's figures.
 
-The engine rule picks PO + PTD at 0.3 GHz (5e9 source-point pairs on 90 x 360) and go+edge at 1
-and 3 GHz; the wave-aware refinement uses the data's own model (a PO + PTD run per iteration at
-0.3 GHz: most of the time). Two cores by default (``RAYSIM_THREADS`` caps the threads).
+The engine rule picks PO + PTD at all three (its samples fit the memory up to 35 GHz on 25 GB);
+the wave-aware refinement uses the data's own model (a PO + PTD run per iteration: most of the
+time). Two cores by default (``RAYSIM_THREADS`` caps the threads).
 
 Run: ``nice -n 10 .venv/bin/python benchmarks/bench_check.py [--sphere 90x360] [--grid 256]
 [--refine-model auto] [-o out/bench_check]``; the page and check.nc land in the output folder.
