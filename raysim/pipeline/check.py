@@ -1,8 +1,9 @@
 """``raysim check``: does the GO assumption hold for this dish, at these frequencies, with these gaps?
 
 For each frequency the dish (a scene, or a mesh file fitted to its paraboloid) is simulated with
-GO and with the cheapest wave engine accurate there (:func:`raysim.pipeline.check_inputs.choose_wave`),
-both with the same deformation (the scene's, or a realistic mix of gravity-like astigmatism and
+GO and with PO + PTD wherever its samples fit the memory, go+edge beyond
+(:func:`raysim.pipeline.check_inputs.choose_wave`; the time expected is said first), both with
+the same deformation (the scene's, or a realistic mix of gravity-like astigmatism and
 actuator bumps, 100 um RMS by default). Then:
 
 - the ideal intensity's and FA's difference GO - wave, over the usable sphere (theta up to the
