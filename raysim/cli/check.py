@@ -34,7 +34,7 @@ def check(
     wave: str = typer.Option("auto", "--wave",
                              help="Wave engine: auto (PO + PTD wherever its samples fit the memory, "
                                   "else go+edge; the expected time is printed first), po, po+ptd "
-                                  "or go+edge (seconds at any frequency)."),
+                                  "or go+edge (its data take seconds at any frequency)."),
     sphere: str | None = typer.Option(None, "--sphere",
                                       help="Probe-sphere cells NTHETAxNPHI, e.g. 90x360 (default: "
                                            "the scene's)."),
