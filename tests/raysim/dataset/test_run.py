@@ -168,23 +168,15 @@ def test_killed_client_resumes_to_the_same_store(reference, spec, tmp_path, inpr
     workers killed with SIGKILL after the first sample, then resumed by another cluster: the
     same arrays as the reference made by one worker, and the samples done before the kill
     untouched."""
-    store = tmp_path / "killed.zarr"
-    proc = popen_cli("dataset", str(DEMO), "-o", str(store), "--workers", "2", stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, start_new_session=True)
-    try:
-        deadline = time.monotonic() + RUN_TIMEOUT
-        while not _markers(store) and proc.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert proc.poll() is None, "the run ended before it could be interrupted"
-        proc.send_signal(signal.SIGKILL)  # the client; its local workers lose their scheduler
-        # and are killed at once too: left to notice, they finished the samples they held
-        # (all 8 of them on a busy machine), and the kill must leave some undone
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=30)
-    finally:
-        kill_group(proc)
-    done = _markers(store)
-    assert 0 < len(done) < spec.samples
+    # a sample takes a fraction of a second: where the kill lands a second late (this process
+    # waiting for a core on a busy machine), the workers have finished all 8 and there is
+    # nothing to resume (seen once in a CI run); such a lost race is run again, on a new store
+    for attempt in range(3):
+        store = tmp_path / f"killed{attempt}.zarr"
+        done = _killed_after_the_first_sample(store)
+        if 0 < len(done) < spec.samples:
+            break
+    assert 0 < len(done) < spec.samples, f"three runs finished every sample before the kill: {done}"
     group = zarr.open_group(str(store), mode="r")
     finished = np.asarray(group["finished"][...])
     report = generate(spec, store, resume=True, scheduler=inproc)
@@ -195,6 +187,27 @@ def test_killed_client_resumes_to_the_same_store(reference, spec, tmp_path, inpr
     after = np.asarray(zarr.open_group(str(store), mode="r")["finished"][...])
     kept = sorted(done)
     assert np.array_equal(after[kept], finished[kept])  # done samples were not redone
+
+
+def _killed_after_the_first_sample(store: Path) -> set[int]:
+    """``raysim dataset`` of the demo on two local workers into ``store``, the client and its
+    workers killed with SIGKILL as soon as the first sample's marker is there (or the run has
+    ended); the samples done."""
+    proc = popen_cli("dataset", str(DEMO), "-o", str(store), "--workers", "2", stdout=subprocess.DEVNULL,
+                     stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + RUN_TIMEOUT
+        while not _markers(store) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGKILL)  # the client; its local workers lose their scheduler
+        # and are killed at once too: left to notice, they finished the samples they held
+        # (all 8 of them on a busy machine), and the kill must leave some undone
+        with contextlib.suppress(ProcessLookupError):  # a run that ended has no group left
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        kill_group(proc)
+    return _markers(store)
 
 
 def test_a_resume_with_no_store_says_it_made_a_new_one(reference, spec, tmp_path, inproc):
